@@ -1,0 +1,12 @@
+"""mc_ao core: Monte Carlo hemisphere sampling and a per-texel ambient occlusion baker (no Blender)."""
+
+from ._version import __version__
+from .errors import (
+    BakeCancelled,
+    BakeMemoryError,
+    ImageWriteError,
+    McAoError,
+    MeshError,
+    MeshTypeError,
+    SettingsError,
+)
