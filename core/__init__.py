@@ -10,3 +10,6 @@ from .errors import (
     MeshTypeError,
     SettingsError,
 )
+from . import stats, warps
+from .integrate import Estimate, estimate, integrate
+from .stats import RunningStats
