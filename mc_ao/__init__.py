@@ -1,0 +1,44 @@
+"""The Blender side of mc_ao: scene settings, the Bake AO operator, the sidebar panel, preferences.
+
+Nothing here is imported at module level that needs bpy, so the extension package imports without
+Blender; register() pulls the bpy modules in.
+"""
+
+_classes = ()
+
+
+def register(addon_name="mc_ao"):
+    """Register the classes and ``Scene.mc_ao``; ``addon_name`` keys the add-on preferences."""
+    global _classes
+    import bpy
+
+    from . import operators, panel, properties
+
+    properties.McAoPreferences.bl_idname = addon_name
+    _classes = (
+        properties.McAoSettings,
+        properties.McAoPreferences,
+        operators.OBJECT_OT_mc_ao_bake,
+        panel.VIEW3D_PT_mc_ao,
+        panel.VIEW3D_PT_mc_ao_sampling,
+        panel.VIEW3D_PT_mc_ao_occlusion,
+        panel.VIEW3D_PT_mc_ao_image,
+        panel.VIEW3D_PT_mc_ao_output,
+    )
+    for cls in _classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.mc_ao = bpy.props.PointerProperty(type=properties.McAoSettings)
+
+
+def unregister():
+    global _classes
+    import bpy
+
+    from . import operators
+
+    for run in list(operators._RUNS):
+        run.stop()
+    del bpy.types.Scene.mc_ao
+    for cls in reversed(_classes):
+        bpy.utils.unregister_class(cls)
+    _classes = ()

@@ -1,0 +1,143 @@
+"""What to bake: pick the targets, gather their geometry and their occluders, run core.bake_ao.
+
+plan() reads Blender data and must run in the main thread; Job.run() touches no bpy and runs in a
+worker thread (the operator's) or in the main thread (scripts/bake_ao.py).
+"""
+
+from dataclasses import dataclass, field
+
+from . import corelink
+from .extract import GEOMETRY_TYPES, ExtractError, MeshArrays, object_arrays
+
+
+def can_be_target(obj):
+    """A target is a mesh object with a UV map (checked on its original data, cheaply, for poll)."""
+    return obj.type == "MESH" and len(obj.data.uv_layers) > 0
+
+
+def targets_of(objects):
+    """The objects among ``objects`` that bake_ao can bake, in name order (a stable bake order)."""
+    return sorted((obj for obj in objects if can_be_target(obj)), key=lambda obj: obj.name)
+
+
+def why_not_bakeable(objects):
+    """None when something among ``objects`` (the selection) can be baked, else the reason, for the UI."""
+    if not objects:
+        return "Select a mesh object to bake"
+    meshes = [obj for obj in objects if obj.type == "MESH"]
+    if not meshes:
+        return "No mesh object is selected"
+    if not any(can_be_target(obj) for obj in meshes):
+        if len(meshes) == 1:
+            return f"{meshes[0].name} has no UV map"
+        return "None of the selected meshes has a UV map"
+    return None
+
+
+@dataclass
+class Job:
+    """The bake of one object: its geometry with UVs and normals, and the geometry around it."""
+
+    object_name: str
+    image_name: str
+    target: MeshArrays
+    occluders: list = field(default_factory=list)
+
+    @property
+    def triangles(self):
+        return len(self.target.triangles) + sum(len(o.triangles) for o in self.occluders)
+
+    def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None):
+        """core.bake_ao of this job; returns its result. Needs no bpy (safe in a worker thread).
+
+        Raises core.McAoError subclasses (core.BakeCancelled when ``cancel`` fires).
+        """
+        core = corelink.load()
+
+        def mesh(arrays):
+            return core.Mesh(
+                positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs,
+                normals=arrays.normals, name=arrays.name,
+            )
+
+        return core.bake_ao(
+            mesh(self.target),
+            occluders=[mesh(o) for o in self.occluders],
+            **settings.bake_kwargs(threads),
+            progress=progress,
+            cancel=cancel,
+            on_tile=on_tile,
+        )
+
+
+def _visible_geometry(depsgraph, view_layer):
+    """(original object name or None for an instance, MeshArrays) of everything visible in the view layer."""
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if obj.type not in GEOMETRY_TYPES:
+            continue
+        key = None
+        if not inst.is_instance:
+            if not obj.original.visible_get(view_layer=view_layer):
+                continue
+            key = obj.original.name
+        arrays = object_arrays(obj, matrix=inst.matrix_world.copy())
+        if arrays is not None:
+            yield key, arrays
+
+
+def _selected_geometry(depsgraph, objects):
+    for obj in objects:
+        if obj.type in GEOMETRY_TYPES:
+            arrays = object_arrays(obj.evaluated_get(depsgraph))
+            if arrays is not None:
+                yield obj.name, arrays
+
+
+def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
+    """One Job per target object, with geometry evaluated by ``depsgraph`` (modifiers applied).
+
+    Parameters
+    ----------
+    depsgraph : bpy.types.Depsgraph
+        Evaluated dependency graph (``context.evaluated_depsgraph_get()``).
+    targets : list of bpy.types.Object
+        Mesh objects to bake (original, not evaluated, objects).
+    settings : mc_ao.settings.BakeSettings
+    selected : list of bpy.types.Object
+        The occluders when ``settings.occluders == "SELECTED"`` (each target is left out of its own list).
+    view_layer : bpy.types.ViewLayer, optional
+        Whose visibility counts for ``settings.occluders == "VISIBLE"``; the depsgraph's by default.
+
+    Raises
+    ------
+    ExtractError
+        A target has no faces or no such UV map, or two targets would bake into one image.
+    """
+    image_names = {}
+    for obj in targets:
+        name = settings.image_name_for(obj.name)
+        if name in image_names:
+            raise ExtractError(
+                f"{image_names[name]} and {obj.name} would both bake into image {name!r}; "
+                "put {object} into the image name"
+            )
+        image_names[name] = obj.name
+
+    if settings.occluders == "VISIBLE":
+        pool = list(_visible_geometry(depsgraph, view_layer or depsgraph.view_layer))
+    elif settings.occluders == "SELECTED":
+        pool = list(_selected_geometry(depsgraph, selected))
+    else:
+        pool = []
+
+    jobs = []
+    for obj in targets:
+        target = object_arrays(
+            obj.evaluated_get(depsgraph), uv_map=settings.uv_map, with_uvs=True, with_normals=True,
+        )
+        if target is None:
+            raise ExtractError(f"{obj.name} has no faces to bake")
+        occluders = [arrays for key, arrays in pool if key != obj.name]
+        jobs.append(Job(obj.name, settings.image_name_for(obj.name), target, occluders))
+    return jobs

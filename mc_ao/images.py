@@ -1,0 +1,149 @@
+"""Blender images for bake results: create or reuse "<object>_AO", fill it, restore it, save it."""
+
+import importlib.util
+
+import bpy
+import numpy as np
+
+from . import corelink
+from .settings import FILE_FORMATS
+
+
+class ImageError(ValueError):
+    """An existing image cannot take the bake (a UDIM image, for one)."""
+
+
+def rgba(ao, channels=4):
+    """(H, W) AO -> (H, W, channels) float32 pixels: AO in the colour channels, alpha 1 everywhere.
+
+    Alpha stays 1 outside the UV islands too, so that the map looks the same in every viewer; the
+    bake's coverage mask is in the result, not in the image. ``channels`` is the image's (4 for any
+    image a bake creates; an image loaded from a file may have 1 to 4).
+    """
+    out = np.ones(ao.shape + (channels,), dtype=np.float32)
+    colour = 1 if channels == 2 else min(channels, 3)  # 2 channels = grey + alpha
+    out[..., :colour] = ao[..., None]
+    return out
+
+
+def pixels_of(image):
+    """The image's pixels as an (H, W, channels) float32 array (a copy)."""
+    w, h = image.size
+    buf = np.empty(w * h * image.channels, dtype=np.float32)
+    image.pixels.foreach_get(buf)
+    return buf.reshape(h, w, image.channels)
+
+
+def set_pixels(image, pixels):
+    """Write (H, W, channels) float pixels into the image (same size) and let viewers redraw it."""
+    image.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
+    image.update()
+
+
+class Snapshot:
+    """What an image was before a bake changed it, to put it back when the bake is cancelled.
+
+    A bake that creates its image removes it again; one that reuses an image restores its size,
+    depth, colour space and pixels.
+    """
+
+    def __init__(self, image, created):
+        self.name = image.name
+        self.created = created
+        if created:
+            return
+        self.generated = image.source == "GENERATED"
+        self.generated_state = (image.generated_width, image.generated_height, image.use_generated_float)
+        self.size = tuple(image.size)
+        self.colorspace = image.colorspace_settings.name
+        # image.has_data is False for a file image until its pixels are first read; size loads it.
+        self.pixels = pixels_of(image) if all(self.size) else None
+
+    def restore(self):
+        image = bpy.data.images.get(self.name)
+        if image is None:
+            return
+        if self.created:
+            bpy.data.images.remove(image)
+            return
+        if self.generated:
+            image.generated_width, image.generated_height, image.use_generated_float = self.generated_state
+        elif tuple(image.size) != self.size and all(self.size):
+            image.scale(*self.size)
+        image.colorspace_settings.name = self.colorspace
+        if self.pixels is not None and tuple(image.size) == self.size:
+            set_pixels(image, self.pixels)
+
+
+def prepare_image(name, width, height, float_buffer):
+    """Create the image ``name`` or make an existing one fit the bake; return (image, Snapshot).
+
+    A new image is Non-Color and float when asked. An existing generated image gets the bake's size
+    and depth; an image from a file is scaled to the size (its depth is the file's). Either way its
+    colour space becomes Non-Color: AO is data, and any other colour space would transform it.
+    """
+    image = bpy.data.images.get(name)
+    if image is None:
+        image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=float_buffer, is_data=True)
+        return image, Snapshot(image, created=True)
+    if image.source not in {"GENERATED", "FILE"}:
+        raise ImageError(f"image {name!r} is a {image.source.lower()} image; bake into a plain image")
+    snapshot = Snapshot(image, created=False)
+    if image.source == "GENERATED":
+        if (image.generated_width, image.generated_height, image.use_generated_float) != (
+            width, height, float_buffer,
+        ):
+            image.generated_width, image.generated_height = width, height
+            image.use_generated_float = float_buffer
+    elif tuple(image.size) != (width, height):
+        image.scale(width, height)
+    image.colorspace_settings.name = "Non-Color"
+    return image, snapshot
+
+
+def oiio_available():
+    """Whether core.imageio can write files here (it needs the OpenImageIO Python module)."""
+    return importlib.util.find_spec("OpenImageIO") is not None
+
+
+def save(image, result, path, settings, metadata=None):
+    """Write a bake result to ``path`` in ``settings.file_format``; return how it was written.
+
+    The core's OpenImageIO writer is used where OpenImageIO is importable (Blender's official builds
+    ship it): an atomic write, one grey channel, the bake's metadata. Where it is missing (Debian's
+    Blender, for one), the pixels go through Blender's own writer instead, from a temporary image so
+    the baked image stays a generated, unsaved one: RGBA, the format's default depth for the image's
+    depth (8 or 16-bit PNG, half or float EXR), no metadata.
+
+    Returns
+    -------
+    str
+        "OpenImageIO" or "Blender".
+    """
+    if oiio_available():
+        imageio = corelink.load("imageio")
+        imageio.write_ao(path, result, bits=settings.file_bits, metadata=metadata, make_dirs=True)
+        return "OpenImageIO"
+    save_with_blender(image, path, settings.file_format)
+    return "Blender"
+
+
+def save_with_blender(image, path, file_format):
+    """Write ``image``'s pixels to ``path`` with Blender's image writer, leaving ``image`` unchanged."""
+    import os
+
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    w, h = image.size
+    temp = bpy.data.images.new(".mc_ao_save", w, h, alpha=True, float_buffer=image.is_float, is_data=True)
+    try:
+        pixels = pixels_of(image)
+        temp.pixels.foreach_set(rgba(pixels[..., 0], 4).ravel() if image.channels != 4 else pixels.ravel())
+        temp.filepath_raw = path
+        temp.file_format = file_format
+        temp.save()
+    finally:
+        bpy.data.images.remove(temp)
+
+
+def file_extension(file_format):
+    return FILE_FORMATS[file_format][0]

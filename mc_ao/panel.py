@@ -1,0 +1,113 @@
+"""The sidebar tab "MC AO" in the 3D Viewport: the Bake AO button and the settings, grouped."""
+
+import bpy
+
+from . import baking
+from .operators import OBJECT_OT_mc_ao_bake
+from .settings import BakeSettings
+
+
+class _McAoPanel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "MC AO"
+
+
+class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
+    bl_label = "Ambient Occlusion"
+
+    def draw(self, context):
+        layout = self.layout
+        selected = context.selected_objects
+        row = layout.row()
+        row.scale_y = 1.5
+        row.operator(OBJECT_OT_mc_ao_bake.bl_idname, icon="RENDER_STILL")
+        # The button greys out when its poll fails; say why under it.
+        reason = baking.why_not_bakeable(selected)
+        if reason is not None:
+            layout.label(text=reason, icon="INFO")
+            return
+        targets = baking.targets_of(selected)
+        if len(targets) == 1:
+            image_name = BakeSettings.from_properties(context.scene.mc_ao).image_name_for(targets[0].name)
+            layout.label(text=f"Into {image_name}", icon="IMAGE_DATA")
+        else:
+            layout.label(text=f"{len(targets)} objects, one image each", icon="IMAGE_DATA")
+
+
+class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
+    bl_label = "Sampling"
+    bl_parent_id = "VIEW3D_PT_mc_ao"
+
+    def draw(self, context):
+        settings = context.scene.mc_ao
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(settings, "samples")
+        col.prop(settings, "target_error")
+        sub = col.column()
+        sub.active = settings.target_error > 0
+        sub.prop(settings, "min_samples")
+        col = layout.column()
+        col.prop(settings, "source")
+        col.prop(settings, "distribution")
+        col.prop(settings, "seed")
+        col.prop(settings, "threads")
+
+
+class VIEW3D_PT_mc_ao_occlusion(_McAoPanel, bpy.types.Panel):
+    bl_label = "Occlusion"
+    bl_parent_id = "VIEW3D_PT_mc_ao"
+
+    def draw(self, context):
+        settings = context.scene.mc_ao
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(settings, "occluders")
+        col.prop(settings, "max_distance")
+        col.prop(settings, "ignore_backfaces")
+
+
+class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
+    bl_label = "Image"
+    bl_parent_id = "VIEW3D_PT_mc_ao"
+
+    def draw(self, context):
+        settings = context.scene.mc_ao
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column(align=True)
+        col.prop(settings, "resolution")
+        col.prop(settings, "height")
+        col = layout.column()
+        col.prop(settings, "margin")
+        obj = context.active_object
+        if obj is not None and obj.type == "MESH":
+            col.prop_search(settings, "uv_map", obj.data, "uv_layers", text="UV Map")
+        else:
+            col.prop(settings, "uv_map")
+        col.prop(settings, "image_name")
+        col.prop(settings, "float_buffer")
+
+
+class VIEW3D_PT_mc_ao_output(_McAoPanel, bpy.types.Panel):
+    bl_label = "Save to File"
+    bl_parent_id = "VIEW3D_PT_mc_ao"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.mc_ao, "save_to_file", text="")
+
+    def draw(self, context):
+        settings = context.scene.mc_ao
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.active = settings.save_to_file
+        layout.prop(settings, "file_format")
+        layout.prop(settings, "output_dir")
