@@ -1,6 +1,7 @@
 """Blender images for bake results: create or reuse "<object>_AO", fill it, restore it, save it."""
 
 import importlib.util
+import os
 
 import bpy
 import numpy as np
@@ -130,20 +131,24 @@ def save(image, result, path, settings, metadata=None):
 
 def save_with_blender(image, path, file_format):
     """Write ``image``'s pixels to ``path`` with Blender's image writer, leaving ``image`` unchanged."""
-    import os
+    pixels = pixels_of(image)
+    if image.channels != 4:
+        pixels = rgba(pixels[..., 0])
+    save_pixels_with_blender(pixels, path, file_format, image.is_float)
 
+
+def save_pixels_with_blender(pixels, path, file_format, float_buffer):
+    """Write (H, W, 4) pixels to ``path`` in ``file_format`` (PNG, OPEN_EXR, TIFF) through a temporary image.
+
+    A temporary image, because saving an image to a path turns it into a file image.
+    """
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-    w, h = image.size
-    temp = bpy.data.images.new(".mc_ao_save", w, h, alpha=True, float_buffer=image.is_float, is_data=True)
+    h, w = pixels.shape[:2]
+    temp = bpy.data.images.new(".mc_ao_save", w, h, alpha=True, float_buffer=float_buffer, is_data=True)
     try:
-        pixels = pixels_of(image)
-        temp.pixels.foreach_set(rgba(pixels[..., 0], 4).ravel() if image.channels != 4 else pixels.ravel())
+        temp.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
         temp.filepath_raw = path
         temp.file_format = file_format
         temp.save()
     finally:
         bpy.data.images.remove(temp)
-
-
-def file_extension(file_format):
-    return FILE_FORMATS[file_format][0]
