@@ -13,3 +13,5 @@ from .errors import (
 from . import stats, warps
 from .integrate import Estimate, estimate, integrate
 from .stats import RunningStats
+from .mesh import Mesh
+from .bake import BakeResult, bake_ao

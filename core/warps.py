@@ -77,6 +77,22 @@ def invert_uniform_disk_polar(p):
     return np.stack([r2, _wrap_unit(np.arctan2(p[:, 1], p[:, 0]) * INV_TWO_PI)], axis=1)
 
 
+def concentric_disk_xy(u0, u1):
+    """The concentric map on separate coordinate arrays (any shape): returns (x, y).
+
+    Component arrays keep numpy's inner loops long; :func:`sample_uniform_disk_concentric` and the
+    baker's ray generation both use it.
+    """
+    a = 2.0 * u0 - 1.0
+    b = 2.0 * u1 - 1.0
+    use_a = np.abs(a) > np.abs(b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(use_a, a, b)
+        phi = np.where(use_a, (math.pi / 4.0) * (b / a), math.pi / 2.0 - (math.pi / 4.0) * (a / b))
+    phi = np.where((a == 0.0) & (b == 0.0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
 def sample_uniform_disk_concentric(u):
     """Uniform unit disk by Shirley and Chiu's concentric map (low distortion, keeps strata compact).
 
@@ -84,14 +100,7 @@ def sample_uniform_disk_concentric(u):
     |b| >= |a| maps linearly in angle. Returns (n, 2).
     """
     u = _as_points(u, 2)
-    a = 2.0 * u[:, 0] - 1.0
-    b = 2.0 * u[:, 1] - 1.0
-    use_a = np.abs(a) > np.abs(b)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.where(use_a, a, b)
-        phi = np.where(use_a, (math.pi / 4.0) * (b / a), math.pi / 2.0 - (math.pi / 4.0) * (a / b))
-    phi = np.where((a == 0.0) & (b == 0.0), 0.0, phi)
-    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
+    return np.stack(concentric_disk_xy(u[:, 0], u[:, 1]), axis=1)
 
 
 def invert_uniform_disk_concentric(p):
@@ -198,13 +207,16 @@ def orthonormal_basis(n):
     s, t : arrays of the same shape as n.
     """
     n = np.asarray(n, dtype=np.float64)
-    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    sx, sy, sz, tx, ty, tz = basis_components(n[..., 0], n[..., 1], n[..., 2])
+    return np.stack([sx, sy, sz], axis=-1), np.stack([tx, ty, tz], axis=-1)
+
+
+def basis_components(x, y, z):
+    """:func:`orthonormal_basis` on separate component arrays: returns (sx, sy, sz, tx, ty, tz)."""
     sign = np.copysign(1.0, z)
     a = -1.0 / (sign + z)
     b = x * y * a
-    s = np.stack([1.0 + sign * x * x * a, sign * b, -sign * x], axis=-1)
-    t = np.stack([b, sign + y * y * a, -y], axis=-1)
-    return s, t
+    return 1.0 + sign * x * x * a, sign * b, -sign * x, b, sign + y * y * a, -y
 
 
 def to_world(local, n):

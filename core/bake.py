@@ -1,0 +1,549 @@
+"""The per-texel ambient occlusion baker: UV rasterisation, hemisphere sampling, Embree occlusion rays.
+
+For a surface point x with shading normal n, AO(x) = (1/pi) * integral over the hemisphere of
+V(x, w) cos(theta) dw, V = 1 where the ray from x along w meets nothing within max_distance. A texel's
+value is the mean AO over the part of the surface its square covers (see :mod:`core.raster`).
+
+Estimators: cosine-weighted directions (p = cos/pi) give the term V(w), variance AO(1 - AO), exactly
+0 on open surfaces; uniform directions (p = 1/(2 pi)) give 2 cos(theta) V(w). Both estimate the same
+AO.
+
+Rays leave from the surface point pushed off along the geometric normal, on the side the shading
+normal faces, by an offset that scales with the scene's size and the point's distance from the origin
+(float32 rays lose absolute precision with both). A direction from the shading hemisphere that points
+below the geometric surface (possible where interpolated normals bend away from the face) counts as
+occluded without being traced: that is what a ray leaving the true surface would meet first, the
+surface itself, and it keeps AO continuous across smooth-shaded terminators.
+"""
+
+import math
+import os
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._version import __version__
+from .errors import BakeCancelled, BakeMemoryError, McAoError, MeshError, SettingsError
+from .margin import dilate
+from .mesh import Mesh
+from .patterns import SOURCE_NAMES, TexelPattern
+from .raster import bin_triangles, prepare, rasterize_tile
+from .stats import RunningStats, z_for_confidence
+from .warps import TWO_PI, basis_components, concentric_disk_xy
+
+DISTRIBUTIONS = ("cosine", "uniform")
+#: Largest image side the baker accepts (the same as Blender's image size limit).
+MAX_RESOLUTION = 65536
+#: Offsets off the surface: relative to the scene's bounding-box diagonal and to |position|.
+EPS_SCENE = 1e-6
+EPS_POSITION = 2.0 ** -18
+
+
+@dataclass
+class BakeResult:
+    """What a bake returns. Arrays are (H, W), row 0 is v = 0 (Blender's pixel order).
+
+    ao : float32 in [0, 1]; covered texels hold their estimate, margin texels the dilated value,
+        the rest 0.
+    mask : bool, texels a UV triangle covers.
+    stderr : float32, each covered texel's standard error (0 elsewhere).
+    samples : int32, samples taken per covered texel (0 elsewhere).
+    rays : rays traced (directions below the geometric surface are not traced).
+    seconds : wall time of the bake; trace_seconds : time inside embreex, summed over threads.
+    metadata : settings and version, for image files.
+    report : counts of what the input held: degenerate UV triangles skipped, triangles with UVs
+        outside [0, 1] (only their part inside the image is baked), texels covered by more than one
+        UV island (averaged over all surfaces covering them), covered texels.
+    """
+
+    ao: np.ndarray
+    mask: np.ndarray
+    stderr: np.ndarray
+    samples: np.ndarray
+    rays: int
+    seconds: float
+    trace_seconds: float
+    threads: int
+    metadata: dict = field(default_factory=dict)
+    report: dict = field(default_factory=dict)
+
+    @property
+    def rays_per_second(self):
+        return self.rays / self.seconds if self.seconds > 0 else float("nan")
+
+
+def _positive_int(value, what, lo=1):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise SettingsError(f"{what} must be an integer, got {value!r}")
+    if value < lo:
+        raise SettingsError(f"{what} must be at least {lo}, got {value}")
+    return int(value)
+
+
+def _resolution(resolution):
+    if isinstance(resolution, (int, np.integer)) and not isinstance(resolution, bool):
+        resolution = (resolution, resolution)
+    try:
+        w, h = resolution
+    except (TypeError, ValueError):
+        raise SettingsError(f"resolution must be an integer or a (width, height) pair, got {resolution!r}") from None
+    w = _positive_int(w, "resolution width")
+    h = _positive_int(h, "resolution height")
+    if w > MAX_RESOLUTION or h > MAX_RESOLUTION:
+        raise SettingsError(f"resolution {w} x {h} exceeds the largest supported side, {MAX_RESOLUTION}")
+    return w, h
+
+
+def available_memory():
+    """Bytes of memory available to a new allocation (MemAvailable on Linux), or None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def estimate_memory(width, height, triangles, threads, chunk_rays):
+    """Peak bytes a bake needs: output planes, margin work, per-thread chunks, triangle tables."""
+    texels = width * height
+    planes = texels * (4 + 4 + 4 + 1)          # ao, stderr, samples, mask
+    margin_work = texels * (4 + 4 + 1 + 1)      # dilation sums, counts and masks
+    per_ray = 600                               # float64 temporaries of one chunk, generously
+    chunks = threads * chunk_rays * per_ray
+    tris = triangles * 300                      # texel-space corners, affine maps, Embree buffers
+    return planes + margin_work + chunks + tris
+
+
+def _cancelled(cancel):
+    if cancel is None:
+        return False
+    if hasattr(cancel, "is_set"):
+        return cancel.is_set()
+    return bool(cancel())
+
+
+class _Shared:
+    """State the worker threads share: progress, cancellation, errors, timing."""
+
+    def __init__(self, total_work, progress, cancel):
+        self.lock = threading.Lock()
+        self.total = max(total_work, 1)
+        self.done = 0
+        self.progress = progress
+        self.cancel = cancel
+        self.stop = threading.Event()
+        self.trace_seconds = 0.0
+        self.rays = 0
+        self.last_report = 0.0
+
+    def check(self):
+        if self.stop.is_set():
+            raise _Stop()
+        if _cancelled(self.cancel):
+            self.stop.set()
+            raise _Stop()
+
+    def advance(self, work, rays=0, trace_seconds=0.0, force=False):
+        with self.lock:
+            self.done += work
+            self.rays += rays
+            self.trace_seconds += trace_seconds
+            now = time.perf_counter()
+            if self.progress is not None and (force or now - self.last_report >= 0.1):
+                self.last_report = now
+                self.progress(min(self.done / self.total, 1.0))
+
+
+class _Stop(Exception):
+    """Raised inside workers once the bake is cancelled or another worker failed."""
+
+
+class _Tracer:
+    """Occlusion queries against one committed Embree scene of the target and its occluders."""
+
+    def __init__(self, meshes, ignore_backfaces, falloff, max_distance):
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
+        positions = np.concatenate([m.positions for m in meshes])
+        offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
+        tris = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
+        self.face_normals = np.concatenate([m.face_normals for m in meshes])
+        lo, hi = positions.min(axis=0), positions.max(axis=0)
+        self.extent = float(np.linalg.norm(hi - lo))
+        self.scene = rtcore_scene.EmbreeScene()
+        self._mesh = TriangleMesh(self.scene, positions.astype(np.float32), tris.astype(np.int32))
+        self.ignore_backfaces = ignore_backfaces
+        self.falloff = falloff
+        self.max_distance = max_distance
+        self.tfar = np.float32(min(max_distance, 1e37))
+        # Commit (build the BVH) now, once, before any worker thread traces.
+        self.scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), query="OCCLUDED",
+                       dists=np.ones(1, np.float32))
+
+    def offset(self, max_abs):
+        """Distance to push ray origins off the surface, given each point's largest |coordinate|."""
+        return EPS_SCENE * self.extent + EPS_POSITION * max_abs
+
+    def visibility(self, org, dirs):
+        """Per ray, 1 for unoccluded within max_distance, 0 for occluded, between with falloff."""
+        n = len(org)
+        o32 = np.ascontiguousarray(org, dtype=np.float32)
+        d32 = np.ascontiguousarray(dirs, dtype=np.float32)
+        if not self.ignore_backfaces and self.falloff == 0:
+            hit = self.scene.run(o32, d32, query="OCCLUDED", dists=np.full(n, self.tfar, np.float32))
+            return (hit < 0).astype(np.float64)
+        # Hit distances are needed: walk past back faces, weigh hits by distance.
+        remaining = np.full(n, self.tfar, np.float32)
+        travelled = np.zeros(n)
+        vis = np.ones(n)
+        todo = np.arange(n)
+        for _ in range(64):
+            if not len(todo):
+                break
+            out = self.scene.run(o32[todo], d32[todo], dists=remaining[todo].copy(), output=True)
+            prim = out["primID"]
+            hit = prim >= 0
+            t = out["tfar"].astype(np.float64)
+            if self.ignore_backfaces:
+                back = hit & (np.einsum("ij,ij->i", self.face_normals[np.maximum(prim, 0)], dirs[todo]) > 0)
+            else:
+                back = np.zeros_like(hit)
+            front = hit & ~back
+            idx = todo[front]
+            dist = travelled[idx] + t[front]
+            if self.falloff > 0:
+                vis[idx] = 1.0 - np.clip(1.0 - dist / self.max_distance, 0.0, 1.0) ** self.falloff
+            else:
+                vis[idx] = 0.0
+            # Back-face hits: continue from just past the hit point with the distance left.
+            cont = todo[back]
+            if len(cont):
+                hit_at = org[cont] + dirs[cont] * t[back, None]
+                step = t[back] + self.offset(np.abs(hit_at).max(axis=1))
+                travelled[cont] += step
+                o32[cont] = (org[cont] + dirs[cont] * travelled[cont, None]).astype(np.float32)
+                remaining[cont] = np.maximum(self.tfar - travelled[cont], 0).astype(np.float32)
+                cont = cont[remaining[cont] > 0]
+            todo = cont
+        return vis
+
+
+class _TileBaker:
+    def __init__(self, tris, mesh, tracer, pattern, settings, width, height, shared):
+        self.tris, self.mesh, self.tracer, self.pattern = tris, mesh, tracer, pattern
+        self.s = settings
+        self.width, self.height = width, height
+        self.shared = shared
+
+    def _surface(self, frag, sel, ux, uy, k):
+        """Surface samples of the chunk as 9 component planes (g, k): position, unit shading normal,
+        geometric normal oriented to the shading normal's side.
+
+        Texels inside one triangle (the common case) gather that triangle's data once per texel and
+        broadcast it over their k samples; split texels pick a sub-triangle per sample. Component
+        planes, not (n, 3) arrays, keep numpy's inner loops long.
+        """
+        T, W = self.tris, self.width
+        g = len(sel)
+        full = frag.full_tri[sel]
+        simple = full >= 0
+        out = np.empty((9, g, k))
+        if simple.any():
+            rows = slice(None) if simple.all() else np.flatnonzero(simple)
+            ts = full[rows]
+            tex = frag.texels[sel[rows]]
+            dx = ((tex % W) - T.origin_xy[ts, 0])[:, None] + ux[rows]
+            dy = ((tex // W) - T.origin_xy[ts, 1])[:, None] + uy[rows]
+            fn = self.mesh.face_normals[ts]
+            for c in range(3):
+                out[c, rows] = T.pos0[ts, c][:, None] + dx * T.pos_j[ts, 0, c][:, None] + dy * T.pos_j[ts, 1, c][:, None]
+                out[3 + c, rows] = T.nrm0[ts, c][:, None] + dx * T.nrm_j[ts, 0, c][:, None] + dy * T.nrm_j[ts, 1, c][:, None]
+                out[6 + c, rows] = fn[:, c][:, None]
+        if not simple.all():
+            rows = np.flatnonzero(~simple)
+            t_loc = np.repeat(sel[rows], k)
+            a, b = ux[rows].ravel(), uy[rows].ravel()
+            key = frag.sub_texel + frag.sub_cdf
+            j = np.searchsorted(key, t_loc + a, side="right")
+            j = np.clip(j, frag.sub_start[t_loc], frag.sub_start[t_loc + 1] - 1)
+            lo = np.where(j > frag.sub_start[t_loc], frag.sub_cdf[np.maximum(j - 1, 0)], 0.0)
+            a = np.clip((a - lo) / np.maximum(frag.sub_cdf[j] - lo, 1e-300), 0.0, 1.0)
+            # Heitz 2019's low-distortion square-to-triangle map (pbrt-v4's SampleUniformTriangle).
+            first = a < b
+            b0 = np.where(first, a / 2, a - b / 2)
+            b1 = np.where(first, b - a / 2, b / 2)
+            c3 = frag.sub_xy[j]
+            tri = frag.sub_tri[j]
+            dx = b0 * c3[:, 0, 0] + b1 * c3[:, 1, 0] + (1 - b0 - b1) * c3[:, 2, 0] - T.origin_xy[tri, 0]
+            dy = b0 * c3[:, 0, 1] + b1 * c3[:, 1, 1] + (1 - b0 - b1) * c3[:, 2, 1] - T.origin_xy[tri, 1]
+            shape = (len(rows), k)
+            for c in range(3):
+                out[c, rows] = (T.pos0[tri, c] + dx * T.pos_j[tri, 0, c] + dy * T.pos_j[tri, 1, c]).reshape(shape)
+                out[3 + c, rows] = (T.nrm0[tri, c] + dx * T.nrm_j[tri, 0, c] + dy * T.nrm_j[tri, 1, c]).reshape(shape)
+                out[6 + c, rows] = self.mesh.face_normals[tri, c].reshape(shape)
+        n, gn = out[3:6], out[6:9]
+        ln = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        ok = ln > 1e-12
+        inv = 1.0 / np.where(ok, ln, 1.0)
+        for c in range(3):
+            n[c] = np.where(ok, n[c] * inv, gn[c])
+        flip = (gn[0] * n[0] + gn[1] * n[1] + gn[2] * n[2]) < 0
+        gn[:, flip] *= -1.0
+        return out
+
+    def _values(self, frag, sel, start, k):
+        s = self.s
+        u = self.pattern.points_by_dim(frag.texels[sel], start, k)  # (4, g, k)
+        surf = self._surface(frag, sel, u[2], u[3], k)
+        p, n, gn = surf[0:3], surf[3:6], surf[6:9]
+        if s["distribution"] == "cosine":
+            lx, ly = concentric_disk_xy(u[0], u[1])  # Malley: lift the disk onto the hemisphere
+            lz = np.sqrt(np.maximum(0.0, 1.0 - lx * lx - ly * ly))
+        else:
+            lz = u[0]
+            r = np.sqrt(np.maximum(0.0, 1.0 - lz * lz))
+            lx, ly = r * np.cos(TWO_PI * u[1]), r * np.sin(TWO_PI * u[1])
+        sx, sy, sz, tx, ty, tz = basis_components(n[0], n[1], n[2])
+        d = np.empty((3, len(sel), k))
+        d[0] = lx * sx + ly * tx + lz * n[0]
+        d[1] = lx * sy + ly * ty + lz * n[1]
+        d[2] = lx * sz + ly * tz + lz * n[2]
+        above = (d[0] * gn[0] + d[1] * gn[1] + d[2] * gn[2]) > 0
+        eps = self.tracer.offset(np.maximum(np.maximum(np.abs(p[0]), np.abs(p[1])), np.abs(p[2])))
+        idx = np.flatnonzero(above.ravel())
+        org = np.empty((len(idx), 3), np.float32)
+        dirs = np.empty((len(idx), 3), np.float32)
+        e = eps.ravel()[idx]
+        for c in range(3):
+            org[:, c] = p[c].ravel()[idx] + gn[c].ravel()[idx] * e
+            dirs[:, c] = d[c].ravel()[idx]
+        vis = np.zeros(above.size)
+        t0 = time.perf_counter()
+        vis[idx] = self.tracer.visibility(org, dirs)
+        dt = time.perf_counter() - t0
+        vis = vis.reshape(len(sel), k)
+        if s["distribution"] == "uniform":
+            vis *= 2.0 * lz
+        return vis, len(idx), dt
+
+    def bake(self, key, tri_ids):
+        s, shared = self.s, self.shared
+        ty, tx = key
+        tile = s["tile"]
+        x0, y0 = tx * tile, ty * tile
+        x1, y1 = min(x0 + tile, self.width), min(y0 + tile, self.height)
+        frag = rasterize_tile(self.tris, tri_ids, self.width, self.height, x0, y0, x1, y1)
+        n_tex = len(frag.texels)
+        stats = RunningStats(n_tex)
+        if n_tex == 0:
+            return frag, stats
+        adaptive = s["target_error"] > 0
+        total = s["samples"]
+        k = min(s["min_samples"], total) if adaptive else total
+        start = 0
+        active = np.arange(n_tex)
+        z = z_for_confidence(0.95)
+        while len(active):
+            g = max(1, s["chunk_rays"] // k)
+            for c0 in range(0, len(active), g):
+                shared.check()
+                sel = active[c0:c0 + g]
+                values, rays, dt = self._values(frag, sel, start, k)
+                part = RunningStats.from_moments(stats.n[sel], stats.mean[sel], stats.m2[sel]).add(values)
+                stats.n[sel], stats.mean[sel], stats.m2[sel] = part.n, part.mean, part.m2
+                shared.advance(len(sel) * k, rays, dt)
+            start += k
+            if not adaptive or start >= total:
+                break
+            se = np.sqrt(np.where(stats.n[active] > 1, stats.m2[active] / np.maximum(stats.n[active] - 1, 1), 0.0)
+                         / stats.n[active])
+            active = active[z * se > s["target_error"]]
+            k = min(start, total - start)  # double each round: Sobol' prefixes stay powers of two
+        # Credit the work the adaptive stop saved, so progress reaches 1.
+        shared.advance(n_tex * total - int(stats.n.sum()), force=False)
+        return frag, stats
+
+
+def _validate(target, occluders, resolution, samples, min_samples, target_error, max_distance, distribution,
+              source, margin, seed, threads, falloff):
+    if not isinstance(target, Mesh):
+        raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
+    if target.uvs is None:
+        raise MeshError(f"mesh {target.name!r} has no UVs: the baker needs a UV map to know where each texel lies")
+    occluders = list(occluders or ())
+    for o in occluders:
+        if not isinstance(o, Mesh):
+            raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
+    w, h = _resolution(resolution)
+    samples = _positive_int(samples, "samples")
+    min_samples = _positive_int(min_samples, "min_samples")
+    try:
+        target_error = float(target_error)
+        max_distance = float(max_distance)
+        falloff = float(falloff)
+    except (TypeError, ValueError):
+        raise SettingsError("target_error, max_distance and falloff must be numbers") from None
+    if not (math.isfinite(target_error) and target_error >= 0):
+        raise SettingsError(f"target_error must be a finite number >= 0 (0 turns adaptive sampling off), got {target_error}")
+    if not (max_distance > 0):  # also refuses NaN
+        raise SettingsError(f"max_distance must be positive (inf for unlimited), got {max_distance}")
+    if not (math.isfinite(falloff) and falloff >= 0):
+        raise SettingsError(f"falloff must be a finite number >= 0, got {falloff}")
+    if falloff > 0 and not math.isfinite(max_distance):
+        raise SettingsError("a distance falloff needs a finite max_distance to fall off over")
+    if distribution not in DISTRIBUTIONS:
+        raise SettingsError(f"unknown distribution {distribution!r}; choose one of {', '.join(DISTRIBUTIONS)}")
+    if source not in SOURCE_NAMES:
+        raise SettingsError(f"unknown sample source {source!r}; choose one of {', '.join(SOURCE_NAMES)}")
+    margin = _positive_int(margin, "margin", lo=0)
+    seed = _positive_int(seed, "seed", lo=0)
+    if threads is None:
+        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    threads = _positive_int(threads, "threads")
+    return dict(occluders=occluders, width=w, height=h, samples=samples, min_samples=min(min_samples, samples),
+                target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
+                margin=margin, seed=seed, threads=threads, falloff=falloff)
+
+
+def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
+            max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
+            ignore_backfaces=False, falloff=0.0, progress=None, cancel=None, on_tile=None,
+            tile_size=32, chunk_rays=1 << 16):
+    """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
+
+    Parameters
+    ----------
+    target : Mesh with UVs. It always occludes itself.
+    occluders : Meshes (UVs not needed) that also block rays, in the same world space.
+    resolution : int or (width, height) in texels.
+    samples : the most samples per texel (every texel takes exactly this many when adaptive is off).
+    min_samples : with adaptive sampling, what every texel takes before it may stop.
+    target_error : adaptive sampling when > 0: a texel stops once the half-width of its 95%
+        confidence interval is at most this (in AO units, e.g. 0.01), after doubling rounds from
+        ``min_samples``; fully open texels under cosine sampling have zero variance and stop at the
+        minimum. 0 turns adaptive sampling off.
+    max_distance : occluders farther than this along a ray do not count (world units).
+    distribution : 'cosine' (importance sampling, default) or 'uniform' (weight 2 cos theta).
+    source : 'sobol' (Owen-scrambled, default), 'stratified', 'independent' or 'halton'.
+    margin : texels to extend each UV island by, from the nearest covered texel.
+    seed : non-negative integer; the same seed gives a bit-identical result for any thread count.
+    threads : worker threads (None: every core this process may use).
+    ignore_backfaces : hits on the back of a triangle (its winding's normal facing along the ray)
+        do not occlude; the ray continues past them.
+    falloff : 0 for plain AO; p > 0 weighs a hit at distance t by (1 - t / max_distance)^p, so
+        distant occluders darken less (needs a finite max_distance).
+    progress : called as progress(fraction) from worker threads, one call at a time, about every
+        0.1 s while rays are traced.
+    cancel : a threading.Event or a callable returning True to stop; checked between chunks of
+        rays. A cancelled bake raises BakeCancelled and returns nothing.
+    on_tile : called as on_tile(rows, cols, ao_block) from worker threads when a tile of texels is
+        final (before margin dilation); ``rows``, ``cols`` are slices of the (H, W) result.
+
+    Returns
+    -------
+    BakeResult
+
+    Raises
+    ------
+    MeshError, MeshTypeError, SettingsError, BakeMemoryError (before any heavy work), BakeCancelled.
+    """
+    t_start = time.perf_counter()
+    cfg = _validate(target, occluders, resolution, samples, min_samples, target_error, max_distance,
+                    distribution, source, margin, seed, threads, falloff)
+    w, h = cfg["width"], cfg["height"]
+    tri_total = target.triangle_count + sum(o.triangle_count for o in cfg["occluders"])
+    need = estimate_memory(w, h, tri_total, cfg["threads"], chunk_rays)
+    avail = available_memory()
+    if avail is not None and need > avail:
+        raise BakeMemoryError(f"a {w} x {h} bake of {tri_total} triangles needs about {need / 2**30:.2f} GiB, "
+                              f"but only {avail / 2**30:.2f} GiB is available; lower the resolution")
+    if _cancelled(cancel):
+        raise BakeCancelled("the bake was cancelled before it started")
+
+    tris = prepare(target, w, h)
+    bins = bin_triangles(tris, w, h, tile_size)
+    tracer = _Tracer([target] + cfg["occluders"], ignore_backfaces, cfg["falloff"], cfg["max_distance"])
+    pattern = TexelPattern(cfg["source"], cfg["seed"], cfg["samples"])
+    settings = dict(cfg, tile=tile_size, chunk_rays=chunk_rays)
+    # Planned work: texel-samples of every tile's bounding rectangle is unknown before rasterising,
+    # so count each tile's texels times samples as it is rasterised, against an upper bound.
+    planned = sum(min(tile_size, w - kx * tile_size) * min(tile_size, h - ky * tile_size)
+                  for ky, kx in bins) * cfg["samples"]
+    shared = _Shared(planned, progress, cancel)
+    baker = _TileBaker(tris, target, tracer, pattern, settings, w, h, shared)
+
+    ao = np.zeros((h, w), np.float32)
+    se = np.zeros((h, w), np.float32)
+    count = np.zeros((h, w), np.int32)
+    mask = np.zeros((h, w), bool)
+    coverage_over = 0
+    keys = sorted(bins)
+
+    def work(key):
+        nonlocal coverage_over
+        frag, stats = baker.bake(key, bins[key])
+        ty, tx = key
+        rect = min(tile_size, w - tx * tile_size) * min(tile_size, h - ty * tile_size)
+        shared.advance(rect * cfg["samples"] - len(frag.texels) * cfg["samples"])
+        if len(frag.texels):
+            rows, cols = frag.texels // w, frag.texels % w
+            ao[rows, cols] = np.clip(stats.mean, 0.0, 1.0)
+            se[rows, cols] = np.nan_to_num(stats.stderr, nan=0.0)
+            count[rows, cols] = stats.n
+            mask[rows, cols] = True
+            with shared.lock:
+                coverage_over += int((frag.coverage > 1.0 + 1e-6).sum())
+            if on_tile is not None:
+                r = slice(ty * tile_size, min((ty + 1) * tile_size, h))
+                c = slice(tx * tile_size, min((tx + 1) * tile_size, w))
+                with shared.lock:
+                    on_tile(r, c, ao[r, c].copy())
+
+    def guarded(key):
+        try:
+            work(key)
+        except _Stop:
+            pass
+        except BaseException:
+            shared.stop.set()
+            raise
+
+    if cfg["threads"] == 1 or len(keys) <= 1:
+        for key in keys:
+            guarded(key)
+    else:
+        with ThreadPoolExecutor(max_workers=cfg["threads"], thread_name_prefix="mc_ao") as pool:
+            for f in [pool.submit(guarded, key) for key in keys]:
+                f.result()
+    if shared.stop.is_set():
+        raise BakeCancelled("the bake was cancelled; nothing was written")
+    if progress is not None:
+        progress(1.0)
+
+    if cfg["margin"] > 0:
+        ao = dilate(ao, mask, cfg["margin"])
+    seconds = time.perf_counter() - t_start
+    metadata = {
+        "samples": cfg["samples"], "min_samples": cfg["min_samples"], "target_error": cfg["target_error"],
+        "sample_source": cfg["source"], "distribution": cfg["distribution"], "seed": cfg["seed"],
+        "max_distance": cfg["max_distance"], "falloff": cfg["falloff"], "ignore_backfaces": bool(ignore_backfaces),
+        "margin": cfg["margin"], "resolution": f"{w}x{h}", "version": __version__, "rays": shared.rays,
+    }
+    report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": tris.degenerate,
+              "uv_outside_triangles": tris.outside, "overlapping_texels": coverage_over}
+    return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=shared.rays, seconds=seconds,
+                      trace_seconds=shared.trace_seconds, threads=cfg["threads"], metadata=metadata,
+                      report=report)
+
+
+__all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "estimate_memory", "available_memory", "McAoError"]

@@ -1,0 +1,114 @@
+"""Triangle meshes as the baker takes them: validated numpy arrays in world space.
+
+Everything that can be wrong with the arrays is found here, before any heavy work, and reported with
+the mesh's name and the exact problem (see :mod:`core.errors`).
+"""
+
+import numpy as np
+
+from .errors import MeshError, MeshTypeError
+
+
+def _real_array(a, what, name):
+    try:
+        arr = np.asarray(a)
+    except Exception as e:  # ragged lists and the like
+        raise MeshTypeError(f"mesh {name!r}: {what} cannot be read as an array ({e})") from None
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)) \
+            or arr.dtype == np.bool_:
+        raise MeshTypeError(f"mesh {name!r}: {what} must hold real numbers, got dtype {arr.dtype}")
+    return arr
+
+
+def _check_shape(arr, shape, what, name):
+    if arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape)):
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise MeshError(f"mesh {name!r}: {what} must have shape {want}, got {arr.shape}")
+
+
+def _check_finite(arr, what, name):
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        first = np.argwhere(bad)[0]
+        kind = "NaN" if np.isnan(arr[tuple(first)]) else "infinity"
+        raise MeshError(f"mesh {name!r}: {what} contain {int(bad.sum())} non-finite values "
+                        f"({kind} first at index {tuple(int(i) for i in first)})")
+
+
+class Mesh:
+    """A triangle mesh in world space.
+
+    Parameters
+    ----------
+    positions : (V, 3) real array of vertex positions.
+    triangles : (T, 3) integer array of vertex indices.
+    uvs : (T, 3, 2) real array, the UV of each triangle corner, or None (occluders need none).
+    normals : (T, 3, 3) real array, the shading normal of each triangle corner, or None for face
+        normals (flat shading). Corner normals need not be unit length; zero-length ones fall back
+        to the face normal.
+    name : used in every error message about this mesh.
+
+    Attributes
+    ----------
+    positions : (V, 3) float64; triangles : (T, 3) int64; uvs : (T, 3, 2) float64 or None;
+    normals : (T, 3, 3) float64 unit corner normals; face_normals : (T, 3) float64 unit geometric
+    normals, from the winding (v1 - v0) x (v2 - v0), zero for degenerate triangles.
+    """
+
+    def __init__(self, positions, triangles, uvs=None, normals=None, name="mesh"):
+        self.name = str(name)
+        p = _real_array(positions, "positions", self.name)
+        _check_shape(p, (None, 3), "positions", self.name)
+        t = np.asarray(triangles) if not isinstance(triangles, np.ndarray) else triangles
+        if t.dtype == object or not np.issubdtype(t.dtype, np.integer) or t.dtype == np.bool_:
+            if t.size == 0 and t.dtype != object:
+                t = t.astype(np.int64)
+            else:
+                raise MeshTypeError(f"mesh {self.name!r}: triangles must be integer vertex indices, "
+                                    f"got dtype {t.dtype}")
+        _check_shape(t, (None, 3), "triangles", self.name)
+        if len(t) == 0:
+            raise MeshError(f"mesh {self.name!r} is empty: it has no triangles")
+        if len(p) == 0:
+            raise MeshError(f"mesh {self.name!r} is empty: it has no vertices")
+        _check_finite(p, "positions", self.name)
+        lo, hi = int(t.min()), int(t.max())
+        if lo < 0 or hi >= len(p):
+            bad = int(((t < 0) | (t >= len(p))).any(axis=1).sum())
+            raise MeshError(f"mesh {self.name!r}: {bad} triangles index vertices out of range "
+                            f"(indices span {lo}..{hi}, the mesh has {len(p)} vertices)")
+        self.positions = p.astype(np.float64)
+        self.triangles = t.astype(np.int64)
+        T = len(t)
+
+        self.uvs = None
+        if uvs is not None:
+            uv = _real_array(uvs, "uvs", self.name)
+            _check_shape(uv, (T, 3, 2), "uvs (one UV per triangle corner)", self.name)
+            _check_finite(uv, "uvs", self.name)
+            self.uvs = uv.astype(np.float64)
+
+        corners = self.positions[self.triangles]
+        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        length = np.linalg.norm(cross, axis=1)
+        self.areas = 0.5 * length
+        self.face_normals = np.where(length[:, None] > 0, cross / np.where(length > 0, length, 1.0)[:, None], 0.0)
+
+        if normals is None:
+            self.normals = np.repeat(self.face_normals[:, None, :], 3, axis=1)
+            self.has_corner_normals = False
+        else:
+            n = _real_array(normals, "normals", self.name)
+            _check_shape(n, (T, 3, 3), "normals (one normal per triangle corner)", self.name)
+            _check_finite(n, "normals", self.name)
+            n = n.astype(np.float64)
+            ln = np.linalg.norm(n, axis=2, keepdims=True)
+            self.normals = np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), self.face_normals[:, None, :])
+            self.has_corner_normals = True
+
+    @property
+    def triangle_count(self):
+        return len(self.triangles)
+
+    def __repr__(self):
+        return f"Mesh({self.name!r}, {len(self.positions)} vertices, {len(self.triangles)} triangles)"

@@ -1,0 +1,260 @@
+"""UV rasterisation: which surface every texel covers, as exact pieces of triangles.
+
+Texel space: x = u * W, y = v * H, texel (row i, column j) is the unit square [j, j+1) x [i, i+1).
+A texel is covered when a UV triangle overlaps its square with positive area, however little (so
+texels cut by a triangle's edge are covered, conservatively). Each (texel, triangle) overlap is the
+texel square clipped by the triangle (Sutherland-Hodgman), split into a fan of sub-triangles, so that
+sample positions can be drawn uniformly over exactly the covered part of the texel and always lie on
+the surface. Texels entirely inside one triangle, the common case, are flagged and skip the clipping.
+
+Work is organised by tiles of texels: triangles are binned to the tiles their UV bounding boxes
+touch, and each tile is rasterised on its own (in the worker thread that bakes it), which bounds the
+memory of any bake to a tile's worth of fragments.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Clipped overlaps smaller than this (in texel areas) are dropped as numerical slivers.
+MIN_FRAGMENT_AREA = 1e-9
+
+
+@dataclass
+class UVTriangles:
+    """Per-triangle data of the target in texel space, shared by every tile."""
+
+    xy: np.ndarray        # (T, 3, 2) corners in texel coordinates, counter-clockwise
+    valid: np.ndarray     # (T,) bool: positive UV area (degenerate UV triangles are skipped)
+    origin_xy: np.ndarray  # (T, 2) the first corner, the origin of the local affine maps
+    pos0: np.ndarray      # (T, 3) world position at origin_xy
+    pos_j: np.ndarray     # (T, 2, 3) d(position)/d(x, y)
+    nrm0: np.ndarray      # (T, 3) interpolated (unnormalised) normal at origin_xy
+    nrm_j: np.ndarray     # (T, 2, 3) d(normal)/d(x, y)
+    degenerate: int       # number of triangles with zero UV area
+    outside: int          # number of valid triangles with some UV outside [0, 1]
+
+
+def prepare(mesh, width, height):
+    """Texel-space corners and the affine maps texel (x, y) -> world position and normal, per triangle.
+
+    The maps are anchored at each triangle's own first corner, not at the UV origin, so evaluating
+    them loses no precision for small triangles far from (0, 0).
+    """
+    xy = mesh.uvs * np.array([width, height], dtype=np.float64)
+    e1 = xy[:, 1] - xy[:, 0]
+    e2 = xy[:, 2] - xy[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # twice the signed UV area, in texels
+    scale = np.maximum(np.abs(e1).max(axis=1), np.abs(e2).max(axis=1))
+    valid = np.abs(det) > 1e-12 * np.maximum(scale * scale, 1e-300)
+    valid &= np.abs(det) > 0
+    # Counter-clockwise corners make every edge function positive inside.
+    cw = det < 0
+    xy_ccw = xy.copy()
+    xy_ccw[cw, 1], xy_ccw[cw, 2] = xy[cw, 2], xy[cw, 1]
+
+    safe = np.where(valid, det, 1.0)
+    # Barycentric coordinates b1, b2 as linear functions of (x - x0, y - y0): inverse of [e1 e2].
+    inv = np.empty((len(xy), 2, 2))
+    inv[:, 0, 0] = e2[:, 1] / safe
+    inv[:, 0, 1] = -e2[:, 0] / safe
+    inv[:, 1, 0] = -e1[:, 1] / safe
+    inv[:, 1, 1] = e1[:, 0] / safe
+    # d b1 / d(x, y) = inv[:, 0, :], d b2 / d(x, y) = inv[:, 1, :]
+    P = mesh.positions[mesh.triangles]
+    N = mesh.normals
+    dP1, dP2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    dN1, dN2 = N[:, 1] - N[:, 0], N[:, 2] - N[:, 0]
+    pos_j = inv[:, 0, :, None] * dP1[:, None, :] + inv[:, 1, :, None] * dP2[:, None, :]
+    nrm_j = inv[:, 0, :, None] * dN1[:, None, :] + inv[:, 1, :, None] * dN2[:, None, :]
+    uv = mesh.uvs
+    outside = int((valid & np.any((uv < 0) | (uv > 1), axis=(1, 2))).sum())
+    return UVTriangles(xy_ccw, valid, xy[:, 0].copy(), P[:, 0].copy(), pos_j, N[:, 0].copy(), nrm_j,
+                       degenerate=int((~valid).sum()), outside=outside)
+
+
+def bin_triangles(tris, width, height, tile):
+    """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array, for tiles touched."""
+    idx = np.flatnonzero(tris.valid)
+    xy = tris.xy[idx]
+    lo = np.floor(xy.min(axis=1)).astype(np.int64)
+    hi = np.ceil(xy.max(axis=1)).astype(np.int64) - 1  # last texel the bbox reaches
+    lo = np.maximum(lo, 0)
+    hi = np.minimum(hi, [width - 1, height - 1])
+    ok = np.all(hi >= lo, axis=1)
+    idx, lo, hi = idx[ok], lo[ok], hi[ok]
+    t_lo, t_hi = lo // tile, hi // tile  # (x, y) tile coordinates
+    nx = t_hi[:, 0] - t_lo[:, 0] + 1
+    ny = t_hi[:, 1] - t_lo[:, 1] + 1
+    count = nx * ny
+    rep = np.repeat(np.arange(len(idx)), count)
+    k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
+    tx = t_lo[rep, 0] + k % nx[rep]
+    ty = t_lo[rep, 1] + k // nx[rep]
+    tiles_x = -(-width // tile)
+    key = ty * tiles_x + tx
+    order = np.argsort(key, kind="stable")
+    key, tri = key[order], idx[rep[order]]
+    bounds = np.flatnonzero(np.diff(key)) + 1
+    out = {}
+    for part_key, part in zip(np.split(key, bounds), np.split(tri, bounds)):
+        if part_key.size:
+            out[(int(part_key[0] // tiles_x), int(part_key[0] % tiles_x))] = part
+    return out
+
+
+def _clip(poly, count, a, b, c):
+    """Clip convex polygons (P, K, 2) with ``count`` vertices by a*x + b*y + c >= 0 (vectorised)."""
+    P, K, _ = poly.shape
+    slot = np.arange(K)
+    alive = slot[None, :] < count[:, None]
+    nxt = (slot[None, :] + 1) % np.maximum(count[:, None], 1)
+    v = poly
+    w = np.take_along_axis(poly, nxt[..., None], axis=1)
+    dv = a[:, None] * v[..., 0] + b[:, None] * v[..., 1] + c[:, None]
+    dw = a[:, None] * w[..., 0] + b[:, None] * w[..., 1] + c[:, None]
+    inside_v = dv >= 0
+    inside_w = dw >= 0
+    keep = alive & inside_v
+    cross = alive & (inside_v != inside_w)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(cross, dv / (dv - dw), 0.0)
+    x = v + t[..., None] * (w - v)
+    # Emit per slot: the vertex if kept, then the crossing point if the edge crosses.
+    emit = np.stack([keep, cross], axis=2).reshape(P, 2 * K)
+    pts = np.stack([v, x], axis=2).reshape(P, 2 * K, 2)
+    pos = np.cumsum(emit, axis=1) - 1
+    new_count = emit.sum(axis=1)
+    out = np.zeros((P, K + 1, 2))
+    r, s = np.nonzero(emit)
+    out[r, pos[r, s]] = pts[r, s]
+    return out, new_count
+
+
+@dataclass
+class TileFragments:
+    """What one tile's texels cover.
+
+    ``texels``: (n,) flat texel indices (row * W + col) of covered texels, sorted.
+    ``full_tri``: (n,) the triangle covering the whole texel, or -1 when the texel is split.
+    Sub-triangles of split texels (fans of the clipped polygons), grouped by texel:
+    ``sub_texel`` (m,) index into ``texels``, ``sub_tri`` (m,) parent triangle, ``sub_xy`` (m, 3, 2)
+    corners in texel space, ``sub_cdf`` (m,) the texel's cumulative area fraction up to and including
+    this sub-triangle, ``sub_start`` (n + 1,) offsets of each texel's run.
+    ``coverage``: (n,) covered area of each texel in texel units (above 1 where UV islands overlap).
+    """
+
+    texels: np.ndarray
+    full_tri: np.ndarray
+    sub_texel: np.ndarray
+    sub_tri: np.ndarray
+    sub_xy: np.ndarray
+    sub_cdf: np.ndarray
+    sub_start: np.ndarray
+    coverage: np.ndarray
+
+
+def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
+    """Fragments of the texels [x0, x1) x [y0, y1) covered by the triangles ``tri_ids``."""
+    xy = tris.xy[tri_ids]
+    lo = np.maximum(np.floor(xy.min(axis=1)).astype(np.int64), [x0, y0])
+    hi = np.minimum(np.ceil(xy.max(axis=1)).astype(np.int64), [x1, y1])  # exclusive
+    nx = np.maximum(hi[:, 0] - lo[:, 0], 0)
+    ny = np.maximum(hi[:, 1] - lo[:, 1], 0)
+    count = nx * ny
+    rep = np.repeat(np.arange(len(tri_ids)), count)
+    k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
+    px = lo[rep, 0] + k % nx[rep]
+    py = lo[rep, 1] + k // nx[rep]
+    pxy = xy[rep]  # (pairs, 3, 2)
+
+    # Edge functions E_k(p) = cross(c_{k+1} - c_k, p - c_k) >= 0 inside (corners are CCW).
+    c0, c1 = pxy, np.roll(pxy, -1, axis=1)
+    ea = -(c1[..., 1] - c0[..., 1])
+    eb = c1[..., 0] - c0[..., 0]
+    ec = -(ea * c0[..., 0] + eb * c0[..., 1])
+    corners_x = px[:, None] + np.array([0, 1, 1, 0])
+    corners_y = py[:, None] + np.array([0, 0, 1, 1])
+    E = ea[:, :, None] * corners_x[:, None, :] + eb[:, :, None] * corners_y[:, None, :] + ec[:, :, None]
+    full = np.all(E >= 0, axis=(1, 2))
+    out = np.any(np.all(E <= 0, axis=2), axis=1) & ~full
+    part = ~full & ~out
+
+    # Clip the texel square by the three edges for the partial pairs.
+    ip = np.flatnonzero(part)
+    sq = np.zeros((len(ip), 4, 2))
+    sq[..., 0] = corners_x[ip]
+    sq[..., 1] = corners_y[ip]
+    poly, cnt = sq, np.full(len(ip), 4)
+    for e in range(3):
+        poly, cnt = _clip(poly, cnt, ea[ip, e], eb[ip, e], ec[ip, e])
+    # Fan triangulation around vertex 0: sub-triangles (0, k, k+1), k = 1 .. cnt - 2.
+    K = poly.shape[1]
+    ks = np.arange(1, K - 1)
+    fan_ok = ks[None, :] < (cnt[:, None] - 1)
+    a = poly[:, :1, :]
+    b = poly[:, 1:K - 1, :]
+    c = poly[:, 2:K, :]
+    fan_area = 0.5 * ((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
+                      - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+    fan_area = np.where(fan_ok, np.abs(fan_area), 0.0)
+    pair_area = fan_area.sum(axis=1)
+    real = pair_area > MIN_FRAGMENT_AREA
+    ip, poly, fan_ok, fan_area, b, c, a = ip[real], poly[real], fan_ok[real], fan_area[real], b[real], c[real], a[real]
+    fan_ok &= fan_area > 0
+
+    tw = x1 - x0
+    def flat(ix, iy):
+        return (iy * width + ix).astype(np.int64)
+
+    full_texel = flat(px[full], py[full])
+    full_tri = tri_ids[rep[full]]
+    rr, kk = np.nonzero(fan_ok)
+    sub_texel_flat = flat(px[ip[rr]], py[ip[rr]])
+    sub_tri = tri_ids[rep[ip[rr]]]
+    sub_xy = np.stack([a[rr, 0], b[rr, kk], c[rr, kk]], axis=1)
+    sub_area = fan_area[rr, kk]
+
+    # A texel with exactly one full fragment and nothing else keeps the fast path; a texel that is
+    # full for one triangle and touched by others (overlapping UVs) is split into sub-triangles.
+    all_texels = np.concatenate([full_texel, sub_texel_flat])
+    texels, inverse, counts = np.unique(all_texels, return_inverse=True, return_counts=True)
+    n_full = len(full_texel)
+    full_idx = inverse[:n_full]
+    simple = np.zeros(len(texels), dtype=bool)
+    simple[full_idx] = counts[full_idx] == 1
+    full_of = np.full(len(texels), -1, dtype=np.int64)
+    full_of[full_idx[simple[full_idx]]] = full_tri[simple[full_idx]]
+
+    # Full fragments of non-simple texels become two sub-triangles of the square.
+    nf = ~simple[full_idx]
+    if nf.any():
+        fx, fy = px[full][nf], py[full][nf]
+        sq_a = np.stack([fx, fy], 1).astype(float)
+        sq_b = np.stack([fx + 1, fy], 1).astype(float)
+        sq_c = np.stack([fx + 1, fy + 1], 1).astype(float)
+        sq_d = np.stack([fx, fy + 1], 1).astype(float)
+        extra_xy = np.concatenate([np.stack([sq_a, sq_b, sq_c], 1), np.stack([sq_a, sq_c, sq_d], 1)])
+        extra_tri = np.concatenate([full_tri[nf], full_tri[nf]])
+        extra_tex = np.concatenate([full_idx[nf], full_idx[nf]])
+        sub_xy = np.concatenate([sub_xy, extra_xy])
+        sub_tri = np.concatenate([sub_tri, extra_tri])
+        sub_area = np.concatenate([sub_area, np.full(len(extra_tri), 0.5)])
+        sub_tex = np.concatenate([inverse[n_full:], extra_tex])
+    else:
+        sub_tex = inverse[n_full:]
+
+    order = np.argsort(sub_tex, kind="stable")
+    sub_tex, sub_tri, sub_xy, sub_area = sub_tex[order], sub_tri[order], sub_xy[order], sub_area[order]
+    coverage = np.bincount(sub_tex, weights=sub_area, minlength=len(texels))
+    coverage[simple] = 1.0
+    sub_start = np.searchsorted(sub_tex, np.arange(len(texels) + 1))
+    csum = np.cumsum(sub_area)
+    run_base = np.concatenate([[0.0], csum])[sub_start[:-1]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sub_cdf = (csum - run_base[sub_tex]) / coverage[sub_tex]
+    if len(sub_cdf):
+        last = sub_start[1:][sub_start[1:] > sub_start[:-1]] - 1
+        sub_cdf[last] = 1.0
+    del tw
+    return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage)
