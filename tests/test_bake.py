@@ -1,0 +1,240 @@
+"""The AO baker against analytic truth: open and closed scenes, Lambert's polygon form factor,
+truncated distances, estimator agreement, determinism, adaptive sampling, margin, files."""
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from core import BakeCancelled, Mesh, bake_ao
+from core.raster import prepare, rasterize_tile
+from core.stats import normal_quantile
+from scenes import box, plane, polygon_form_factor, texel_mean
+
+LID = np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]])
+
+
+def lid_mesh(verts=LID):
+    return Mesh(verts, np.array([[0, 1, 2], [0, 2, 3]]), name="lid")
+
+
+@pytest.mark.parametrize("source", ["sobol", "stratified", "independent", "halton"])
+def test_open_plane_is_exactly_one_with_zero_error(source):
+    r = bake_ao(plane(), resolution=16, samples=32, source=source, margin=0)
+    assert r.mask.all()
+    assert np.all(r.ao == 1.0) and np.all(r.stderr == 0.0) and np.all(r.samples == 32)
+
+
+def test_open_plane_uniform_is_unbiased_but_noisy():
+    r = bake_ao(plane(), resolution=16, samples=256, distribution="uniform", margin=0, source="independent")
+    # 2 cos(theta) under uniform directions: mean 1, variance 1/3 per sample.
+    assert np.all(r.stderr > 0)
+    z = (r.ao.astype(float) - 1.0)
+    # ao is clipped to [0, 1], so compare the unclipped mean through texels below and above 1 symmetrically
+    assert abs(np.mean(np.minimum(z, 0))) < 4 * math.sqrt(1 / 3 / 256)
+
+
+@pytest.fixture(scope="module")
+def lid_truth():
+    W = H = 24
+    truth = texel_mean(lambda p: 1.0 - polygon_form_factor(p, LID), W, H)
+    return W, H, truth
+
+
+@pytest.mark.parametrize("distribution", ["cosine", "uniform"])
+def test_plane_under_polygon_matches_lamberts_formula(lid_truth, distribution):
+    W, H, truth = lid_truth
+    r = bake_ao(plane(), [lid_mesh()], resolution=(W, H), samples=256, source="independent",
+                distribution=distribution, margin=0, seed=3)
+    # Compare before the [0, 1] clip only where clipping cannot act: the truth is well inside (0, 1).
+    err = r.ao - truth
+    z = err / r.stderr
+    m = z.size
+    assert abs(z.mean()) < 4 / math.sqrt(m), z.mean()            # no systematic bias
+    assert 0.8 < z.var() < 1.25, z.var()                         # the stderr is honest
+    assert np.abs(z).max() < normal_quantile(1 - 0.01 / (2 * m)) + 0.5  # no texel far off (Sidak, t tails)
+
+
+def test_sobol_is_unbiased_and_more_accurate_than_independent(lid_truth):
+    W, H, truth = lid_truth
+    errs = {}
+    for source in ("sobol", "independent"):
+        r = bake_ao(plane(), [lid_mesh()], resolution=(W, H), samples=256, source=source, margin=0, seed=5)
+        errs[source] = r.ao - truth
+        se = r.stderr
+    # Sobol's mean error is within the (conservative) combined standard error of zero.
+    assert abs(errs["sobol"].mean()) < 4 * math.sqrt((se ** 2).mean() / se.size)
+    rmse = {k: math.sqrt((v ** 2).mean()) for k, v in errs.items()}
+    assert rmse["sobol"] < 0.7 * rmse["independent"], rmse
+
+
+def test_cosine_has_lower_variance_than_uniform(lid_truth):
+    W, H, _ = lid_truth
+    se = {d: bake_ao(plane(), [lid_mesh()], resolution=(W, H), samples=128, distribution=d, margin=0,
+                     source="independent").stderr.mean() for d in ("cosine", "uniform")}
+    assert se["cosine"] < 0.8 * se["uniform"], se
+
+
+BIG_LID = np.array([[-1.0, -1.0, 0.3], [2.0, -1.0, 0.3], [2.0, 2.0, 0.3], [-1.0, 2.0, 0.3]])
+
+
+def test_max_distance_below_the_lid_height_sees_nothing():
+    r = bake_ao(plane(), [lid_mesh(BIG_LID)], resolution=16, samples=64, max_distance=0.25, margin=0)
+    assert np.all(r.ao == 1.0) and np.all(r.stderr == 0)
+
+
+def test_max_distance_between_gives_the_truncated_cone():
+    # Hits count only for cos(theta) >= h / d; the lid covers that whole cone, so the occluded
+    # cosine-weighted fraction is sin^2(theta_c) and AO = (h / d)^2 = 0.36 everywhere.
+    r = bake_ao(plane(), [lid_mesh(BIG_LID)], resolution=16, samples=256, max_distance=0.5, margin=0,
+                source="independent", seed=2)
+    z = (r.ao - 0.36) / r.stderr
+    assert abs(z.mean()) < 4 / math.sqrt(z.size) and 0.75 < z.var() < 1.3
+
+
+def test_point_inside_a_closed_box_is_fully_occluded():
+    r = bake_ao(plane(), [box((-0.5, -0.5, -0.5), (1.5, 1.5, 1.0))], resolution=16, samples=64, margin=0)
+    assert np.all(r.ao == 0.0) and np.all(r.stderr == 0)
+
+
+def test_same_seed_is_bit_identical_for_any_thread_count():
+    kw = dict(resolution=40, samples=64, margin=2, tile_size=8)
+    a = bake_ao(plane(), [lid_mesh()], threads=1, seed=11, **kw)
+    b = bake_ao(plane(), [lid_mesh()], threads=2, seed=11, **kw)
+    c = bake_ao(plane(), [lid_mesh()], threads=2, seed=12, **kw)
+    for name in ("ao", "stderr", "samples", "mask"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert not np.array_equal(a.ao, c.ao)
+
+
+def test_result_does_not_depend_on_tiling_or_chunking():
+    a = bake_ao(plane(), [lid_mesh()], resolution=20, samples=32, tile_size=8, chunk_rays=100, margin=0)
+    b = bake_ao(plane(), [lid_mesh()], resolution=20, samples=32, tile_size=32, chunk_rays=1 << 16, margin=0)
+    assert np.array_equal(a.ao, b.ao) and np.array_equal(a.stderr, b.stderr)
+
+
+def test_adaptive_sampling_stops_open_texels_at_the_minimum_and_converges_the_rest():
+    big = plane(-1.0, -1.0, 2.0, 2.0)
+    target = 0.05
+    r = bake_ao(big, [lid_mesh()], resolution=32, samples=1024, min_samples=16, target_error=target,
+                max_distance=0.5, margin=0)
+    half = 1.959963984540054 * r.stderr
+    assert np.all((r.samples == 1024) | (half <= target + 1e-7))
+    open_ = r.ao == 1.0
+    assert open_.sum() > 100 and np.all(r.samples[open_] == 16)
+    under = r.ao < 0.9
+    assert under.any() and np.all(r.samples[under] > 16)
+    assert r.rays < 0.5 * 1024 * 32 * 32
+
+
+def test_margin_keeps_covered_texels_and_fills_the_border():
+    half = Mesh(np.array([[0, 0, 0], [0.5, 0, 0], [0.5, 1, 0], [0, 1, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]),
+                uvs=np.array([[[0, 0], [0.5, 0], [0.5, 1]], [[0, 0], [0.5, 1], [0, 1]]]), name="half")
+    a = bake_ao(half, [lid_mesh()], resolution=32, samples=32, margin=0)
+    b = bake_ao(half, [lid_mesh()], resolution=32, samples=32, margin=4)
+    assert np.array_equal(a.ao[a.mask], b.ao[b.mask]) and np.array_equal(a.mask, b.mask)
+    cols = np.flatnonzero(a.mask.any(axis=0))
+    last = cols.max()
+    assert last == 15
+    ring = b.ao[:, last + 1:last + 5]
+    # Each ring averages already-filled neighbours, so it stays within the covered values' range.
+    assert np.all(ring >= a.ao[a.mask].min()) and np.all(ring <= a.ao[a.mask].max())
+    # The first ring takes the mean of its covered 8-neighbours: the edge column's rows i-1, i, i+1.
+    edge = np.pad(a.ao[:, last].astype(float), 1)
+    cnt = np.pad(np.ones(32), 1)
+    want = (edge[:-2] + edge[1:-1] + edge[2:]) / (cnt[:-2] + cnt[1:-1] + cnt[2:])
+    np.testing.assert_allclose(ring[:, 0], want, rtol=1e-6)
+    assert np.all(b.ao[:, last + 5:] == 0)
+
+
+def test_cancel_raises_and_returns_nothing():
+    ev = threading.Event()
+    calls = []
+
+    def progress(f):
+        calls.append(f)
+        ev.set()
+
+    with pytest.raises(BakeCancelled):
+        bake_ao(plane(), [lid_mesh()], resolution=64, samples=64, progress=progress, cancel=ev, chunk_rays=1024)
+    with pytest.raises(BakeCancelled):
+        bake_ao(plane(), resolution=8, samples=4, cancel=lambda: True)
+
+
+def test_progress_is_monotone_and_ends_at_one():
+    seen = []
+    bake_ao(plane(), [lid_mesh()], resolution=32, samples=16, progress=seen.append, chunk_rays=256, tile_size=8)
+    assert seen[-1] == 1.0 and all(b >= a for a, b in zip(seen, seen[1:]))
+
+
+def test_on_tile_reports_final_blocks():
+    blocks = []
+    r = bake_ao(plane(), [lid_mesh()], resolution=20, samples=8, tile_size=8, margin=0,
+                on_tile=lambda rows, cols, block: blocks.append((rows, cols, block)))
+    assert len(blocks) == 9
+    for rows, cols, block in blocks:
+        assert np.array_equal(block, r.ao[rows, cols])
+
+
+def test_rasteriser_covers_exactly_the_uv_area():
+    rng = np.random.default_rng(4)
+    uv = rng.random((40, 3, 2))
+    P = rng.random((120, 3))
+    m = Mesh(P, np.arange(120).reshape(40, 3), uvs=uv, name="soup")
+    W = H = 16
+    tris = prepare(m, W, H)
+    frag = rasterize_tile(tris, np.flatnonzero(tris.valid), W, H, 0, 0, W, H)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum() * W * H
+    assert frag.coverage.sum() == pytest.approx(uv_area, rel=1e-9)
+    # Every sub-triangle lies inside its texel square.
+    tex = frag.texels[frag.sub_texel]
+    x0, y0 = tex % W, tex // W
+    assert np.all(frag.sub_xy[..., 0] >= x0[:, None] - 1e-9) and np.all(frag.sub_xy[..., 0] <= x0[:, None] + 1 + 1e-9)
+    assert np.all(frag.sub_xy[..., 1] >= y0[:, None] - 1e-9) and np.all(frag.sub_xy[..., 1] <= y0[:, None] + 1 + 1e-9)
+
+
+def test_texels_cut_by_an_edge_are_covered_and_sampled_on_the_surface():
+    # One triangle whose hypotenuse cuts texels diagonally: every texel it touches is covered, and
+    # the AO of a surface point is 1 anywhere on this open triangle.
+    m = Mesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2]]),
+             uvs=np.array([[[0.01, 0.01], [0.93, 0.01], [0.01, 0.93]]]), name="tri")
+    r = bake_ao(m, resolution=16, samples=8, margin=0)
+    x = (np.arange(16) + 0.5) / 16
+    U, V = np.meshgrid(x, x)
+    centre_inside = (U > 0.01) & (V > 0.01) & (U + V < 0.94)
+    assert np.all(r.mask[centre_inside])
+    assert r.mask.sum() > centre_inside.sum()  # edge texels whose centres are outside count too
+    assert np.all(r.ao[r.mask] == 1.0)
+
+
+def test_report_counts_degenerate_outside_and_overlapping_uvs():
+    P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    F = np.array([[0, 1, 2], [0, 2, 3], [0, 1, 2], [0, 1, 3]])
+    uv = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]], [[0, 0], [1, 0], [1, 1]],
+                   [[0.2, 0.2], [0.2, 0.2], [0.2, 0.2]]], float)
+    uv[1] += [0.0, 0.0]
+    r = bake_ao(Mesh(P, F, uv, name="m"), resolution=8, samples=4, margin=0)
+    assert r.report["degenerate_uv_triangles"] == 1
+    assert r.report["overlapping_texels"] > 0
+    uv2 = np.array([[[0, 0], [1.5, 0], [1.5, 1]], [[0, 0], [1, 1], [0, 1]]], float)
+    r2 = bake_ao(Mesh(P, F[:2], uv2, name="m2"), resolution=8, samples=4, margin=0)
+    assert r2.report["uv_outside_triangles"] == 1
+
+
+def test_written_file_has_the_right_orientation_and_metadata(tmp_path):
+    from core.imageio import read_image, write_ao
+
+    half = Mesh(np.array([[0, 0, 0], [1, 0, 0], [1, 0.5, 0], [0, 0.5, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]),
+                uvs=np.array([[[0, 0], [1, 0], [1, 0.5]], [[0, 0], [1, 0.5], [0, 0.5]]]), name="bottom")
+    r = bake_ao(half, resolution=8, samples=8, margin=0, seed=9)
+    assert r.mask[0].all() and not r.mask[-1].any()  # row 0 is v = 0
+    write_ao(tmp_path / "ao.exr", r, bits="float")
+    img, meta = read_image(tmp_path / "ao.exr")
+    assert np.array_equal(img, r.ao)
+    assert int(meta["samples"]) == 8 and int(meta["seed"]) == 9 and meta["sample_source"] == "sobol"
+    import OpenImageIO as oiio
+
+    raw = oiio.ImageBuf(str(tmp_path / "ao.exr")).get_pixels(oiio.FLOAT)
+    assert raw[-1].min() == 1.0 and raw[0].max() == 0.0  # the file's first scanline is the top row
