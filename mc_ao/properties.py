@@ -6,6 +6,13 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, St
 from .settings import BakeSettings
 
 _DEFAULTS = BakeSettings()
+# Blender 4.5 and later warn about "//" in a path property unless it declares that it supports it;
+# older versions do not know the option.
+_BLEND_RELATIVE = (
+    {"PATH_SUPPORTS_BLEND_RELATIVE"}
+    if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties
+    else set()
+)
 
 
 class McAoSettings(bpy.types.PropertyGroup):
@@ -98,7 +105,7 @@ class McAoSettings(bpy.types.PropertyGroup):
     )
     output_dir: StringProperty(
         name="Folder", description='Folder for the files ("//" is the .blend file\'s folder)',
-        default=_DEFAULTS.output_dir, subtype="DIR_PATH",
+        default=_DEFAULTS.output_dir, subtype="DIR_PATH", options=_BLEND_RELATIVE,
     )
     seed: IntProperty(
         name="Seed", description="Seed of the random scrambling; the same seed gives the same image",
