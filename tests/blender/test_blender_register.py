@@ -7,7 +7,7 @@ import tomllib
 
 import pytest
 
-from conftest import ROOT
+from blender_helpers import ROOT
 
 pytestmark = pytest.mark.blender
 

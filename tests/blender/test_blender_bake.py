@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import add_cube, add_plane, clean_scene, image_ao, select_only
+from blender_helpers import add_cube, add_plane, clean_scene, image_ao, select_only
 
 pytestmark = pytest.mark.blender
 
