@@ -116,7 +116,7 @@ class ProgressBar:
     def update(self, fraction, force=False):
         # Called from the core's worker threads (one at a time).
         now = time.monotonic()
-        if not self.enabled or (not force and now - self.shown < 0.1):
+        if not self.enabled or (not force and fraction < 1.0 and now - self.shown < 0.1):
             return
         self.shown = now
         filled = int(round(self.width * min(max(fraction, 0.0), 1.0)))
