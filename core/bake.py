@@ -30,6 +30,7 @@ from .errors import BakeCancelled, BakeMemoryError, McAoError, MeshError, Settin
 from .margin import dilate
 from .mesh import Mesh
 from .patterns import SOURCE_NAMES, TexelPattern
+from . import raster as R
 from .raster import bin_triangles, prepare, rasterize_tile
 from .stats import RunningStats, z_for_confidence
 from .warps import TWO_PI, basis_components, concentric_disk_xy
@@ -246,35 +247,40 @@ class _TileBaker:
         self.shared = shared
 
     def _surface(self, frag, sel, ux, uy, k):
-        """Surface samples of the chunk as 9 component planes (g, k): position, unit shading normal,
-        geometric normal oriented to the shading normal's side.
+        """Surface samples of the chunk as component planes (g, k): position (float64), unit shading
+        normal and geometric normal oriented to the shading normal's side (float32).
 
-        Texels inside one triangle (the common case) gather that triangle's data once per texel and
-        broadcast it over their k samples; split texels pick a sub-triangle per sample. Component
-        planes, not (n, 3) arrays, keep numpy's inner loops long.
+        Texels inside one triangle (the common case) gather that triangle's row of the packed table
+        once per texel and broadcast it over their k samples; split texels pick a sub-triangle per
+        sample and gather per sample. Component planes, not (n, 3) arrays, keep numpy's inner loops
+        long.
         """
-        T, W = self.tris, self.width
+        W = self.width
         g = len(sel)
         full = frag.full_tri[sel]
         simple = full >= 0
-        out = np.empty((9, g, k))
+        pos = np.empty((3, g, k))
+        nrm = np.empty((3, g, k))
+        gn = np.empty((3, g, k), np.float32)
+
+        def fill(rows, tab, dx, dy, col):
+            for c in range(3):
+                pos[c, rows] = col(tab, R.TABLE_P0 + c) + dx * col(tab, R.TABLE_PDX + c) + dy * col(tab, R.TABLE_PDY + c)
+                nrm[c, rows] = col(tab, R.TABLE_N0 + c) + dx * col(tab, R.TABLE_NDX + c) + dy * col(tab, R.TABLE_NDY + c)
+                gn[c, rows] = col(tab, R.TABLE_FN + c)
+
         if simple.any():
             rows = slice(None) if simple.all() else np.flatnonzero(simple)
-            ts = full[rows]
+            tab = self.tris.table[full[rows]]  # one row per texel
             tex = frag.texels[sel[rows]]
-            dx = ((tex % W) - T.origin_xy[ts, 0])[:, None] + ux[rows]
-            dy = ((tex // W) - T.origin_xy[ts, 1])[:, None] + uy[rows]
-            fn = self.mesh.face_normals[ts]
-            for c in range(3):
-                out[c, rows] = T.pos0[ts, c][:, None] + dx * T.pos_j[ts, 0, c][:, None] + dy * T.pos_j[ts, 1, c][:, None]
-                out[3 + c, rows] = T.nrm0[ts, c][:, None] + dx * T.nrm_j[ts, 0, c][:, None] + dy * T.nrm_j[ts, 1, c][:, None]
-                out[6 + c, rows] = fn[:, c][:, None]
+            dx = ((tex % W) - tab[:, R.TABLE_ORIGIN])[:, None] + ux[rows]
+            dy = ((tex // W) - tab[:, R.TABLE_ORIGIN + 1])[:, None] + uy[rows]
+            fill(rows, tab, dx, dy, lambda t, i: t[:, i, None])
         if not simple.all():
             rows = np.flatnonzero(~simple)
             t_loc = np.repeat(sel[rows], k)
             a, b = ux[rows].ravel(), uy[rows].ravel()
-            key = frag.sub_texel + frag.sub_cdf
-            j = np.searchsorted(key, t_loc + a, side="right")
+            j = np.searchsorted(frag.sub_key, t_loc + a, side="right")
             j = np.clip(j, frag.sub_start[t_loc], frag.sub_start[t_loc + 1] - 1)
             lo = np.where(j > frag.sub_start[t_loc], frag.sub_cdf[np.maximum(j - 1, 0)], 0.0)
             a = np.clip((a - lo) / np.maximum(frag.sub_cdf[j] - lo, 1e-300), 0.0, 1.0)
@@ -282,39 +288,38 @@ class _TileBaker:
             first = a < b
             b0 = np.where(first, a / 2, a - b / 2)
             b1 = np.where(first, b - a / 2, b / 2)
+            b2 = 1.0 - b0 - b1
             c3 = frag.sub_xy[j]
-            tri = frag.sub_tri[j]
-            dx = b0 * c3[:, 0, 0] + b1 * c3[:, 1, 0] + (1 - b0 - b1) * c3[:, 2, 0] - T.origin_xy[tri, 0]
-            dy = b0 * c3[:, 0, 1] + b1 * c3[:, 1, 1] + (1 - b0 - b1) * c3[:, 2, 1] - T.origin_xy[tri, 1]
+            tab = self.tris.table[frag.sub_tri[j]]  # one row per sample
+            dx = b0 * c3[:, 0, 0] + b1 * c3[:, 1, 0] + b2 * c3[:, 2, 0] - tab[:, R.TABLE_ORIGIN]
+            dy = b0 * c3[:, 0, 1] + b1 * c3[:, 1, 1] + b2 * c3[:, 2, 1] - tab[:, R.TABLE_ORIGIN + 1]
             shape = (len(rows), k)
-            for c in range(3):
-                out[c, rows] = (T.pos0[tri, c] + dx * T.pos_j[tri, 0, c] + dy * T.pos_j[tri, 1, c]).reshape(shape)
-                out[3 + c, rows] = (T.nrm0[tri, c] + dx * T.nrm_j[tri, 0, c] + dy * T.nrm_j[tri, 1, c]).reshape(shape)
-                out[6 + c, rows] = self.mesh.face_normals[tri, c].reshape(shape)
-        n, gn = out[3:6], out[6:9]
-        ln = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+            fill(rows, tab, dx.reshape(shape), dy.reshape(shape), lambda t, i: t[:, i].reshape(shape))
+        ln = np.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])
         ok = ln > 1e-12
         inv = 1.0 / np.where(ok, ln, 1.0)
+        n = np.empty((3, g, k), np.float32)
         for c in range(3):
-            n[c] = np.where(ok, n[c] * inv, gn[c])
+            n[c] = np.where(ok, nrm[c] * inv, gn[c])
         flip = (gn[0] * n[0] + gn[1] * n[1] + gn[2] * n[2]) < 0
         gn[:, flip] *= -1.0
-        return out
+        return pos, n, gn
 
     def _values(self, frag, sel, start, k):
         s = self.s
         u = self.pattern.points_by_dim(frag.texels[sel], start, k)  # (4, g, k)
-        surf = self._surface(frag, sel, u[2], u[3], k)
-        p, n, gn = surf[0:3], surf[3:6], surf[6:9]
+        p, n, gn = self._surface(frag, sel, u[2], u[3], k)
+        u0, u1 = u[0].astype(np.float32), u[1].astype(np.float32)
         if s["distribution"] == "cosine":
-            lx, ly = concentric_disk_xy(u[0], u[1])  # Malley: lift the disk onto the hemisphere
-            lz = np.sqrt(np.maximum(0.0, 1.0 - lx * lx - ly * ly))
+            lx, ly = concentric_disk_xy(u0, u1)  # Malley: lift the disk onto the hemisphere
+            lz = np.sqrt(np.maximum(np.float32(0), np.float32(1) - lx * lx - ly * ly))
         else:
-            lz = u[0]
-            r = np.sqrt(np.maximum(0.0, 1.0 - lz * lz))
-            lx, ly = r * np.cos(TWO_PI * u[1]), r * np.sin(TWO_PI * u[1])
+            lz = u0
+            r = np.sqrt(np.maximum(np.float32(0), np.float32(1) - lz * lz))
+            phi = np.float32(TWO_PI) * u1
+            lx, ly = r * np.cos(phi), r * np.sin(phi)
         sx, sy, sz, tx, ty, tz = basis_components(n[0], n[1], n[2])
-        d = np.empty((3, len(sel), k))
+        d = np.empty((3, len(sel), k), np.float32)
         d[0] = lx * sx + ly * tx + lz * n[0]
         d[1] = lx * sy + ly * ty + lz * n[1]
         d[2] = lx * sz + ly * tz + lz * n[2]

@@ -20,6 +20,12 @@ import numpy as np
 MIN_FRAGMENT_AREA = 1e-9
 
 
+# Columns of UVTriangles.table: origin (x, y), position at the origin, d position / dx, / dy,
+# normal at the origin, d normal / dx, / dy, unit face normal.
+TABLE_ORIGIN, TABLE_P0, TABLE_PDX, TABLE_PDY, TABLE_N0, TABLE_NDX, TABLE_NDY, TABLE_FN = 0, 2, 5, 8, 11, 14, 17, 20
+TABLE_WIDTH = 23
+
+
 @dataclass
 class UVTriangles:
     """Per-triangle data of the target in texel space, shared by every tile."""
@@ -33,6 +39,7 @@ class UVTriangles:
     nrm_j: np.ndarray     # (T, 2, 3) d(normal)/d(x, y)
     degenerate: int       # number of triangles with zero UV area
     outside: int          # number of valid triangles with some UV outside [0, 1]
+    table: np.ndarray = None  # (T, 23) the above packed per row, see TABLE_* (one gather per sample)
 
 
 def prepare(mesh, width, height):
@@ -69,8 +76,10 @@ def prepare(mesh, width, height):
     nrm_j = inv[:, 0, :, None] * dN1[:, None, :] + inv[:, 1, :, None] * dN2[:, None, :]
     uv = mesh.uvs
     outside = int((valid & np.any((uv < 0) | (uv > 1), axis=(1, 2))).sum())
+    table = np.concatenate([xy[:, 0], P[:, 0], pos_j[:, 0], pos_j[:, 1], N[:, 0], nrm_j[:, 0], nrm_j[:, 1],
+                            mesh.face_normals], axis=1)
     return UVTriangles(xy_ccw, valid, xy[:, 0].copy(), P[:, 0].copy(), pos_j, N[:, 0].copy(), nrm_j,
-                       degenerate=int((~valid).sum()), outside=outside)
+                       degenerate=int((~valid).sum()), outside=outside, table=np.ascontiguousarray(table))
 
 
 def bin_triangles(tris, width, height, tile):
@@ -152,6 +161,7 @@ class TileFragments:
     sub_cdf: np.ndarray
     sub_start: np.ndarray
     coverage: np.ndarray
+    sub_key: np.ndarray = None  # sub_texel + sub_cdf: increasing, so one searchsorted finds any texel's pick
 
 
 def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
@@ -257,4 +267,5 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
         last = sub_start[1:][sub_start[1:] > sub_start[:-1]] - 1
         sub_cdf[last] = 1.0
     del tw
-    return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage)
+    return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage,
+                         sub_key=sub_tex + sub_cdf)
