@@ -15,3 +15,4 @@ from .integrate import Estimate, estimate, integrate
 from .stats import RunningStats
 from .mesh import Mesh
 from .bake import BakeResult, bake_ao
+from .imageio import ImageReadError

@@ -55,7 +55,8 @@ class BakeResult:
     rays : rays traced (directions below the geometric surface are not traced).
     seconds : wall time of the bake; trace_seconds : time inside embreex, summed over threads.
     metadata : settings and version, for image files.
-    report : counts of what the input held: degenerate UV triangles skipped, triangles with UVs
+    report : counts of what the input held: degenerate UV triangles skipped, triangles of zero area
+        in space skipped (they have no surface), triangles with UVs
         outside [0, 1] (only their part inside the image is baked), texels covered by more than one
         UV island (averaged over all surfaces covering them), covered texels.
     """
@@ -545,6 +546,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         "margin": cfg["margin"], "resolution": f"{w}x{h}", "version": __version__, "rays": shared.rays,
     }
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": tris.degenerate,
+              "degenerate_triangles": tris.degenerate_space,
               "uv_outside_triangles": tris.outside, "overlapping_texels": coverage_over}
     return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=shared.rays, seconds=seconds,
                       trace_seconds=shared.trace_seconds, threads=cfg["threads"], metadata=metadata,

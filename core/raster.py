@@ -37,7 +37,8 @@ class UVTriangles:
     pos_j: np.ndarray     # (T, 2, 3) d(position)/d(x, y)
     nrm0: np.ndarray      # (T, 3) interpolated (unnormalised) normal at origin_xy
     nrm_j: np.ndarray     # (T, 2, 3) d(normal)/d(x, y)
-    degenerate: int       # number of triangles with zero UV area
+    degenerate: int       # number of triangles with zero UV area (skipped)
+    degenerate_space: int  # number of triangles with UV area but zero area in space (skipped)
     outside: int          # number of valid triangles with some UV outside [0, 1]
     table: np.ndarray = None  # (T, 23) the above packed per row, see TABLE_* (one gather per sample)
 
@@ -55,6 +56,10 @@ def prepare(mesh, width, height):
     scale = np.maximum(np.abs(e1).max(axis=1), np.abs(e2).max(axis=1))
     valid = np.abs(det) > 1e-12 * np.maximum(scale * scale, 1e-300)
     valid &= np.abs(det) > 0
+    # A triangle with no area in space has no surface (and no normal) to bake.
+    flat = ~(mesh.areas > 0)
+    degenerate_space = int((valid & flat).sum())
+    valid &= ~flat
     # Counter-clockwise corners make every edge function positive inside.
     cw = det < 0
     xy_ccw = xy.copy()
@@ -79,7 +84,8 @@ def prepare(mesh, width, height):
     table = np.concatenate([xy[:, 0], P[:, 0], pos_j[:, 0], pos_j[:, 1], N[:, 0], nrm_j[:, 0], nrm_j[:, 1],
                             mesh.face_normals], axis=1)
     return UVTriangles(xy_ccw, valid, xy[:, 0].copy(), P[:, 0].copy(), pos_j, N[:, 0].copy(), nrm_j,
-                       degenerate=int((~valid).sum()), outside=outside, table=np.ascontiguousarray(table))
+                       degenerate=int((~valid).sum()) - degenerate_space, degenerate_space=degenerate_space,
+                       outside=outside, table=np.ascontiguousarray(table))
 
 
 def bin_triangles(tris, width, height, tile):

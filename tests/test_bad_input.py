@@ -1,0 +1,162 @@
+"""Bad input to the core: each case raises its documented exception, naming the mesh and the problem,
+before any heavy work; random meshes and settings never raise anything else and give sane results."""
+
+import threading
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from core import (BakeCancelled, BakeMemoryError, McAoError, Mesh, MeshError, MeshTypeError, SettingsError,
+                  bake_ao)
+from scenes import plane
+
+P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+F = np.array([[0, 1, 2], [0, 2, 3]])
+UV = P[F][:, :, :2]
+
+
+@pytest.mark.parametrize("bad, exc, words", [
+    (dict(positions=np.where(np.arange(12).reshape(4, 3) == 4, np.nan, P)), MeshError, ["'crate'", "NaN"]),
+    (dict(positions=np.where(np.arange(12).reshape(4, 3) == 7, np.inf, P)), MeshError, ["'crate'", "infinity"]),
+    (dict(normals=np.full((2, 3, 3), np.nan)), MeshError, ["'crate'", "normals", "NaN"]),
+    (dict(uvs=np.full((2, 3, 2), np.inf)), MeshError, ["'crate'", "uvs"]),
+    (dict(triangles=F + 2), MeshError, ["'crate'", "out of range", "4 vertices"]),
+    (dict(triangles=-F), MeshError, ["out of range"]),
+    (dict(positions=P[:, :2]), MeshError, ["positions", "shape (N, 3)"]),
+    (dict(triangles=F.astype(float)), MeshTypeError, ["triangles", "integer"]),
+    (dict(positions=P.astype(complex)), MeshTypeError, ["positions", "complex"]),
+    (dict(positions=P.astype(object)), MeshTypeError, ["positions"]),
+    (dict(uvs=UV[:1]), MeshError, ["uvs", "(2, 3, 2)"]),
+    (dict(normals=np.ones((2, 3))), MeshError, ["normals", "(2, 3, 3)"]),
+    (dict(triangles=np.zeros((0, 3), int)), MeshError, ["'crate'", "empty"]),
+    (dict(positions=np.zeros((0, 3)), triangles=np.zeros((0, 3), int)), MeshError, ["empty"]),
+])
+def test_bad_meshes_are_refused_with_a_clear_message(bad, exc, words):
+    args = dict(positions=P, triangles=F, uvs=UV, normals=None, name="crate")
+    args.update(bad)
+    with pytest.raises(exc) as info:
+        Mesh(**args)
+    for w in words:
+        assert w in str(info.value), (w, str(info.value))
+    assert isinstance(info.value, McAoError)
+
+
+def test_target_without_uvs_is_refused():
+    with pytest.raises(MeshError, match=r"'ground' has no UVs"):
+        bake_ao(Mesh(P, F, name="ground"))
+
+
+@pytest.mark.parametrize("kw, words", [
+    (dict(resolution=0), "at least 1"), (dict(resolution=-5), "at least 1"),
+    (dict(resolution=(16, 0)), "height"), (dict(resolution=(16,)), "pair"),
+    (dict(resolution=1.5), "pair"), (dict(resolution=100_000), "exceeds"),
+    (dict(samples=0), "samples"), (dict(samples=2.5), "samples"), (dict(min_samples=0), "min_samples"),
+    (dict(max_distance=0.0), "max_distance"), (dict(max_distance=-1.0), "max_distance"),
+    (dict(max_distance=float("nan")), "max_distance"), (dict(target_error=-0.1), "target_error"),
+    (dict(distribution="gaussian"), "cosine, uniform"), (dict(source="random"), "sobol"),
+    (dict(margin=-1), "margin"), (dict(seed=-3), "seed"), (dict(threads=0), "threads"),
+    (dict(falloff=1.0), "finite max_distance"), (dict(occluders=[object()]), "core.Mesh"),
+])
+def test_bad_settings_are_refused(kw, words):
+    kw = dict(kw)
+    occ = kw.pop("occluders", ())
+    with pytest.raises(SettingsError, match=words):
+        bake_ao(plane(), occ, **{"resolution": 8, "samples": 4, **kw})
+
+
+def test_a_bake_too_large_for_memory_is_refused_with_the_estimate_before_allocating():
+    with pytest.raises(BakeMemoryError, match=r"needs about [0-9.]+ GiB.*available"):
+        bake_ao(plane(), resolution=65536, samples=1)
+
+
+@pytest.mark.parametrize("after", [0, 1, 3, 10])
+def test_cancel_at_any_point_leaves_no_result(after):
+    calls = []
+
+    def cancel():
+        calls.append(1)
+        return len(calls) > after
+
+    with pytest.raises(BakeCancelled):
+        bake_ao(plane(), [plane(z=0.3, uv=False, name="lid")], resolution=64, samples=16, chunk_rays=512,
+                cancel=cancel, threads=2)
+
+
+def test_cancel_from_another_thread_mid_bake():
+    ev = threading.Event()
+    seen = []
+
+    def progress(f):
+        seen.append(f)
+        if f > 0.3:
+            ev.set()
+
+    with pytest.raises(BakeCancelled):
+        bake_ao(plane(), [plane(z=0.3, uv=False, name="lid")], resolution=64, samples=64, chunk_rays=2048,
+                progress=progress, cancel=ev, threads=2)
+    assert 0.3 < max(seen) < 1.0
+
+
+def test_degenerate_triangles_are_skipped_and_counted():
+    Pd = np.concatenate([P, [[2, 2, 0]]])
+    Fd = np.concatenate([F, [[1, 1, 4]]])  # zero area in space, but UVs with area
+    uv = np.concatenate([UV, [[[0.1, 0.1], [0.2, 0.1], [0.1, 0.2]]]])
+    r = bake_ao(Mesh(Pd, Fd, uv, name="m"), resolution=8, samples=4, margin=0)
+    assert r.report["degenerate_triangles"] == 1
+    assert np.all(r.ao[r.mask] == 1.0)
+
+
+# --- property-based: random meshes and settings --------------------------------------------------
+
+coords = st.floats(-4, 4, allow_nan=False, width=32)
+
+
+@st.composite
+def meshes(draw):
+    nv = draw(st.integers(3, 9))
+    nt = draw(st.integers(1, 6))
+    pos = np.array(draw(st.lists(st.tuples(coords, coords, coords), min_size=nv, max_size=nv)), float)
+    tri = np.array(draw(st.lists(st.tuples(*[st.integers(0, nv - 1)] * 3), min_size=nt, max_size=nt)))
+    uv = np.array(draw(st.lists(st.floats(-0.5, 1.5, width=32), min_size=nt * 6, max_size=nt * 6)),
+                  float).reshape(nt, 3, 2)
+    normals = None
+    if draw(st.booleans()):
+        normals = np.array(draw(st.lists(st.floats(-1, 1, width=32), min_size=nt * 9, max_size=nt * 9)),
+                           float).reshape(nt, 3, 3)
+    return Mesh(pos, tri, uv, normals, name="random")
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mesh=meshes(), res=st.integers(1, 12), samples=st.integers(1, 8),
+       max_distance=st.one_of(st.just(float("inf")), st.floats(1e-3, 10)),
+       distribution=st.sampled_from(["cosine", "uniform"]),
+       source=st.sampled_from(["sobol", "stratified", "independent", "halton"]),
+       margin=st.integers(0, 3), target_error=st.sampled_from([0.0, 0.05]),
+       ignore_backfaces=st.booleans(), seed=st.integers(0, 2 ** 40))
+def test_random_meshes_and_settings(mesh, res, samples, max_distance, distribution, source, margin,
+                                    target_error, ignore_backfaces, seed):
+    r = bake_ao(mesh, [mesh], resolution=res, samples=samples, max_distance=max_distance,
+                distribution=distribution, source=source, margin=margin, target_error=target_error,
+                min_samples=min(2, samples), ignore_backfaces=ignore_backfaces, seed=seed, threads=1)
+    for a in (r.ao, r.stderr):
+        assert a.shape == (res, res) and a.dtype == np.float32 and np.all(np.isfinite(a))
+    assert np.all((r.ao >= 0) & (r.ao <= 1))
+    assert np.all(r.stderr >= 0)
+    assert np.all(r.samples[r.mask] >= 1) and np.all(r.samples[~r.mask] == 0)
+    assert np.all(r.stderr[~r.mask] == 0)
+    if margin == 0:
+        assert np.all(r.ao[~r.mask] == 0)
+    assert r.report["covered_texels"] == r.mask.sum()
+
+
+@settings(max_examples=40, deadline=None)
+@given(mesh=meshes(), which=st.sampled_from(["positions", "uvs", "normals"]), idx=st.integers(0, 10 ** 6),
+       value=st.sampled_from([np.nan, np.inf, -np.inf]))
+def test_any_non_finite_value_is_refused_by_name(mesh, which, idx, value):
+    arrays = dict(positions=mesh.positions.copy(), uvs=mesh.uvs.copy(), normals=mesh.normals.copy())
+    a = arrays[which]
+    a.flat[idx % a.size] = value
+    with pytest.raises(MeshError, match=which):
+        Mesh(arrays["positions"], mesh.triangles, arrays["uvs"], arrays["normals"], name="random")
