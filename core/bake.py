@@ -271,7 +271,9 @@ class _TileBaker:
                 gn[c, rows] = col(tab, R.TABLE_FN + c)
 
         if simple.any():
-            rows = slice(None) if simple.all() else np.flatnonzero(simple)
+            # bake() orders texels simple-first, so the simple rows are a prefix: views, not copies.
+            n_simple = int(simple.sum())
+            rows = slice(0, n_simple) if simple[:n_simple].all() else np.flatnonzero(simple)
             tab = self.tris.table[full[rows]]  # one row per texel
             tex = frag.texels[sel[rows]]
             dx = ((tex % W) - tab[:, R.TABLE_ORIGIN])[:, None] + ux[rows]
@@ -291,11 +293,13 @@ class _TileBaker:
             b1 = np.where(first, b - a / 2, b / 2)
             b2 = 1.0 - b0 - b1
             c3 = frag.sub_xy[j]
-            tab = self.tris.table[frag.sub_tri[j]]  # one row per sample
-            dx = b0 * c3[:, 0, 0] + b1 * c3[:, 1, 0] + b2 * c3[:, 2, 0] - tab[:, R.TABLE_ORIGIN]
-            dy = b0 * c3[:, 0, 1] + b1 * c3[:, 1, 1] + b2 * c3[:, 2, 1] - tab[:, R.TABLE_ORIGIN + 1]
+            tab = np.take(self.tris.table_t, frag.sub_tri[j], axis=1)  # (23, samples)
+            dx = b0 * c3[:, 0, 0] + b1 * c3[:, 1, 0] + b2 * c3[:, 2, 0] - tab[R.TABLE_ORIGIN]
+            dy = b0 * c3[:, 0, 1] + b1 * c3[:, 1, 1] + b2 * c3[:, 2, 1] - tab[R.TABLE_ORIGIN + 1]
             shape = (len(rows), k)
-            fill(rows, tab, dx.reshape(shape), dy.reshape(shape), lambda t, i: t[:, i].reshape(shape))
+            if rows[0] == g - len(rows):
+                rows = slice(g - len(rows), g)  # the split rows are the suffix
+            fill(rows, tab, dx.reshape(shape), dy.reshape(shape), lambda t, i: t[i].reshape(shape))
         ln = np.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])
         ok = ln > 1e-12
         inv = 1.0 / np.where(ok, ln, 1.0)
@@ -357,7 +361,8 @@ class _TileBaker:
         total = s["samples"]
         k = min(s["min_samples"], total) if adaptive else total
         start = 0
-        active = np.arange(n_tex)
+        # Texels inside one triangle first: chunks then hold them as a contiguous block (see _surface).
+        active = np.argsort(frag.full_tri < 0, kind="stable")
         z = z_for_confidence(0.95)
         while len(active):
             g = max(1, s["chunk_rays"] // k)
@@ -508,7 +513,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             count[rows, cols] = stats.n
             mask[rows, cols] = True
             with shared.lock:
-                coverage_over += int((frag.coverage > 1.0 + 1e-6).sum())
+                coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
             if on_tile is not None:
                 r = slice(ty * tile_size, min((ty + 1) * tile_size, h))
                 c = slice(tx * tile_size, min((tx + 1) * tile_size, w))

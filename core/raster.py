@@ -18,6 +18,9 @@ import numpy as np
 
 #: Clipped overlaps smaller than this (in texel areas) are dropped as numerical slivers.
 MIN_FRAGMENT_AREA = 1e-9
+#: Coverage above 1 + this (in texel areas) counts as overlapping UV islands in the bake's report;
+#: UV unwrappers leave slivers of 1e-6 to 1e-4 texels where islands touch, which are not worth a word.
+OVERLAP_REPORT_AREA = 1e-3
 
 
 # Columns of UVTriangles.table: origin (x, y), position at the origin, d position / dx, / dy,
@@ -40,7 +43,8 @@ class UVTriangles:
     degenerate: int       # number of triangles with zero UV area (skipped)
     degenerate_space: int  # number of triangles with UV area but zero area in space (skipped)
     outside: int          # number of valid triangles with some UV outside [0, 1]
-    table: np.ndarray = None  # (T, 23) the above packed per row, see TABLE_* (one gather per sample)
+    table: np.ndarray = None  # (T, 23) the above packed per row, see TABLE_* (one gather per texel)
+    table_t: np.ndarray = None  # (23, T) the same, column-major: gathers per sample come out contiguous
 
 
 def prepare(mesh, width, height):
@@ -85,7 +89,8 @@ def prepare(mesh, width, height):
                             mesh.face_normals], axis=1)
     return UVTriangles(xy_ccw, valid, xy[:, 0].copy(), P[:, 0].copy(), pos_j, N[:, 0].copy(), nrm_j,
                        degenerate=int((~valid).sum()) - degenerate_space, degenerate_space=degenerate_space,
-                       outside=outside, table=np.ascontiguousarray(table))
+                       outside=outside, table=np.ascontiguousarray(table),
+                       table_t=np.ascontiguousarray(table.T))
 
 
 def bin_triangles(tris, width, height, tile):
