@@ -260,8 +260,10 @@ class _TileBaker:
         g = len(sel)
         full = frag.full_tri[sel]
         simple = full >= 0
-        pos = np.empty((3, g, k))
-        nrm = np.empty((3, g, k))
+        # float32 throughout: rounding the position (6e-8 |p|) stays far below the ray offset
+        # (EPS_SCENE * extent + EPS_POSITION * |p|), so rays never start behind the surface.
+        pos = np.empty((3, g, k), np.float32)
+        nrm = np.empty((3, g, k), np.float32)
         gn = np.empty((3, g, k), np.float32)
 
         def fill(rows, tab, dx, dy, col):
@@ -276,8 +278,8 @@ class _TileBaker:
             rows = slice(0, n_simple) if simple[:n_simple].all() else np.flatnonzero(simple)
             tab = self.tris.table[full[rows]]  # one row per texel
             tex = frag.texels[sel[rows]]
-            dx = ((tex % W) - tab[:, R.TABLE_ORIGIN])[:, None] + ux[rows]
-            dy = ((tex // W) - tab[:, R.TABLE_ORIGIN + 1])[:, None] + uy[rows]
+            dx = ((tex % W) - self.tris.origin_xy[full[rows], 0]).astype(np.float32)[:, None] + ux[rows]
+            dy = ((tex // W) - self.tris.origin_xy[full[rows], 1]).astype(np.float32)[:, None] + uy[rows]
             fill(rows, tab, dx, dy, lambda t, i: t[:, i, None])
         if not simple.all():
             rows = np.flatnonzero(~simple)
@@ -301,9 +303,9 @@ class _TileBaker:
                 rows = slice(g - len(rows), g)  # the split rows are the suffix
             fill(rows, tab, dx.reshape(shape), dy.reshape(shape), lambda t, i: t[i].reshape(shape))
         ln = np.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])
-        ok = ln > 1e-12
-        inv = 1.0 / np.where(ok, ln, 1.0)
-        n = np.empty((3, g, k), np.float32)
+        ok = ln > np.float32(1e-12)
+        inv = np.float32(1) / np.where(ok, ln, np.float32(1))
+        n = nrm
         for c in range(3):
             n[c] = np.where(ok, nrm[c] * inv, gn[c])
         flip = (gn[0] * n[0] + gn[1] * n[1] + gn[2] * n[2]) < 0
@@ -312,9 +314,9 @@ class _TileBaker:
 
     def _values(self, frag, sel, start, k):
         s = self.s
-        u = self.pattern.points_by_dim(frag.texels[sel], start, k)  # (4, g, k)
+        u = self.pattern.points_by_dim(frag.texels[sel], start, k).astype(np.float32)  # (4, g, k)
         p, n, gn = self._surface(frag, sel, u[2], u[3], k)
-        u0, u1 = u[0].astype(np.float32), u[1].astype(np.float32)
+        u0, u1 = u[0], u[1]
         if s["distribution"] == "cosine":
             lx, ly = concentric_disk_xy(u0, u1)  # Malley: lift the disk onto the hemisphere
             lz = np.sqrt(np.maximum(np.float32(0), np.float32(1) - lx * lx - ly * ly))

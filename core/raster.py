@@ -43,7 +43,7 @@ class UVTriangles:
     degenerate: int       # number of triangles with zero UV area (skipped)
     degenerate_space: int  # number of triangles with UV area but zero area in space (skipped)
     outside: int          # number of valid triangles with some UV outside [0, 1]
-    table: np.ndarray = None  # (T, 23) the above packed per row, see TABLE_* (one gather per texel)
+    table: np.ndarray = None  # (T, 23) float32, the above packed per row, see TABLE_* (one gather per texel)
     table_t: np.ndarray = None  # (23, T) the same, column-major: gathers per sample come out contiguous
 
 
@@ -89,8 +89,8 @@ def prepare(mesh, width, height):
                             mesh.face_normals], axis=1)
     return UVTriangles(xy_ccw, valid, xy[:, 0].copy(), P[:, 0].copy(), pos_j, N[:, 0].copy(), nrm_j,
                        degenerate=int((~valid).sum()) - degenerate_space, degenerate_space=degenerate_space,
-                       outside=outside, table=np.ascontiguousarray(table),
-                       table_t=np.ascontiguousarray(table.T))
+                       outside=outside, table=np.ascontiguousarray(table, dtype=np.float32),
+                       table_t=np.ascontiguousarray(table.T, dtype=np.float32))
 
 
 def bin_triangles(tris, width, height, tile):
