@@ -1,0 +1,110 @@
+#!/usr/bin/env python3
+"""Make the README's pictures from the repository's own code (needs requirements-docs.txt).
+
+    .venv/bin/pip install -r requirements-docs.txt
+    .venv/bin/python docs/make_figures.py [convergence] [gallery]
+
+convergence  docs/convergence.png: RMSE against samples per texel for each sample source on the
+             analytic scene (a plane under a hovering 64-gon, exact AO from Lambert's formula),
+             with the Monte Carlo N^-1/2 slope drawn for reference.
+gallery      docs/gallery.png: the baked AO of every sample scene's objects, through
+             scripts/bake_ao.py (the add-on's own geometry gathering).
+"""
+
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from core import Mesh, bake_ao  # noqa: E402
+from core.analytic import plane_under_polygon_ao, regular_polygon  # noqa: E402
+from core.imageio import read_image  # noqa: E402
+
+# The analytic sample scene's numbers (sample_scenes/make_scenes.py: ANALYTIC).
+HALF, RADIUS, HEIGHT, VERTS = 1.0, 0.5, 0.4, 64
+SOURCES = ["independent", "stratified", "halton", "sobol"]
+
+
+def analytic_scene():
+    P = np.array([[-HALF, -HALF, 0], [HALF, -HALF, 0], [HALF, HALF, 0], [-HALF, HALF, 0]], float)
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    plane = Mesh(P, F, uvs=(P[F][:, :, :2] + HALF) / (2 * HALF), name="Plane")
+    poly = regular_polygon(RADIUS, HEIGHT, VERTS)
+    fan = np.array([[0, i, i + 1] for i in range(1, VERTS - 1)])
+    return plane, Mesh(poly, fan, name="Disk"), poly
+
+
+def convergence(res=64, ns=(4, 8, 16, 32, 64, 128, 256, 512, 1024), seeds=3):
+    plane, disk, poly = analytic_scene()
+    truth = plane_under_polygon_ao(poly, res, res, bounds=(-HALF, -HALF, HALF, HALF))
+    table = {}
+    for source in SOURCES:
+        rmse = []
+        for n in ns:
+            errs = [bake_ao(plane, [disk], resolution=res, samples=n, source=source, margin=0, seed=s).ao - truth
+                    for s in range(seeds)]
+            rmse.append(float(np.sqrt(np.mean(np.square(errs)))))
+        slope = float(np.polyfit(np.log(ns), np.log(rmse), 1)[0])
+        table[source] = {"rmse": rmse, "slope": slope}
+        print(f"{source:12s} slope {slope:+.3f}  rmse " + " ".join(f"{e:.2e}" for e in rmse))
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    for source in SOURCES:
+        ax.loglog(ns, table[source]["rmse"], "o-", ms=3, label=f"{source} (slope {table[source]['slope']:+.2f})")
+    ref = table["independent"]["rmse"][0] * (np.array(ns) / ns[0]) ** -0.5
+    ax.loglog(ns, ref, "k--", lw=1, label="N$^{-1/2}$ reference")
+    ax.set_xlabel("samples per texel")
+    ax.set_ylabel("RMSE against the exact AO")
+    ax.set_title(f"Analytic scene, {res}x{res} texels, mean of {seeds} seeds")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "convergence.png")
+    (ROOT / "docs" / "convergence.json").write_text(json.dumps({"samples": list(ns), **table}, indent=1))
+
+
+# (scene, objects, extra arguments): the room is closed, so without a distance limit it is all 0.
+GALLERY = [("suzanne.blend", ["Suzanne", "Ground"], []),
+           ("room.blend", ["Room", "Table", "Crate"], ["--max-distance", "1.0"]),
+           ("analytic.blend", ["Plane"], []), ("dense.blend", ["Terrain"], [])]
+
+
+def gallery(res=256, samples=64):
+    panels = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for blend, objects, extra in GALLERY:
+            out = Path(tmp) / blend
+            cmd = [sys.executable, str(ROOT / "scripts" / "bake_ao.py"), str(ROOT / "sample_scenes" / blend),
+                   "--objects", *objects, "--resolution", str(res), "--samples", str(samples),
+                   "--output", str(out), "--format", "exr", "--quiet", *extra]
+            subprocess.run(cmd, check=True)
+            for obj in objects:
+                img, _ = read_image(out / f"{obj}_AO.exr")
+                panels.append((f"{blend}: {obj}", img if img.ndim == 2 else img[..., 0]))
+    cols = 4
+    rows = -(-len(panels) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.2 * cols, 2.4 * rows), dpi=90)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, (title, img) in zip(axes.ravel(), panels):
+        ax.imshow(img, cmap="gray", vmin=0, vmax=1, origin="lower", interpolation="nearest")
+        ax.set_title(title, fontsize=7)
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "gallery.png")
+
+
+if __name__ == "__main__":
+    which = sys.argv[1:] or ["convergence", "gallery"]
+    if "convergence" in which:
+        convergence()
+    if "gallery" in which:
+        gallery()
