@@ -98,6 +98,21 @@ def _output_dir(settings):
     return bpy.path.abspath(settings.output_dir)
 
 
+def _redraw(context):
+    """Redraw the editors that show images or the panel: Blender redraws them on events only."""
+    if context.window_manager is None:
+        return
+    for window in context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type in {"IMAGE_EDITOR", "VIEW_3D"}:
+                area.tag_redraw()
+
+
+def is_running():
+    """Whether an AO bake is in progress (the panel says so, the operator refuses a second one)."""
+    return bool(_RUNS)
+
+
 def summary(job, result):
     """One line per baked object: size, time, samples per texel, ray throughput."""
     h, w = result.ao.shape
@@ -119,7 +134,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if _RUNS:
+        if is_running():
             cls.poll_message_set("An AO bake is running")
             return False
         reason = baking.why_not_bakeable(context.selected_objects)
@@ -189,7 +204,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             buffer[rows, cols] = images.rgba(block, buffer.shape[2])
             self.pending.add(i)
         elif kind == "done":
-            self._finish_job(*args)
+            self._finish_job(context, *args)
         elif kind == "error":
             i, exc = args
             self.errors += 1
@@ -206,7 +221,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             return True
         return False
 
-    def _finish_job(self, i, result):
+    def _finish_job(self, context, i, result):
         job = self.run.jobs[i]
         self.pending.discard(i)
         try:
@@ -216,6 +231,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             self.report({"ERROR"}, f"{job.object_name}: {exc}")
             return
         images.set_pixels(image, images.rgba(result.ao, image.channels))
+        _redraw(context)
         self.finished.append(i)
         self.report({"INFO"}, summary(job, result))
         if self.output_dir is not None:
@@ -238,10 +254,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             images.set_pixels(image, buffer)
         self.pending.clear()
         self.last_flush = now
-        for window in context.window_manager.windows:
-            for area in window.screen.areas:
-                if area.type in {"IMAGE_EDITOR", "VIEW_3D"}:
-                    area.tag_redraw()
+        _redraw(context)
 
     def _restore_unfinished(self):
         """Put back the images of jobs that did not finish: a cancelled bake leaves no partial image."""
@@ -255,6 +268,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             self._restore_unfinished()
         context.window_manager.progress_end()
         self._set_texts(context, None)
+        _redraw(context)  # images restored, and the Bake AO button enabled again
         if cancelled:
             kept = [self.run.jobs[i].object_name for i in self.finished]
             note = f"; kept the finished bakes of {', '.join(kept)}" if kept else ""
@@ -315,6 +329,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         try:
             context.window_manager.progress_end()
             self._set_texts(context, None)
+            _redraw(context)
         except (AttributeError, ReferenceError, RuntimeError):
             pass
 

@@ -3,7 +3,7 @@
 import bpy
 
 from . import baking
-from .operators import OBJECT_OT_mc_ao_bake
+from .operators import OBJECT_OT_mc_ao_bake, is_running
 from .settings import BakeSettings
 
 
@@ -22,6 +22,9 @@ class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
         row = layout.row()
         row.scale_y = 1.5
         row.operator(OBJECT_OT_mc_ao_bake.bl_idname, icon="RENDER_STILL")
+        if is_running():
+            layout.label(text="Baking, Esc cancels", icon="TIME")
+            return
         # The button greys out when its poll fails; say why under it.
         reason = baking.why_not_bakeable(selected)
         if reason is not None:
