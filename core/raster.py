@@ -33,18 +33,15 @@ TABLE_WIDTH = 23
 class UVTriangles:
     """Per-triangle data of the target in texel space, shared by every tile."""
 
-    xy: np.ndarray        # (T, 3, 2) corners in texel coordinates, counter-clockwise
-    valid: np.ndarray     # (T,) bool: positive UV area (degenerate UV triangles are skipped)
-    origin_xy: np.ndarray  # (T, 2) the first corner, the origin of the local affine maps
-    pos0: np.ndarray      # (T, 3) world position at origin_xy
-    pos_j: np.ndarray     # (T, 2, 3) d(position)/d(x, y)
-    nrm0: np.ndarray      # (T, 3) interpolated (unnormalised) normal at origin_xy
-    nrm_j: np.ndarray     # (T, 2, 3) d(normal)/d(x, y)
-    degenerate: int       # number of triangles with zero UV area (skipped)
+    xy: np.ndarray         # (T, 3, 2) corners in texel coordinates, counter-clockwise
+    valid: np.ndarray      # (T,) bool: positive UV area and area in space (others are skipped)
+    origin_xy: np.ndarray  # (T, 2) float64, the first corner: the origin of the local affine maps
+    table: np.ndarray      # (T, 23) float32: origin, position and normal at the origin and their
+                           # derivatives along x and y, face normal (columns TABLE_*); one gather per texel
+    table_t: np.ndarray    # (23, T) the same, column-major: gathers per sample come out contiguous
+    degenerate: int        # number of triangles with zero UV area (skipped)
     degenerate_space: int  # number of triangles with UV area but zero area in space (skipped)
-    outside: int          # number of valid triangles with some UV outside [0, 1]
-    table: np.ndarray = None  # (T, 23) float32, the above packed per row, see TABLE_* (one gather per texel)
-    table_t: np.ndarray = None  # (23, T) the same, column-major: gathers per sample come out contiguous
+    outside: int           # number of valid triangles with some UV outside [0, 1]
 
 
 def prepare(mesh, width, height):
@@ -87,10 +84,10 @@ def prepare(mesh, width, height):
     outside = int((valid & np.any((uv < 0) | (uv > 1), axis=(1, 2))).sum())
     table = np.concatenate([xy[:, 0], P[:, 0], pos_j[:, 0], pos_j[:, 1], N[:, 0], nrm_j[:, 0], nrm_j[:, 1],
                             mesh.face_normals], axis=1)
-    return UVTriangles(xy_ccw, valid, xy[:, 0].copy(), P[:, 0].copy(), pos_j, N[:, 0].copy(), nrm_j,
+    return UVTriangles(xy_ccw, valid, xy[:, 0].copy(), table=np.ascontiguousarray(table, dtype=np.float32),
+                       table_t=np.ascontiguousarray(table.T, dtype=np.float32),
                        degenerate=int((~valid).sum()) - degenerate_space, degenerate_space=degenerate_space,
-                       outside=outside, table=np.ascontiguousarray(table, dtype=np.float32),
-                       table_t=np.ascontiguousarray(table.T, dtype=np.float32))
+                       outside=outside)
 
 
 def bin_triangles(tris, width, height, tile):
@@ -224,7 +221,6 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
     ip, poly, fan_ok, fan_area, b, c, a = ip[real], poly[real], fan_ok[real], fan_area[real], b[real], c[real], a[real]
     fan_ok &= fan_area > 0
 
-    tw = x1 - x0
     def flat(ix, iy):
         return (iy * width + ix).astype(np.int64)
 
@@ -277,6 +273,5 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
     if len(sub_cdf):
         last = sub_start[1:][sub_start[1:] > sub_start[:-1]] - 1
         sub_cdf[last] = 1.0
-    del tw
     return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage,
                          sub_key=sub_tex + sub_cdf)
