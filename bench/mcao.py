@@ -1,0 +1,60 @@
+"""mc_ao's side of the comparison: the add-on's Bake AO operator and core.bake_ao on the same arrays."""
+
+import time
+
+import numpy as np
+
+_registered = False
+
+
+def register(bpy):
+    """Register the checkout's add-on (top-level ``mc_ao``) once in this bpy session."""
+    global _registered
+    if not _registered and not hasattr(bpy.types.Scene, "mc_ao"):
+        import mc_ao
+
+        mc_ao.register()
+    _registered = True
+
+
+def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=16, seed=0, source="SOBOL",
+                  target_error=0.0, min_samples=16):
+    """bpy.ops.object.mc_ao_bake() of ``obj`` alone (every visible object occludes it).
+
+    Returns (ao (H, W) float32 from the image's R channel, wall seconds of the operator call).
+    """
+    from .cycles import read_ao
+    from .scene import select_only
+
+    register(bpy)
+    s = bpy.context.scene.mc_ao
+    s.samples = samples
+    s.min_samples = min(min_samples, samples)
+    s.target_error = target_error
+    s.resolution = resolution
+    s.height = 0
+    s.max_distance = max_distance
+    s.source = source
+    s.distribution = "COSINE"
+    s.occluders = "VISIBLE"
+    s.margin = margin
+    s.float_buffer = True
+    s.save_to_file = False
+    s.seed = seed
+    s.threads = threads
+    s.image_name = ""
+    select_only(bpy, obj)
+    t0 = time.perf_counter()
+    res = bpy.ops.object.mc_ao_bake()
+    seconds = time.perf_counter() - t0
+    if res != {"FINISHED"}:
+        raise RuntimeError(f"mc_ao_bake returned {res}")
+    return read_ao(bpy.data.images[f"{obj.name}_AO"]), seconds
+
+
+def core_bake(target, occluders, **kw):
+    """core.bake_ao with the benchmark's defaults (cosine directions, no margin unless asked)."""
+    from core import bake_ao
+
+    kw.setdefault("margin", 0)
+    return bake_ao(target, occluders, **kw)

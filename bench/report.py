@@ -1,0 +1,187 @@
+"""The benchmark's printed table, from the results dictionary that run.py also writes as JSON."""
+
+
+def _fmt(v, spec):
+    if v is None:
+        return "-"
+    try:
+        return format(v, spec)
+    except (TypeError, ValueError):
+        return str(v)
+
+
+def _grid(headers, rows):
+    cols = [headers] + [[str(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cols) for i in range(len(headers))]
+    line = "  ".join(h.rjust(w) for h, w in zip(headers, widths))
+    out = [line, "  ".join("-" * w for w in widths)]
+    out += ["  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cols[1:]]
+    return ["  " + x for x in out]
+
+
+def _md(d, digits=5):
+    """'+0.00012 +- 0.00008 (z +1.5)' from a mean_diff dictionary."""
+    if not d or d.get("n", 0) < 2:
+        return "-"
+    return f"{d['mean']:+.{digits}f} +- {d['se']:.{digits}f} (z {d['z']:+.1f}, n {d['n']})"
+
+
+def table(data):
+    m, r = data["machine"], data["results"]
+    L = [f"mc_ao benchmark ({data['mode']} mode), {data['started']}, {data['duration_s']:.0f} s",
+         f"machine: {m['cpu']}, {m['cores']} cores, {m['memory_gib']} GiB; Python {m['python']}, numpy {m['numpy']}, "
+         f"embreex {m.get('embreex', '?')}; Blender {data['blender']} (bpy); commit {data['git']['commit']}"
+         f"{' (core/ modified)' if data['git']['core_dirty'] else ''}",
+         f"threads {data['threads']} for both bakers; load average at start {data['load_average_start']}, "
+         f"end {data['load_average_end']} (a shared machine: fastest repeat counts)", ""]
+
+    es = r.get("equal_samples")
+    if es:
+        L.append("1. Equal samples (Suzanne over plane + blocks; Cycles CPU bake type AO vs mc_ao's Bake AO operator; "
+                 f"margin {es['margin']})")
+        rows = [[f"{x['resolution']}^2", x["samples"], _fmt(x["cycles_s"], ".2f"), _fmt(x["mc_operator_s"], ".2f"),
+                 _fmt(x["mc_core_s"], ".2f"), x["cycles_texels"], x["mc_texels"], _fmt(x["cycles_tsps"] / 1e6, ".2f"),
+                 _fmt(x["mc_tsps"] / 1e6, ".2f"), _fmt(x["ratio_tsps"], ".2f") + "x", _fmt(x["ratio_time"], ".2f") + "x",
+                 _fmt(100 * x["mc_core_trace_share"], ".0f") + "%"] for x in es["rows"]]
+        L += _grid(["res", "spp", "Cycles s", "mc op s", "mc core s", "Cyc texels", "mc texels", "Cyc Mts/s",
+                    "mc Mts/s", "ts/s ratio", "time ratio", "in embree"], rows)
+        L.append("  (Mts/s = million texel-samples per second, each baker's own covered texels; time ratio = "
+                 "Cycles s / mc op s for the same image)")
+        L.append("")
+
+    ee = r.get("equal_error")
+    if ee:
+        ref = ee["reference"]
+        L.append(f"2. Equal error ({ee['resolution']}^2, RMSE vs mc_ao sobol {ref['samples']} spp reference, "
+                 f"its rms stderr {ref['rms_stderr']:.5f}; {ee['texels']['interior']} interior texels)")
+        series = ee["series"]
+        names = list(series)
+        width = max(len(series[n]) for n in names)
+        rows = []
+        for n in names:
+            pts = series[n]
+            rows.append([n] + [f"{p['rmse']:.4f}@{p['seconds']:.2f}s" for p in pts] + [""] * (width - len(pts)))
+        L += _grid(["series"] + [f"pt{i + 1}" for i in range(width)], rows)
+        L.append("  (points: Cycles and fixed series at " + ", ".join(str(s) for s in data["config"]["cyc_spp"])
+                 + " spp (mc: " + ", ".join(str(s) for s in data["config"]["mc_spp"]) + "); adaptive at target_error "
+                 + ", ".join(str(e) for e in data["config"]["adaptive_errors"])
+                 + f", cap {data['config']['adaptive_cap']})")
+        c = ee.get("cycles_at_128")
+        if c:
+            L.append(f"  Cycles at 128 spp: RMSE {c['rmse']:.5f} in {c['seconds']:.2f} s. mc_ao time to that RMSE:")
+            rows = [[k, _fmt(v["seconds"], ".3f"), _fmt(v["ratio"], ".3f")]
+                    for k, v in ee["mc_time_to_cycles128_rmse"].items()]
+            L += _grid(["mc_ao config", "seconds", "x Cycles time"], rows)
+        L.append("")
+
+    ag = r.get("agreement")
+    if ag:
+        L.append("3. Agreement (mean Cycles - mc_ao over texels both cover, +- standard error)")
+        s = ag["suzanne"]
+        for key, label in (("terminator_offset_0", "Suzanne, Cycles terminator offset 0"),
+                           ("terminator_offset_default_0.1", "Suzanne, Cycles default terminator offset 0.1")):
+            L.append(f"  {label}: interior {_md(s[key]['interior'])}; island-edge {_md(s[key]['edge'])}")
+            L.append("     by shading-normal tilt: " + "; ".join(
+                f"{b['tilt_deg'][0]}-{b['tilt_deg'][1]} deg {b['mean']:+.4f} (z {b['z']:+.1f})"
+                for b in s[key]["by_normal_tilt"] if b.get("n", 0) > 1))
+        L.append(f"  coverage: {s['texels_common']} texels both, {s['texels_mc_only']} mc_ao only (partly covered), "
+                 f"{s['texels_cycles_only']} Cycles only")
+        p = ag["plane"]
+        L.append(f"  plane, open texels: {_md(p['open'])}")
+        L.append(f"  plane, texels across block walls: {_md(p['texels_across_block_walls'])}; on the triangle "
+                 f"diagonal: {_md(p['texels_on_the_triangle_diagonal'])}")
+        lid = ag["lid"]
+        L.append(f"  lid (exact 1 - F, {lid['resolution']}^2 x {lid['samples']}): mc - exact(texel) "
+                 f"{_md(lid['mc_minus_exact'])}")
+        L.append(f"     Cycles - exact(texel) {_md(lid['cycles_minus_exact'])}; Cycles - exact(central half of "
+                 f"the texel) {_md(lid['cycles_minus_exact_central_half'])}")
+        d = ag["distance"]
+        L.append(f"  finite distance (exact (h/d)^2 = {d['exact']:.4f}): Cycles - exact {_md(d['cycles_minus_exact'])}; "
+                 f"mc - exact {_md(d['mc_minus_exact'])}")
+        sp = ag["sample_placement"]
+        L.append(f"  Cycles sample placement (emission bakes of a step crossing one texel): {sp['reading']}; "
+                 f"Non-Color float values untouched: {sp['non_color_values_untouched']}")
+        cc = ag["coplanar_contact"]
+        L.append(f"  blocks resting exactly on the plane (coplanar faces): under the blocks Cycles "
+                 f"{cc['cycles_mean_under']:.3f}, mc_ao {cc['mc_mean_under']:.3f}")
+        L.append("")
+
+    ce = r.get("ceiling")
+    if ce:
+        b = ce["bake"]
+        L.append(f"4. Ceiling ({b['resolution']}^2 x {b['samples']}, {ce['rays']} rays {ce['rays_source']})")
+        rows = [["mc_ao bake, 1 thread", _fmt(b["seconds"], ".2f"), _fmt(b["mrays_per_s"], ".2f"),
+                 _fmt(100 * b["trace_share"], ".0f") + "%"],
+                ["mc_ao bake, 2 threads", _fmt(ce["bake_2threads"]["seconds"], ".2f"),
+                 _fmt(ce["bake_2threads"]["mrays_per_s"], ".2f"), _fmt(100 * ce["bake_2threads"]["trace_share"], ".0f") + "%"]]
+        for x in ce["embree_alone"]:
+            rows.append([f"embreex alone, {x['threads']} thr, chunk {x['chunk']}", _fmt(x["seconds"], ".2f"),
+                         _fmt(x["mrays_per_s"], ".2f"), ""])
+        L += _grid(["what", "seconds", "Mrays/s", "in embree"], rows)
+        pr = ce["profile"]
+        L.append(f"  profile ({pr['resolution']}^2 x {pr['samples']}, 1 thread, {pr['bake_seconds']:.2f} s; "
+                 "own time by file):")
+        L += _grid(["where", "seconds", "share"], [[g["where"], _fmt(g["seconds"], ".3f"), _fmt(100 * g["share"], ".1f") + "%"]
+                                                 for g in pr["by_file"][:8]])
+        L.append("  top functions (own time):")
+        L += _grid(["function", "calls", "tottime", "cumtime"],
+                   [[f["function"][-70:], f["ncalls"], _fmt(f["tottime"], ".3f"), _fmt(f["cumtime"], ".3f")]
+                    for f in pr["top_functions"][:10]])
+        L.append("")
+
+    th, rs, tr, mem = r.get("threads"), r.get("resolution"), r.get("triangles"), r.get("memory")
+    if th or rs or tr or mem:
+        L.append("5. Scaling (core.bake_ao)")
+        rows = []
+        if th:
+            for x in th["rows"]:
+                rows.append([f"threads {x['threads']}", f"{x['resolution']}^2 x {x['samples']}", _fmt(x["seconds"], ".2f"),
+                             _fmt(x["mtexel_samples_per_s"], ".2f"), _fmt(x["mrays_per_s"], ".2f"),
+                             _fmt(100 * x["trace_share"], ".0f") + "%"])
+        if rs:
+            for x in rs["rows"] + rs["one_sample"]:
+                rows.append([f"resolution {x['resolution']}", f"{x['resolution']}^2 x {x['samples']}",
+                             _fmt(x["seconds"], ".2f"), _fmt(x["mtexel_samples_per_s"], ".2f"),
+                             _fmt(x["mrays_per_s"], ".2f"), _fmt(100 * x["trace_share"], ".0f") + "%"])
+        if mem and "peak_rss_mib" in mem:
+            rows.append([f"resolution {mem['resolution']}", f"{mem['resolution']}^2 x {mem['samples']}",
+                         _fmt(mem["bake_seconds"], ".2f"), _fmt(mem["texel_samples_per_s"] / 1e6, ".2f"),
+                         _fmt(mem["rays"] / mem["bake_seconds"] / 1e6, ".2f"), _fmt(100 * mem["trace_share"], ".0f") + "%"])
+        if tr:
+            for x in tr["rows"]:
+                rows.append([f"triangles {x['triangles']}", f"{x['resolution']}^2 x {x['samples']}",
+                             _fmt(x["seconds"], ".2f"), _fmt(x["mtexel_samples_per_s"], ".2f"),
+                             _fmt(x["mrays_per_s"], ".2f"), _fmt(100 * x["trace_share"], ".0f") + "%"])
+        L += _grid(["case", "bake", "seconds", "Mts/s", "Mrays/s", "in embree"], rows)
+        if th:
+            L.append(f"  speed-up 1 -> 2 threads: {th['speedup_1_to_2']:.2f}x (CPU/wall of the 2-thread bake "
+                     f"{th['rows'][1]['cpu_per_wall']:.2f}); embreex alone on the same machine at the same time: "
+                     f"{th['embree_alone_speedup_1_to_2']:.2f}x")
+        if mem and "peak_rss_mib" in mem:
+            L.append(f"  peak memory {mem['resolution']}^2 x {mem['samples']}: {mem['peak_rss_mib']:.0f} MiB RSS "
+                     f"({mem['rss_before_mib']:.0f} MiB before the bake, fresh process, no bpy); highest RSS while "
+                     f"tracing {mem.get('peak_rss_tracing_mib', float('nan')):.0f} MiB, after tracing (result planes, "
+                     f"margin) {mem.get('peak_rss_after_tracing_mib', float('nan')):.0f} MiB")
+        elif mem:
+            L.append(f"  memory: {mem.get('skipped') or mem.get('error', '')[:200]}")
+        L.append("")
+
+    dv = r.get("device")
+    if dv:
+        L.append(f"6. Threads on the device machine ({dv.get('machine', '?')}; measured {dv.get('when', '?')}, "
+                 "merged from bench/results/device.json)")
+        if dv.get("rows"):
+            base = dv["rows"][0]["seconds"]
+            L += _grid(["threads", "seconds", "speed-up", "Mrays/s", "in embree"],
+                       [[x["threads"], _fmt(x["seconds"], ".2f"), _fmt(base / x["seconds"], ".2f") + "x",
+                         _fmt(x["mrays_per_s"], ".2f"), _fmt(100 * x["trace_share"], ".0f") + "%"] for x in dv["rows"]])
+        else:
+            L.append(f"  {dv.get('note', 'no rows')}")
+        L.append("")
+
+    tg = data.get("targets")
+    if tg:
+        L.append("Targets (issue 7)")
+        L += _grid(["target", "wanted", "measured", "met"], [[t["name"], t["target"], t["value"], "yes" if t["met"] else "NO"]
+                                                              for t in tg])
+    return "\n".join(L)

@@ -1,0 +1,106 @@
+"""Scaling of core.bake_ao: threads, resolution, triangle count, and the peak memory of a 4096^2 bake."""
+
+import json
+import subprocess
+import sys
+
+from . import mcao
+from .common import ROOT, log
+from .scene import DISTANCE, displaced_grid
+
+
+def _bake_row(r, **extra):
+    texels = int(r.mask.sum())
+    return dict(seconds=r.seconds, texels=texels, rays=r.rays, threads=r.threads,
+                mtexel_samples_per_s=texels * r.samples[r.mask].mean() / r.seconds / 1e6 if texels else 0.0,
+                mrays_per_s=r.rays / r.seconds / 1e6, trace_share=r.trace_seconds / (r.seconds * r.threads),
+                **extra)
+
+
+def threads(ctx):
+    """1 against 2 threads, interleaved with embreex alone on 1 and 2 threads as a calibration: on a
+    shared machine the second core is not always free, and the calibration shows how much of it was."""
+    import time
+
+    from .ceiling import _embree_scene, _replay, _synthetic_rays
+
+    cfg = ctx.cfg
+    res, spp = cfg["thr_res"], cfg["thr_spp"]
+    chunks = _synthetic_rays(ctx, 1 << 21, 1 << 16)
+    scene = _embree_scene([ctx.target] + list(ctx.occluders))
+    times = {1: [], 2: []}
+    calib = {1: [], 2: []}
+    cpu = {}
+    rows = {}
+    for _ in range(cfg["thr_repeats"]):
+        for n in (1, 2):
+            calib[n].append(_replay(scene, chunks, n)[0])
+            c0 = time.process_time()
+            r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=n,
+                               max_distance=DISTANCE, margin=16)
+            c = time.process_time() - c0
+            times[n].append(r.seconds)
+            if n not in rows or r.seconds < rows[n]["seconds"]:
+                rows[n] = _bake_row(r, resolution=res, samples=spp)
+                cpu[n] = c / r.seconds
+    for n in (1, 2):
+        rows[n]["cpu_per_wall"] = cpu[n]
+    embree_speedup = min(calib[1]) / min(calib[2])
+    out = {"resolution": res, "samples": spp, "rows": [rows[1], rows[2]], "seconds_all": times,
+           "speedup_1_to_2": rows[1]["seconds"] / rows[2]["seconds"],
+           "embree_alone_seconds_all": calib, "embree_alone_speedup_1_to_2": embree_speedup,
+           "note": "cpu_per_wall: process CPU seconds per wall second during the bake (2.0 = both cores busy); "
+                   "embree_alone_speedup: the same machine's 2-thread speed-up for GIL-free work at that time"}
+    log(f"threads: 1 -> {rows[1]['seconds']:.2f}s, 2 -> {rows[2]['seconds']:.2f}s, speed-up "
+        f"{out['speedup_1_to_2']:.2f}x (embreex alone {embree_speedup:.2f}x; bake CPU/wall {cpu[2]:.2f})", ctx.clock)
+    return out
+
+
+def resolution(ctx):
+    cfg = ctx.cfg
+    rows = []
+    for res in cfg["scale_res"]:
+        r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=cfg["scale_spp"], threads=ctx.threads,
+                           max_distance=DISTANCE, margin=16)
+        rows.append(_bake_row(r, resolution=res, samples=cfg["scale_spp"]))
+        log(f"resolution {res}^2 x {cfg['scale_spp']}: {r.seconds:.2f}s", ctx.clock)
+    # One sample per texel isolates the per-texel work that does not trace (rasterising, margin).
+    fixed = []
+    for res in cfg["scale_res_1spp"]:
+        r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=1, threads=ctx.threads,
+                           max_distance=DISTANCE, margin=16)
+        fixed.append(_bake_row(r, resolution=res, samples=1))
+    return {"rows": rows, "one_sample": fixed}
+
+
+def triangles(ctx):
+    from core import Mesh
+
+    cfg = ctx.cfg
+    rows = []
+    for n in cfg["tri_n"]:
+        P, F, UV = displaced_grid(n)
+        mesh = Mesh(P, F, UV, name=f"grid{n}")
+        r = mcao.core_bake(mesh, [], resolution=cfg["tri_res"], samples=cfg["tri_spp"], threads=ctx.threads,
+                           max_distance=0.5, margin=0)
+        rows.append(_bake_row(r, triangles=len(F), resolution=cfg["tri_res"], samples=cfg["tri_spp"]))
+        log(f"triangles {len(F)}: {r.seconds:.2f}s ({100 * rows[-1]['trace_share']:.0f}% in embreex)", ctx.clock)
+    return {"scene": "displaced grid (smooth bumps), self-occluding, max distance 0.5", "rows": rows}
+
+
+def memory(ctx):
+    cfg = ctx.cfg
+    if not cfg["mem_res"]:
+        return {"skipped": "quick mode"}
+    path = ctx.scene_npz()
+    cmd = [sys.executable, "-m", "bench.memprobe", str(path), str(cfg["mem_res"]), str(cfg["mem_spp"]),
+           str(ctx.threads)]
+    log(f"memory: {cfg['mem_res']}^2 x {cfg['mem_spp']} in a fresh process", ctx.clock)
+    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=1800)
+    if p.returncode != 0:
+        return {"error": p.stderr[-2000:]}
+    out = json.loads(p.stdout.strip().splitlines()[-1])
+    out["texel_samples_per_s"] = out["texels"] * out["samples"] / out["bake_seconds"]
+    log(f"memory: peak RSS {out['peak_rss_mib']:.0f} MiB ({out['rss_before_mib']:.0f} MiB before the bake), "
+        f"{out['bake_seconds']:.1f}s", ctx.clock)
+    return out
