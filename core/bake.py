@@ -125,6 +125,15 @@ def estimate_memory(width, height, triangles, threads, chunk_rays):
     return planes + margin_work + chunks + tris
 
 
+def auto_tile_size(width, height, samples, threads):
+    """A power of two between 16 and 256: about 2^17 rays per tile, so fixed costs (rasterising a
+    tile, a few dozen numpy calls per chunk) stay small next to tracing, and at least four tiles per
+    thread, so threads share the work evenly."""
+    side = 2 ** round(math.log2(math.sqrt((1 << 17) / samples)))
+    enough = 2 ** math.floor(math.log2(max(1.0, math.sqrt(width * height / (4 * threads)))))
+    return int(min(max(min(side, enough), 16), 256))
+
+
 def _cancelled(cancel):
     if cancel is None:
         return False
@@ -431,7 +440,7 @@ def _validate(target, occluders, resolution, samples, min_samples, target_error,
 def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, progress=None, cancel=None, on_tile=None,
-            tile_size=32, chunk_rays=1 << 16):
+            tile_size=None, chunk_rays=1 << 16):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     Parameters
@@ -461,6 +470,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         rays. A cancelled bake raises BakeCancelled and returns nothing.
     on_tile : called as on_tile(rows, cols, ao_block) from worker threads when a tile of texels is
         final (before margin dilation); ``rows``, ``cols`` are slices of the (H, W) result.
+    tile_size, chunk_rays : texels per side of the unit of work a thread takes (None: chosen from
+        samples and resolution), and rays traced per call into Embree (bounds memory). Neither
+        changes the result: texels draw their samples by (texel, index) alone.
 
     Returns
     -------
@@ -483,6 +495,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     if _cancelled(cancel):
         raise BakeCancelled("the bake was cancelled before it started")
 
+    if tile_size is None:
+        tile_size = auto_tile_size(w, h, cfg["samples"], cfg["threads"])
+    tile_size = _positive_int(tile_size, "tile_size")
     tris = prepare(target, w, h)
     bins = bin_triangles(tris, w, h, tile_size)
     tracer = _Tracer([target] + cfg["occluders"], ignore_backfaces, cfg["falloff"], cfg["max_distance"])

@@ -172,37 +172,75 @@ class TileFragments:
     sub_key: np.ndarray = None  # sub_texel + sub_cdf: increasing, so one searchsorted finds any texel's pick
 
 
-def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
-    """Fragments of the texels [x0, x1) x [y0, y1) covered by the triangles ``tri_ids``."""
-    xy = tris.xy[tri_ids]
-    lo = np.maximum(np.floor(xy.min(axis=1)).astype(np.int64), [x0, y0])
-    hi = np.minimum(np.ceil(xy.max(axis=1)).astype(np.int64), [x1, y1])  # exclusive
-    nx = np.maximum(hi[:, 0] - lo[:, 0], 0)
-    ny = np.maximum(hi[:, 1] - lo[:, 1], 0)
-    count = nx * ny
-    rep = np.repeat(np.arange(len(tri_ids)), count)
-    k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
-    px = lo[rep, 0] + k % nx[rep]
-    py = lo[rep, 1] + k // nx[rep]
-    pxy = xy[rep]  # (pairs, 3, 2)
-
-    # Edge functions E_k(p) = cross(c_{k+1} - c_k, p - c_k) >= 0 inside (corners are CCW).
-    c0, c1 = pxy, np.roll(pxy, -1, axis=1)
+def _edges(xy):
+    """Edge functions E_k(x, y) = a_k x + b_k y + c_k >= 0 inside, for CCW triangles (..., 3, 2)."""
+    c0, c1 = xy, np.roll(xy, -1, axis=-2)
     ea = -(c1[..., 1] - c0[..., 1])
     eb = c1[..., 0] - c0[..., 0]
     ec = -(ea * c0[..., 0] + eb * c0[..., 1])
-    corners_x = px[:, None] + np.array([0, 1, 1, 0])
-    corners_y = py[:, None] + np.array([0, 0, 1, 1])
-    E = ea[:, :, None] * corners_x[:, None, :] + eb[:, :, None] * corners_y[:, None, :] + ec[:, :, None]
+    return ea, eb, ec
+
+
+def _cells(lo, hi, size):
+    """Enumerate, per row of lo/hi (n, 2) (exclusive hi, in units of ``size``), its grid cells:
+    returns (owner row, cell x, cell y) flattened."""
+    nx = np.maximum(hi[:, 0] - lo[:, 0], 0)
+    ny = np.maximum(hi[:, 1] - lo[:, 1], 0)
+    count = nx * ny
+    rep = np.repeat(np.arange(len(lo)), count)
+    k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
+    return rep, lo[rep, 0] + k % nx[rep], lo[rep, 1] + k // nx[rep]
+
+
+def _classify(ea, eb, ec, x, y, size):
+    """Squares [x, x + size] x [y, y + size] against triangles: (inside, outside) masks."""
+    cx = x[:, None] + np.array([0, size, size, 0])
+    cy = y[:, None] + np.array([0, 0, size, size])
+    E = ea[:, :, None] * cx[:, None, :] + eb[:, :, None] * cy[:, None, :] + ec[:, :, None]
     full = np.all(E >= 0, axis=(1, 2))
-    out = np.any(np.all(E <= 0, axis=2), axis=1) & ~full
+    return full, np.any(np.all(E <= 0, axis=2), axis=1) & ~full
+
+
+#: Side of the blocks of texels classified before single texels: whole blocks inside a triangle
+#: skip per-texel work, which is most of a texture for meshes with triangles larger than texels.
+BLOCK = 8
+
+
+def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
+    """Fragments of the texels [x0, x1) x [y0, y1) covered by the triangles ``tri_ids``."""
+    xy = tris.xy[tri_ids]
+    ea_t, eb_t, ec_t = _edges(xy)
+    lo = np.maximum(np.floor(xy.min(axis=1)).astype(np.int64), [x0, y0])
+    hi = np.minimum(np.ceil(xy.max(axis=1)).astype(np.int64), [x1, y1])  # exclusive
+
+    # Level 1: blocks of BLOCK x BLOCK texels (clipped to each triangle's texel bounding box).
+    blo = (lo - [x0, y0]) // BLOCK
+    bhi = -(-(hi - [x0, y0]) // BLOCK)
+    owner, bx, by = _cells(blo, bhi, 1)
+    bx, by = x0 + bx * BLOCK, y0 + by * BLOCK
+    b_full, b_out = _classify(ea_t[owner], eb_t[owner], ec_t[owner], bx.astype(float), by.astype(float), BLOCK)
+    # Texels of full blocks are full; texels of partial blocks are classified one by one.
+    def texels_of(sel):
+        o = owner[sel]
+        t_lo = np.maximum(np.stack([bx[sel], by[sel]], 1), lo[o])
+        t_hi = np.minimum(np.stack([bx[sel], by[sel]], 1) + BLOCK, hi[o])
+        r, px, py = _cells(t_lo, t_hi, 1)
+        return o[r], px, py
+
+    f_tri, f_x, f_y = texels_of(b_full)
+    p_tri, px, py = texels_of(~b_full & ~b_out)
+    ea, eb, ec = ea_t[p_tri], eb_t[p_tri], ec_t[p_tri]
+    full, out = _classify(ea, eb, ec, px.astype(float), py.astype(float), 1)
     part = ~full & ~out
+    f_tri = np.concatenate([f_tri, p_tri[full]])
+    f_x = np.concatenate([f_x, px[full]])
+    f_y = np.concatenate([f_y, py[full]])
 
     # Clip the texel square by the three edges for the partial pairs.
     ip = np.flatnonzero(part)
     sq = np.zeros((len(ip), 4, 2))
-    sq[..., 0] = corners_x[ip]
-    sq[..., 1] = corners_y[ip]
+    sq[..., 0] = px[ip, None] + np.array([0, 1, 1, 0])
+    sq[..., 1] = py[ip, None] + np.array([0, 0, 1, 1])
     poly, cnt = sq, np.full(len(ip), 4)
     for e in range(3):
         poly, cnt = _clip(poly, cnt, ea[ip, e], eb[ip, e], ec[ip, e])
@@ -216,56 +254,51 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
     fan_area = 0.5 * ((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
                       - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
     fan_area = np.where(fan_ok, np.abs(fan_area), 0.0)
-    pair_area = fan_area.sum(axis=1)
-    real = pair_area > MIN_FRAGMENT_AREA
-    ip, poly, fan_ok, fan_area, b, c, a = ip[real], poly[real], fan_ok[real], fan_area[real], b[real], c[real], a[real]
+    real = fan_area.sum(axis=1) > MIN_FRAGMENT_AREA
+    ip, fan_ok, fan_area, b, c, a = ip[real], fan_ok[real], fan_area[real], b[real], c[real], a[real]
     fan_ok &= fan_area > 0
-
-    def flat(ix, iy):
-        return (iy * width + ix).astype(np.int64)
-
-    full_texel = flat(px[full], py[full])
-    full_tri = tri_ids[rep[full]]
     rr, kk = np.nonzero(fan_ok)
-    sub_texel_flat = flat(px[ip[rr]], py[ip[rr]])
-    sub_tri = tri_ids[rep[ip[rr]]]
     sub_xy = np.stack([a[rr, 0], b[rr, kk], c[rr, kk]], axis=1)
     sub_area = fan_area[rr, kk]
+    sub_tri = tri_ids[p_tri[ip[rr]]]
+    sub_local = (py[ip[rr]] - y0) * (x1 - x0) + (px[ip[rr]] - x0)
+
+    # Compact the tile's texels without sorting: count fragments per local texel index.
+    tw, th = x1 - x0, y1 - y0
+    full_local = (f_y - y0) * tw + (f_x - x0)
+    n_full = np.bincount(full_local, minlength=tw * th)
+    n_sub = np.bincount(sub_local, minlength=tw * th) if len(sub_local) else np.zeros(tw * th, np.int64)
+    covered = np.flatnonzero(n_full + n_sub)
+    compact = np.full(tw * th, -1, np.int64)
+    compact[covered] = np.arange(len(covered))
+    texels = (covered // tw + y0) * width + (covered % tw + x0)
 
     # A texel with exactly one full fragment and nothing else keeps the fast path; a texel that is
     # full for one triangle and touched by others (overlapping UVs) is split into sub-triangles.
-    all_texels = np.concatenate([full_texel, sub_texel_flat])
-    texels, inverse, counts = np.unique(all_texels, return_inverse=True, return_counts=True)
-    n_full = len(full_texel)
-    full_idx = inverse[:n_full]
-    simple = np.zeros(len(texels), dtype=bool)
-    simple[full_idx] = counts[full_idx] == 1
-    full_of = np.full(len(texels), -1, dtype=np.int64)
-    full_of[full_idx[simple[full_idx]]] = full_tri[simple[full_idx]]
-
-    # Full fragments of non-simple texels become two sub-triangles of the square.
-    nf = ~simple[full_idx]
+    simple_local = (n_full == 1) & (n_sub == 0)
+    full_of = np.full(len(covered), -1, dtype=np.int64)
+    fs = simple_local[full_local]
+    full_of[compact[full_local[fs]]] = tri_ids[f_tri[fs]]
+    sub_tex = compact[sub_local]
+    nf = ~fs
     if nf.any():
-        fx, fy = px[full][nf], py[full][nf]
-        sq_a = np.stack([fx, fy], 1).astype(float)
-        sq_b = np.stack([fx + 1, fy], 1).astype(float)
-        sq_c = np.stack([fx + 1, fy + 1], 1).astype(float)
-        sq_d = np.stack([fx, fy + 1], 1).astype(float)
-        extra_xy = np.concatenate([np.stack([sq_a, sq_b, sq_c], 1), np.stack([sq_a, sq_c, sq_d], 1)])
-        extra_tri = np.concatenate([full_tri[nf], full_tri[nf]])
-        extra_tex = np.concatenate([full_idx[nf], full_idx[nf]])
-        sub_xy = np.concatenate([sub_xy, extra_xy])
-        sub_tri = np.concatenate([sub_tri, extra_tri])
-        sub_area = np.concatenate([sub_area, np.full(len(extra_tri), 0.5)])
-        sub_tex = np.concatenate([inverse[n_full:], extra_tex])
-    else:
-        sub_tex = inverse[n_full:]
+        fx, fy = f_x[nf].astype(float), f_y[nf].astype(float)
+        sq_a = np.stack([fx, fy], 1)
+        sq_b = np.stack([fx + 1, fy], 1)
+        sq_c = np.stack([fx + 1, fy + 1], 1)
+        sq_d = np.stack([fx, fy + 1], 1)
+        sub_xy = np.concatenate([sub_xy, np.stack([sq_a, sq_b, sq_c], 1), np.stack([sq_a, sq_c, sq_d], 1)])
+        extra_tri = tri_ids[f_tri[nf]]
+        sub_tri = np.concatenate([sub_tri, extra_tri, extra_tri])
+        sub_area = np.concatenate([sub_area, np.full(2 * len(extra_tri), 0.5)])
+        extra_tex = compact[full_local[nf]]
+        sub_tex = np.concatenate([sub_tex, extra_tex, extra_tex])
 
     order = np.argsort(sub_tex, kind="stable")
     sub_tex, sub_tri, sub_xy, sub_area = sub_tex[order], sub_tri[order], sub_xy[order], sub_area[order]
-    coverage = np.bincount(sub_tex, weights=sub_area, minlength=len(texels))
-    coverage[simple] = 1.0
-    sub_start = np.searchsorted(sub_tex, np.arange(len(texels) + 1))
+    coverage = np.bincount(sub_tex, weights=sub_area, minlength=len(covered))
+    coverage[full_of >= 0] = 1.0
+    sub_start = np.searchsorted(sub_tex, np.arange(len(covered) + 1))
     csum = np.cumsum(sub_area)
     run_base = np.concatenate([[0.0], csum])[sub_start[:-1]]
     with np.errstate(invalid="ignore", divide="ignore"):
