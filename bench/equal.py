@@ -67,6 +67,33 @@ def _series_point(r, ref_ao, sel, label, **extra):
                 **extra)
 
 
+def _time_fit(pts):
+    """Least-squares t = a + b * samples over a fixed-sample series: one noisy repeat moves it less
+    than it moves a single point."""
+    x = np.array([p["samples"] for p in pts], float)
+    y = np.array([p["seconds"] for p in pts], float)
+    b, a = np.polyfit(x, y, 1)
+    return float(a), float(b)
+
+
+def _fitted_ratios(series, at128):
+    """Time to Cycles' 128-spp RMSE from fitted times: each fixed series' samples at that RMSE (log-log
+    interpolation of RMSE against samples), priced by its own time fit, over Cycles' fitted time at 128."""
+    if at128 is None:
+        return {}
+    ac, bc = _time_fit(series["cycles"])
+    t_cyc = ac + bc * 128
+    out = {"cycles_fit": {"a_s": ac, "b_s_per_spp": bc, "t128_s": t_cyc}}
+    for name, pts in series.items():
+        if name == "cycles" or "+adaptive" in name:
+            continue
+        spp = interp_time_at([p["samples"] for p in pts], [p["rmse"] for p in pts], at128["rmse"])
+        a, b = _time_fit(pts)
+        t = a + b * spp if spp else None
+        out[name] = {"samples": spp, "seconds": t, "ratio": t / t_cyc if t else None, "a_s": a, "b_s_per_spp": b}
+    return out
+
+
 def equal_error(ctx):
     """RMSE against a converged mc_ao reference, against time, for Cycles and every mc_ao configuration."""
     bpy, cfg = ctx.bpy, ctx.cfg
@@ -136,8 +163,10 @@ def equal_error(ctx):
                 continue
             t = interp_time_at([p["seconds"] for p in pts], [p["rmse"] for p in pts], at128["rmse"])
             matched[name] = {"seconds": t, "ratio": (t / at128["seconds"]) if t else None}
-    best = min((v for v in matched.values() if v["ratio"] is not None), key=lambda v: v["ratio"], default=None)
-    best_name = next((k for k, v in matched.items() if v is best), None)
+    fitted = _fitted_ratios(series, at128)
+    pool = {k: v for k, v in fitted.items() if v.get("ratio") is not None}
+    best_name = min(pool, key=lambda k: pool[k]["ratio"], default=None)
+    best = pool.get(best_name)
     return {
         "resolution": res, "threads": threads,
         "reference": {"baker": "mc_ao core, sobol", "samples": cfg["ref_spp"], "seconds": ref.seconds,
@@ -152,5 +181,6 @@ def equal_error(ctx):
         "series": series,
         "cycles_at_128": at128,
         "mc_time_to_cycles128_rmse": matched,
+        "fitted": fitted,
         "best": {"config": best_name, **(best or {})},
     }

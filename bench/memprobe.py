@@ -1,6 +1,6 @@
 """Peak memory of one core.bake_ao, measured in a fresh process: ``python -m bench.memprobe scene.npz RES SPP THREADS``.
 
-Prints one JSON line: RSS before the bake (after imports and the meshes), peak RSS (ru_maxrss), bake
+Prints one JSON line: RSS before the bake (after imports and the meshes), peak RSS (VmHWM), bake
 seconds, rays and the share inside embreex. No bpy is imported, so the figure is the core's own.
 """
 
@@ -16,10 +16,11 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 
-def rss_mib():
+def rss_mib(field="VmRSS"):
+    """This process's resident set (VmRSS) or its high-water mark (VmHWM), in MiB."""
     with open("/proc/self/status") as f:
         for line in f:
-            if line.startswith("VmRSS:"):
+            if line.startswith(field + ":"):
                 return int(line.split()[1]) / 1024
     return float("nan")
 
@@ -63,12 +64,15 @@ def main(argv):
     wall = time.perf_counter() - t0
     stop.set()
     w.join()
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
+    # VmHWM, not ru_maxrss: Linux carries ru_maxrss across fork + exec, so a probe started by the
+    # benchmark (which holds Blender, over 1 GB) would report its parent's size, not its own.
+    peak = rss_mib("VmHWM")
+    maxrss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
     split = done_at[0] or time.perf_counter()
     during = max((m for t, m in samples if t <= split), default=float("nan"))
     after = max((m for t, m in samples if t > split), default=float("nan"))
     print(json.dumps({"resolution": res, "samples": spp, "threads": threads, "rss_before_mib": before,
-                      "peak_rss_mib": peak, "peak_rss_tracing_mib": during, "peak_rss_after_tracing_mib": after,
+                      "peak_rss_mib": peak, "ru_maxrss_mib": maxrss, "peak_rss_tracing_mib": during, "peak_rss_after_tracing_mib": after,
                       "seconds_after_tracing": time.perf_counter() - split if done_at[0] else None,
                       "seconds": wall, "bake_seconds": r.seconds, "rays": r.rays,
                       "texels": int(r.mask.sum()), "trace_share": r.trace_seconds / (r.seconds * r.threads)}))

@@ -68,10 +68,22 @@ def table(data):
                  + f", cap {data['config']['adaptive_cap']})")
         c = ee.get("cycles_at_128")
         if c:
-            L.append(f"  Cycles at 128 spp: RMSE {c['rmse']:.5f} in {c['seconds']:.2f} s. mc_ao time to that RMSE:")
-            rows = [[k, _fmt(v["seconds"], ".3f"), _fmt(v["ratio"], ".3f")]
-                    for k, v in ee["mc_time_to_cycles128_rmse"].items()]
-            L += _grid(["mc_ao config", "seconds", "x Cycles time"], rows)
+            fit = ee.get("fitted", {})
+            cf = fit.get("cycles_fit", {})
+            L.append(f"  Cycles at 128 spp: RMSE {c['rmse']:.5f} in {c['seconds']:.2f} s measured, "
+                     f"{cf.get('t128_s', float('nan')):.2f} s from its time fit (a + b spp). mc_ao to that RMSE:")
+            rows = []
+            for k, v in ee["mc_time_to_cycles128_rmse"].items():
+                f = fit.get(k, {})
+                rows.append([k, _fmt(v["seconds"], ".3f"), _fmt(v["ratio"], ".3f"), _fmt(f.get("samples"), ".0f"),
+                             _fmt(f.get("seconds"), ".3f"), _fmt(f.get("ratio"), ".3f")])
+            L += _grid(["mc_ao config", "s (measured)", "x Cycles", "spp needed", "s (fitted)", "x Cycles (fitted)"], rows)
+            tx = ee["texels"]
+            if cf and fit.get("sobol"):
+                L.append(f"  time fits: Cycles {cf['a_s']:.3f} s + {1e3 * cf['b_s_per_spp']:.2f} ms/spp "
+                         f"({tx['cycles_mask'] / cf['b_s_per_spp'] / 1e6:.2f} M texel-samples/s marginal); mc_ao sobol "
+                         f"{fit['sobol']['a_s']:.3f} s + {1e3 * fit['sobol']['b_s_per_spp']:.2f} ms/spp "
+                         f"({tx['mc_mask'] / fit['sobol']['b_s_per_spp'] / 1e6:.2f} M texel-samples/s marginal)")
         L.append("")
 
     ag = r.get("agreement")
