@@ -134,9 +134,9 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if is_running():
-            cls.poll_message_set("An AO bake is running")
-            return False
+        # A running bake does not disable the button: Blender 4.3 keeps drawing a button that was
+        # disabled under a resting mouse pointer as disabled, and ignores clicks on it, after it
+        # is enabled again. _start() refuses a second bake instead, and the panel says why.
         reason = baking.why_not_bakeable(context.selected_objects)
         if reason is not None:
             cls.poll_message_set(reason)
@@ -147,6 +147,9 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
 
     def _start(self, context, live):
         """Plan the jobs and start the worker; False (after reporting) when there is nothing to do."""
+        if is_running():
+            self.report({"WARNING"}, "An AO bake is already running; Esc cancels it")
+            return False
         self.settings = BakeSettings.from_properties(context.scene.mc_ao)
         self.errors = 0
         self.finished = []
@@ -303,6 +306,16 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
+        try:
+            return self._modal(context, event)
+        except Exception as exc:  # a bug here must not leave the worker and the timer running
+            traceback.print_exc()
+            self.report({"ERROR"}, f"AO bake stopped by an internal error ({type(exc).__name__}: {exc}); see the console")
+            self._remove_timer(context)
+            self._end(context, cancelled=True)
+            return {"CANCELLED"}
+
+    def _modal(self, context, event):
         if event.type == "ESC":
             self._remove_timer(context)
             return self._end(context, cancelled=True)

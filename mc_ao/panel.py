@@ -4,7 +4,16 @@ import bpy
 
 from . import baking
 from .operators import OBJECT_OT_mc_ao_bake, is_running
+from .extract import default_uv_map
 from .settings import BakeSettings
+
+# UILayout.prop() takes a placeholder for an empty text field in newer Blender versions (4.3 and
+# 5.0 have it), not in every version this extension supports.
+_HAS_PLACEHOLDER = "placeholder" in bpy.types.UILayout.bl_rna.functions["prop"].parameters
+
+
+def _placeholder(text):
+    return {"placeholder": text} if _HAS_PLACEHOLDER else {}
 
 
 class _McAoPanel:
@@ -91,10 +100,13 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
         col.prop(settings, "margin")
         obj = context.active_object
         if obj is not None and obj.type == "MESH":
-            col.prop_search(settings, "uv_map", obj.data, "uv_layers", text="UV Map")
+            col.prop_search(settings, "uv_map", obj.data, "uv_layers", text="UV Map", icon="GROUP_UVS")
+            default = default_uv_map(obj.data)
+            if not settings.uv_map and default:
+                col.label(text=f"Active render UV map: {default}")
         else:
-            col.prop(settings, "uv_map")
-        col.prop(settings, "image_name")
+            col.prop(settings, "uv_map", icon="GROUP_UVS")
+        col.prop(settings, "image_name", **_placeholder("<object>_AO"))
         col.prop(settings, "float_buffer")
 
 

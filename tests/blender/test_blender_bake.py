@@ -271,3 +271,18 @@ def test_a_cancelled_run_reports_cancelled(bpy, scene):
     run.stop()
     assert [run.messages.get()[0], run.messages.get()[0]] == ["cancelled", "end"]
     assert not operators._RUNS
+
+
+def test_a_second_bake_is_refused_while_one_runs(bpy, scene):
+    from mc_ao import operators
+
+    ground = add_plane(bpy, "Ground", size=4)
+    select_only(bpy, ground)
+    running = object()  # what BakeRun.start() registers
+    operators._RUNS.add(running)
+    try:
+        assert bpy.ops.object.mc_ao_bake.poll()  # the button stays clickable ...
+        assert bpy.ops.object.mc_ao_bake() == {"CANCELLED"}  # ... and says a bake is running
+    finally:
+        operators._RUNS.discard(running)
+    assert "Ground_AO" not in bpy.data.images

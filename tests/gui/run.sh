@@ -23,7 +23,8 @@ wait_for() {  # FILE SECONDS; stops early on Blender's error.json
   done
   echo "timed out waiting for $1" >&2; return 1
 }
-click() { xdotool mousemove "$X" "$Y"; sleep 0.3; xdotool click 1; }
+# Come to the button from elsewhere, as a hand does: Blender refreshes a button's state on motion.
+click() { xdotool mousemove 200 600; sleep 0.3; xdotool mousemove "$X" "$Y"; sleep 0.5; xdotool click 1; }
 
 MC_AO_ZIP=$(realpath "$ZIP") MC_AO_GUI_OUT=$OUT \
   blender --factory-startup --window-geometry 0 0 1600 1000 --python tests/gui/click_bake.py \
