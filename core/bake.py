@@ -285,11 +285,19 @@ class _TileBaker:
             # bake() orders texels simple-first, so the simple rows are a prefix: views, not copies.
             n_simple = int(simple.sum())
             rows = slice(0, n_simple) if simple[:n_simple].all() else np.flatnonzero(simple)
-            tab = self.tris.table[full[rows]]  # one row per texel
+            tri = full[rows]
             tex = frag.texels[sel[rows]]
-            dx = ((tex % W) - self.tris.origin_xy[full[rows], 0]).astype(np.float32)[:, None] + ux[rows]
-            dy = ((tex // W) - self.tris.origin_xy[full[rows], 1]).astype(np.float32)[:, None] + uy[rows]
-            fill(rows, tab, dx, dy, lambda t, i: t[:, i, None])
+            cx = ((tex % W) - self.tris.origin_xy[tri, 0]).astype(np.float32)[:, None]
+            cy = ((tex // W) - self.tris.origin_xy[tri, 1]).astype(np.float32)[:, None]
+            if k >= 32:
+                # Gather each texel's row once and broadcast it over its k samples.
+                fill(rows, self.tris.table[tri], cx + ux[rows], cy + uy[rows], lambda t, i: t[:, i, None])
+            else:
+                # Few samples per texel: broadcasting over a short inner axis is slow in numpy, so
+                # repeat the rows per sample and work on long flat arrays instead.
+                shape = (len(tri), k)
+                tab = np.repeat(np.take(self.tris.table_t, tri, axis=1), k, axis=1)
+                fill(rows, tab, cx + ux[rows], cy + uy[rows], lambda t, i: t[i].reshape(shape))
         if not simple.all():
             rows = np.flatnonzero(~simple)
             t_loc = np.repeat(sel[rows], k)
@@ -341,9 +349,11 @@ class _TileBaker:
         d[2] = lx * sz + ly * tz + lz * n[2]
         above = (d[0] * gn[0] + d[1] * gn[1] + d[2] * gn[2]) > 0
         eps = self.tracer.offset(np.maximum(np.maximum(np.abs(p[0]), np.abs(p[1])), np.abs(p[2])))
-        idx = np.flatnonzero(above.ravel())
-        org = np.empty((len(idx), 3), np.float32)
-        dirs = np.empty((len(idx), 3), np.float32)
+        # Usually every direction is above the surface: then take the planes whole, not by index.
+        idx = slice(None) if above.all() else np.flatnonzero(above.ravel())
+        n_rays = above.size if isinstance(idx, slice) else len(idx)
+        org = np.empty((n_rays, 3), np.float32)
+        dirs = np.empty((n_rays, 3), np.float32)
         e = eps.ravel()[idx]
         for c in range(3):
             org[:, c] = p[c].ravel()[idx] + gn[c].ravel()[idx] * e
@@ -355,7 +365,7 @@ class _TileBaker:
         vis = vis.reshape(len(sel), k)
         if s["distribution"] == "uniform":
             vis *= 2.0 * lz
-        return vis, len(idx), dt
+        return vis, n_rays, dt
 
     def bake(self, key, tri_ids):
         s, shared = self.s, self.shared

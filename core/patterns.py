@@ -66,12 +66,16 @@ def _owen_from_reversed(v_rev, seed):
     of the work, since the baker reverses its shared Sobol' base once per bake instead of per texel.
     """
     v = np.broadcast_to(v_rev, np.broadcast_shapes(v_rev.shape, seed.shape)).copy()
-    seed = np.broadcast_to(seed, v.shape)
-    v ^= v * _C0
+    odd = (seed >> np.uint32(16)) | np.uint32(1)  # on the small seed array, broadcast below
+    tmp = np.empty_like(v)
+    np.multiply(v, _C0, out=tmp)
+    v ^= tmp
     v += seed
-    v *= (seed >> np.uint32(16)) | np.uint32(1)
-    v ^= v * _C1
-    v ^= v * _C2
+    v *= odd
+    np.multiply(v, _C1, out=tmp)
+    v ^= tmp
+    np.multiply(v, _C2, out=tmp)
+    v ^= tmp
     return reverse_bits_uint32(v)
 
 
