@@ -150,6 +150,10 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         if is_running():
             self.report({"WARNING"}, "An AO bake is already running; Esc cancels it")
             return False
+        missing = corelink.missing_dependency()
+        if missing is not None:
+            self.report({"ERROR"}, f"Cannot bake: {missing}")
+            return False
         self.settings = BakeSettings.from_properties(context.scene.mc_ao)
         self.errors = 0
         self.finished = []

@@ -20,6 +20,7 @@ import os
 import sys
 import threading
 import time
+import traceback
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -212,6 +213,11 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("\nbake_ao: cancelled", file=sys.stderr)
         return 130
+    except Exception:
+        # Under Blender an escaping exception would end the script with exit status 0.
+        traceback.print_exc()
+        print("bake_ao: error: unexpected failure, see the traceback above", file=sys.stderr)
+        return 1
 
 
 def bake(args, in_blender):
@@ -236,14 +242,10 @@ def bake(args, in_blender):
     from mc_ao.extract import ExtractError
     from mc_ao.settings import BakeSettings
 
-    try:
-        core = corelink.load()
-        corelink.load("bake")  # numpy and embreex: fail here, before any work, if missing
-    except ImportError as exc:
-        raise UsageError(
-            f"cannot import the mc_ao core ({exc}); this Python needs numpy and embreex "
-            "(install the mc_ao extension in this Blender, or pip install embreex)"
-        ) from None
+    missing = corelink.missing_dependency()
+    if missing is not None:
+        raise UsageError(missing)
+    core = corelink.load()
     imageio = corelink.load("imageio") if images.oiio_available() else None
     if imageio is None:
         print("bake_ao: no OpenImageIO in this Python; writing files with Blender's image writer", file=sys.stderr)

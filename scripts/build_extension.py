@@ -34,8 +34,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 MANIFEST = "blender_manifest.toml"
-# Never staged: version control, environments, build outputs. The manifest's exclude patterns
-# decide everything else (they are applied by the builder, on the staged copy).
+# Never staged, whatever the manifest says: version control, environments, build outputs.
 STAGE_SKIP = {".git", ".venv", "dist", "wheels", "out", "__pycache__", ".pytest_cache", ".hypothesis"}
 
 
@@ -126,12 +125,21 @@ def manifest_for(text, platforms, wheels):
 
 
 def stage(source, stage_dir, platforms, wheels, wheel_dir):
-    """Copy the extension to ``stage_dir`` with a manifest for ``platforms`` and their wheels."""
+    """Copy the extension to ``stage_dir`` with a manifest for ``platforms`` and their wheels.
+
+    Only what the manifest's exclude patterns let through is copied (the builder applies them
+    again), so virtual environments and other large folders in a checkout cost nothing.
+    """
+    text = (source / MANIFEST).read_text(encoding="utf-8")
+    patterns = tomllib.loads(text).get("build", {}).get("paths_exclude_pattern", [])
+
     def ignore(directory, names):
-        return [n for n in names if n in STAGE_SKIP or n.endswith(".pyc")]
+        rel_dir = os.path.relpath(directory, source).replace(os.sep, "/")
+        rel_dir = "" if rel_dir == "." else rel_dir + "/"
+        return [n for n in names if n in STAGE_SKIP
+                or _excluded(rel_dir + n, os.path.isdir(os.path.join(directory, n)), patterns)]
 
     shutil.copytree(source, stage_dir, ignore=ignore)
-    text = (source / MANIFEST).read_text(encoding="utf-8")
     (stage_dir / MANIFEST).write_text(manifest_for(text, platforms, wheels), encoding="utf-8")
     for wheel in wheels:
         target = stage_dir / wheel

@@ -1,6 +1,7 @@
 """The user's path: build the zip, Install from Disk into a user repository, enable, bake, uninstall."""
 
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -13,16 +14,37 @@ REPO = "mc_ao_test"
 ADDON = f"bl_ext.{REPO}.mc_ao"
 
 
-@pytest.fixture
-def built_zip(tmp_path):
+def _build_extension():
     sys.path.insert(0, str(ROOT / "scripts"))
     try:
         import build_extension
     finally:
         sys.path.remove(str(ROOT / "scripts"))
+    return build_extension
+
+
+@pytest.fixture
+def built_zip(tmp_path):
     # This machine's platform only: pip downloads its two wheels into wheels/ once.
-    (path,) = build_extension.build(platforms=["current"], output_dir=tmp_path / "dist")
+    (path,) = _build_extension().build(platforms=["current"], output_dir=tmp_path / "dist")
     return path
+
+
+def test_own_zip_writer_matches_blenders_builder(bpy, tmp_path):
+    """The fallback zip writer (for machines without Blender's builder) packs what Blender's does."""
+    build_extension = _build_extension()
+    (blenders,) = build_extension.build(["current"], tmp_path / "blender", builder="blender")
+    (own,) = build_extension.build(["current"], tmp_path / "own", builder="self")
+    assert blenders.name == own.name
+    with zipfile.ZipFile(blenders) as a, zipfile.ZipFile(own) as b:
+        assert sorted(a.namelist()) == sorted(b.namelist())
+        assert a.read("blender_manifest.toml") == b.read("blender_manifest.toml")
+        names = a.namelist()
+    assert "__init__.py" in names and "core/bake.py" in names and "mc_ao/operators.py" in names
+    assert not [n for n in names if n.startswith(("tests/", "scripts/", "bench/", "docs/", "sample_scenes/"))
+                or "__pycache__" in n or n.endswith(".pyc")]
+    wheels = [n for n in names if n.startswith("wheels/")]
+    assert len(wheels) == 2  # cp311 and cp313 for this platform
 
 
 @pytest.fixture
