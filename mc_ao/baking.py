@@ -70,6 +70,21 @@ class Job:
         )
 
 
+# core's BakeResult.report keys that point at a problem in the input, and what they mean.
+_INPUT_NOTES = {
+    "overlapping_texels": "texels under overlapping UV islands average every surface over them",
+    "uv_outside_triangles": "triangles reach outside the UV square [0, 1]; those parts are not baked",
+    "degenerate_uv_triangles": "triangles with no area in the UV map were skipped",
+    "degenerate_triangles": "triangles with no area in space were skipped",
+}
+
+
+def input_notes(result):
+    """Warnings about the input from a bake result's report, e.g. "12 overlapping_texels: ..."."""
+    report = getattr(result, "report", None) or {}
+    return [f"{report[key]} {key}: {text}" for key, text in _INPUT_NOTES.items() if report.get(key)]
+
+
 def _visible_geometry(depsgraph, view_layer):
     """(original object name or None for an instance, MeshArrays) of everything visible in the view layer."""
     for inst in depsgraph.object_instances:

@@ -241,6 +241,8 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         _redraw(context)
         self.finished.append(i)
         self.report({"INFO"}, summary(job, result))
+        for note in baking.input_notes(result):
+            self.report({"WARNING"}, f"{job.object_name}: {note}")
         if self.output_dir is not None:
             path = os.path.join(self.output_dir, self.settings.file_name_for(job.object_name))
             metadata = {"object": job.object_name, "blend": bpy.path.basename(bpy.data.filepath)}

@@ -281,6 +281,8 @@ def bake(args, in_blender):
             print(f"bake_ao: {job.object_name}: {exc}", file=sys.stderr)
             continue
         bar.end()
+        for note in baking.input_notes(result):
+            print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
         covered = result.samples[result.mask]
         rate = result.rays / result.seconds / 1e6 if result.seconds > 0 else float("nan")
         rows.append((job.object_name, f"{width}x{height}", f"{result.seconds:.2f}",

@@ -286,3 +286,12 @@ def test_a_second_bake_is_refused_while_one_runs(bpy, scene):
     finally:
         operators._RUNS.discard(running)
     assert "Ground_AO" not in bpy.data.images
+
+
+def test_overlapping_uv_islands_are_reported(bpy, scene, capfd):
+    ground = add_plane(bpy, "Ground", size=4)
+    array = ground.modifiers.new("Copy", "ARRAY")  # a second plane on the same UVs
+    array.relative_offset_displace = (1.5, 0.0, 0.0)
+    bake(bpy, ground)
+    out = capfd.readouterr().out
+    assert "Ground: " in out and "overlapping_texels: texels under overlapping UV islands" in out
