@@ -43,10 +43,6 @@ class Job:
     target: MeshArrays
     occluders: list = field(default_factory=list)
 
-    @property
-    def triangles(self):
-        return len(self.target.triangles) + sum(len(o.triangles) for o in self.occluders)
-
     def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None):
         """core.bake_ao of this job; returns its result. Needs no bpy (safe in a worker thread).
 
@@ -77,6 +73,14 @@ _INPUT_NOTES = {
     "degenerate_uv_triangles": "triangles with no area in the UV map were skipped",
     "degenerate_triangles": "triangles with no area in space were skipped",
 }
+
+
+def throughput(result):
+    """(mean samples per covered texel, million rays per second) of a bake result."""
+    covered = result.samples[result.mask]
+    per_texel = float(covered.mean()) if covered.size else 0.0
+    rate = result.rays / result.seconds / 1e6 if result.seconds > 0 else float("nan")
+    return per_texel, rate
 
 
 def input_notes(result):

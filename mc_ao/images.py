@@ -110,14 +110,13 @@ def oiio_available():
     return importlib.util.find_spec("OpenImageIO") is not None
 
 
-def save(image, result, path, settings, metadata=None):
+def save(result, path, settings, metadata=None):
     """Write a bake result to ``path`` in ``settings.file_format``; return how it was written.
 
     The core's OpenImageIO writer is used where OpenImageIO is importable (Blender's official builds
     ship it): an atomic write, one grey channel, the bake's metadata. Where it is missing (Debian's
-    Blender, for one), the pixels go through Blender's own writer instead, from a temporary image so
-    the baked image stays a generated, unsaved one: RGBA, the format's default depth for the image's
-    depth (8 or 16-bit PNG, half or float EXR), no metadata.
+    Blender, for one), the pixels go through Blender's own writer instead: RGBA, the format's
+    default depth for the image's depth (8 or 16-bit PNG, half or float EXR), no metadata.
 
     Returns
     -------
@@ -128,22 +127,14 @@ def save(image, result, path, settings, metadata=None):
         imageio = corelink.load("imageio")
         imageio.write_ao(path, result, bits=settings.file_bits, metadata=metadata, make_dirs=True)
         return "OpenImageIO"
-    save_with_blender(image, path, settings.file_format)
+    save_pixels_with_blender(rgba(result.ao), path, settings.file_format, settings.float_buffer)
     return "Blender"
-
-
-def save_with_blender(image, path, file_format):
-    """Write ``image``'s pixels to ``path`` with Blender's image writer, leaving ``image`` unchanged."""
-    pixels = pixels_of(image)
-    if image.channels != 4:
-        pixels = rgba(pixels[..., 0])
-    save_pixels_with_blender(pixels, path, file_format, image.is_float)
 
 
 def save_pixels_with_blender(pixels, path, file_format, float_buffer):
     """Write (H, W, 4) pixels to ``path`` in ``file_format`` (PNG, OPEN_EXR, TIFF) through a temporary image.
 
-    A temporary image, because saving an image to a path turns it into a file image.
+    A temporary image, because saving an image to a path turns that image into a file image.
     """
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     h, w = pixels.shape[:2]

@@ -116,9 +116,7 @@ def is_running():
 def summary(job, result):
     """One line per baked object: size, time, samples per texel, ray throughput."""
     h, w = result.ao.shape
-    covered = result.samples[result.mask]
-    per_texel = float(covered.mean()) if covered.size else 0.0
-    rate = result.rays / result.seconds / 1e6 if result.seconds > 0 else float("nan")
+    per_texel, rate = baking.throughput(result)
     return (
         f"{job.object_name}: {w}x{h} into {job.image_name!r} in {result.seconds:.2f} s, "
         f"{per_texel:.0f} samples per texel, {rate:.2f} M rays/s"
@@ -247,16 +245,16 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             path = os.path.join(self.output_dir, self.settings.file_name_for(job.object_name))
             metadata = {"object": job.object_name, "blend": bpy.path.basename(bpy.data.filepath)}
             try:
-                how = images.save(image, result, path, self.settings, metadata)
+                how = images.save(result, path, self.settings, metadata)
             except (corelink.load().McAoError, OSError, RuntimeError) as exc:
                 self.errors += 1
                 self.report({"ERROR"}, f"{job.object_name}: could not save {path}: {exc}")
             else:
                 self.report({"INFO"}, f"{job.object_name}: saved {path} ({how})")
 
-    def _flush_live(self, context, force=False):
+    def _flush_live(self, context):
         now = time.monotonic()
-        if not self.pending or (not force and now - self.last_flush < LIVE_UPDATE_INTERVAL):
+        if not self.pending or now - self.last_flush < LIVE_UPDATE_INTERVAL:
             return
         for i in self.pending:
             image, _, buffer = self.images[i]
@@ -277,7 +275,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             self._restore_unfinished()
         context.window_manager.progress_end()
         self._set_texts(context, None)
-        _redraw(context)  # images restored, and the Bake AO button enabled again
+        _redraw(context)  # restored images, and the panel without its "Baking" line
         if cancelled:
             kept = [self.run.jobs[i].object_name for i in self.finished]
             note = f"; kept the finished bakes of {', '.join(kept)}" if kept else ""

@@ -283,11 +283,9 @@ def bake(args, in_blender):
         bar.end()
         for note in baking.input_notes(result):
             print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
-        covered = result.samples[result.mask]
-        rate = result.rays / result.seconds / 1e6 if result.seconds > 0 else float("nan")
-        rows.append((job.object_name, f"{width}x{height}", f"{result.seconds:.2f}",
-                     f"{covered.mean() if covered.size else 0:.0f}", f"{rate:.2f}",
-                     ", ".join(str(f) for f in files)))
+        per_texel, rate = baking.throughput(result)
+        rows.append((job.object_name, f"{width}x{height}", f"{result.seconds:.2f}", f"{per_texel:.0f}",
+                     f"{rate:.2f}", ", ".join(str(f) for f in files)))
 
     header = ("object", "size", "seconds", "samples/texel", "Mrays/s", "files")
     if rows:

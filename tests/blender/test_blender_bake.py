@@ -295,3 +295,23 @@ def test_overlapping_uv_islands_are_reported(bpy, scene, capfd):
     bake(bpy, ground)
     out = capfd.readouterr().out
     assert "Ground: " in out and "overlapping_texels: texels under overlapping UV islands" in out
+
+
+def test_save_without_openimageio_goes_through_blenders_writer(bpy, scene, tmp_path, monkeypatch):
+    """Debian's Blender has no OpenImageIO module: the file is then written by Blender itself."""
+    from core import imageio
+    from mc_ao import images
+
+    monkeypatch.setattr(images, "oiio_available", lambda: False)
+    ground = add_plane(bpy, "Ground", size=4)
+    add_cube(bpy, "Block", size=1.0, location=(0, 0, 0.8))
+    settings = scene.mc_ao
+    settings.save_to_file = True
+    settings.output_dir = str(tmp_path)
+    settings.file_format = "PNG"
+    (ao,) = bake(bpy, ground)
+    pixels, _ = imageio.read_image(tmp_path / "Ground_AO.png")
+    assert pixels.shape == (24, 24, 4)  # RGBA from Blender's writer, 16-bit for a float image
+    np.testing.assert_allclose(pixels[..., 0], ao, atol=1 / 65535 + 1e-6)
+    assert np.all(pixels[..., 3] == 1.0)
+    assert [i.name for i in bpy.data.images] == ["Ground_AO"]  # no temporary image left
