@@ -1,7 +1,7 @@
 """What to bake: pick the targets, gather their geometry and their occluders, run core.bake_ao.
 
-plan() reads Blender data and must run in the main thread; Job.run() touches no bpy and runs in a
-worker thread (the operator's) or in the main thread (scripts/bake_ao.py).
+plan() reads Blender data and must run in the main thread; Job.run() touches no bpy and runs on a
+worker thread (the operator's, scripts/bake_ao.py's), so that the main thread stays free.
 """
 
 from dataclasses import dataclass, field

@@ -181,7 +181,7 @@ def pick_objects(bpy, names, baking):
     return objects
 
 
-def write_files(job, result, args, settings, images, imageio):
+def write_files(job, result, args, images, imageio):
     """Write one file per format; return their paths."""
     bits = BITS[args.bits] if args.bits else None
     stem = args.output / job.image_name
@@ -274,7 +274,7 @@ def bake(args, in_blender):
         bar.begin(f"[{n}/{len(jobs)}] {job.object_name}")
         try:
             result = run_job(job, settings, args.threads or None, bar)
-            files = write_files(job, result, args, settings, images, imageio)
+            files = write_files(job, result, args, images, imageio)
         except (core.McAoError, OSError, RuntimeError) as exc:
             bar.end()
             failures += 1
