@@ -10,6 +10,9 @@ import time
 import numpy as np
 
 BAKE_IMAGE = "bench_cycles_AO"
+#: Wall and process-CPU seconds of the last bake (CPU time counts every thread of this process and
+#: hardly grows when a neighbour takes a core away, so it is the steadier figure on a shared machine).
+LAST = {"wall": None, "cpu": None}
 
 
 def configure(bpy, threads, samples, seed=0, light_paths_off=True):
@@ -93,10 +96,11 @@ def bake(bpy, obj, width, height, samples, threads, seed=0, margin=0, sentinel=N
     scene = bpy.context.scene
     scene.render.bake.margin = margin
     scene.render.bake.margin_type = "EXTEND"
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     res = bpy.ops.object.bake(type="AO", margin=margin, margin_type="EXTEND", use_clear=sentinel is None,
                               target="IMAGE_TEXTURES", use_selected_to_active=False)
     seconds = time.perf_counter() - t0
+    LAST.update(wall=seconds, cpu=time.process_time() - c0)
     if res != {"FINISHED"}:
         raise RuntimeError(f"Cycles bake failed: {res}")
     return read_ao(image), seconds

@@ -25,13 +25,15 @@ def equal_samples(ctx):
     rows = []
     for res in cfg["es_res"]:
         reps = cfg["es_repeats"].get(res, 1)
-        cyc_t, op_t, core_t, shares = [], [], [], []
+        cyc_t, op_t, core_t, shares, cyc_c, op_c = [], [], [], [], [], []
         cyc_texels = mc_texels = None
         for _ in range(reps):
             ao, t = cycles.bake(bpy, obj, res, res, spp, threads, margin=16, sentinel=None)
             cyc_t.append(t)
+            cyc_c.append(cycles.LAST["cpu"])
             _, t = mcao.operator_bake(bpy, obj, res, spp, threads, DISTANCE, margin=16)
             op_t.append(t)
+            op_c.append(mcao.LAST["cpu"])
             r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=threads,
                                max_distance=DISTANCE, margin=16)
             core_t.append(r.seconds)
@@ -49,11 +51,14 @@ def equal_samples(ctx):
             "cycles_tsps": cyc_texels * spp / tc, "mc_tsps": mc_texels * spp / to,
             "mc_tsps_common": cyc_texels * spp / to,
             "ratio_time": tc / to, "ratio_tsps": (mc_texels * spp / to) / (cyc_texels * spp / tc),
+            "cycles_cpu_s": min(cyc_c), "mc_operator_cpu_s": min(op_c), "ratio_cpu": min(cyc_c) / min(op_c),
+            "cycles_cpu_s_all": cyc_c, "mc_operator_cpu_s_all": op_c,
             "mc_core_trace_share": float(np.median(shares)),
         }
         rows.append(row)
         log(f"equal samples {res}^2 x {spp}: Cycles {tc:.2f}s, mc_ao operator {to:.2f}s (core {tk:.2f}s), "
-            f"time ratio {row['ratio_time']:.2f}, texel-samples/s ratio {row['ratio_tsps']:.2f}", ctx.clock)
+            f"time ratio {row['ratio_time']:.2f}, texel-samples/s ratio {row['ratio_tsps']:.2f}, "
+            f"CPU-time ratio {row['ratio_cpu']:.2f}", ctx.clock)
     return {"scene": "Suzanne (smooth, subdiv 1) over a plane with two blocks; target Suzanne",
             "margin": 16, "rows": rows,
             "note": "texel-samples/s counts each baker's own texels: Cycles bakes texels whose centre a UV "
@@ -62,16 +67,17 @@ def equal_samples(ctx):
 
 
 def _series_point(r, ref_ao, sel, label, **extra):
-    return dict(label=label, seconds=r.seconds, rmse=rmse(r.ao, ref_ao, sel), rays=r.rays,
+    return dict(label=label, seconds=r.seconds, cpu_seconds=getattr(r, "cpu_seconds", None),
+                rmse=rmse(r.ao, ref_ao, sel), rays=r.rays,
                 mean_samples=float(r.samples[r.mask].mean()), trace_share=r.trace_seconds / (r.seconds * r.threads),
                 **extra)
 
 
-def _time_fit(pts):
+def _time_fit(pts, key="seconds"):
     """Least-squares t = a + b * samples over a fixed-sample series: one noisy repeat moves it less
     than it moves a single point."""
     x = np.array([p["samples"] for p in pts], float)
-    y = np.array([p["seconds"] for p in pts], float)
+    y = np.array([p[key] for p in pts], float)
     b, a = np.polyfit(x, y, 1)
     return float(a), float(b)
 
@@ -91,6 +97,10 @@ def _fitted_ratios(series, at128):
         a, b = _time_fit(pts)
         t = a + b * spp if spp else None
         out[name] = {"samples": spp, "seconds": t, "ratio": t / t_cyc if t else None, "a_s": a, "b_s_per_spp": b}
+        if spp and all(p.get("cpu_seconds") is not None for p in pts + series["cycles"]):
+            acc, bcc = _time_fit(series["cycles"], "cpu_seconds")
+            ac_, bc_ = _time_fit(pts, "cpu_seconds")
+            out[name]["ratio_cpu"] = (ac_ + bc_ * spp) / (acc + bcc * 128)
     return out
 
 
@@ -112,23 +122,27 @@ def equal_error(ctx):
         for rep in range(cfg["ee_repeats"]):
             if spp in cfg["cyc_spp"]:
                 ao, t = cycles.bake(bpy, obj, res, res, spp, threads, seed=11, margin=0, sentinel=-1.0)
+                c = cycles.LAST["cpu"]
                 cyc_mask = ao >= 0
-                cyc[spp] = (ao if rep == 0 else cyc[spp][0], min(t, cyc[spp][1]) if rep else t)
+                cyc[spp] = (ao if rep == 0 else cyc[spp][0], min(t, cyc[spp][1]) if rep else t,
+                            min(c, cyc[spp][2]) if rep else c)
             if spp in cfg["mc_spp"]:
                 for source in SOURCES:
                     r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=threads,
                                        max_distance=DISTANCE, source=source, seed=5)
                     if rep == 0:
                         fixed[source][spp] = r
-                    elif r.seconds < fixed[source][spp].seconds:
-                        fixed[source][spp].seconds = r.seconds
+                    else:
+                        f = fixed[source][spp]
+                        f.seconds = min(f.seconds, r.seconds)
+                        f.cpu_seconds = min(f.cpu_seconds, r.cpu_seconds)
     common = cyc_mask & ref.mask
     interior = erode(common)
     ctx.cyc_mask = cyc_mask
     sel = interior
     ref_noise = float(np.sqrt(np.mean(ref.stderr[sel].astype(np.float64) ** 2)))
-    cyc_series = [dict(label=f"cycles {spp}", samples=spp, seconds=t, rmse=rmse(ao, ref.ao, sel),
-                       rmse_common=rmse(ao, ref.ao, common)) for spp, (ao, t) in sorted(cyc.items())]
+    cyc_series = [dict(label=f"cycles {spp}", samples=spp, seconds=t, cpu_seconds=c, rmse=rmse(ao, ref.ao, sel),
+                       rmse_common=rmse(ao, ref.ao, common)) for spp, (ao, t, c) in sorted(cyc.items())]
     for p in cyc_series:
         log(f"  {p['label']:>22}: {p['seconds']:6.2f}s  RMSE {p['rmse']:.5f}", ctx.clock)
 

@@ -43,10 +43,13 @@ def table(data):
                  _fmt(x["mc_core_s"], ".2f"), x["cycles_texels"], x["mc_texels"], _fmt(x["cycles_tsps"] / 1e6, ".2f"),
                  _fmt(x["mc_tsps"] / 1e6, ".2f"), _fmt(x["ratio_tsps"], ".2f") + "x", _fmt(x["ratio_time"], ".2f") + "x",
                  _fmt(100 * x["mc_core_trace_share"], ".0f") + "%"] for x in es["rows"]]
+        for row, x in zip(rows, es["rows"]):
+            row.insert(-1, _fmt(x.get("ratio_cpu"), ".2f") + "x")
         L += _grid(["res", "spp", "Cycles s", "mc op s", "mc core s", "Cyc texels", "mc texels", "Cyc Mts/s",
-                    "mc Mts/s", "ts/s ratio", "time ratio", "in embree"], rows)
+                    "mc Mts/s", "ts/s ratio", "time ratio", "CPU ratio", "in embree"], rows)
         L.append("  (Mts/s = million texel-samples per second, each baker's own covered texels; time ratio = "
-                 "Cycles s / mc op s for the same image)")
+                 "Cycles s / mc op s for the same image; CPU ratio = the same with process CPU seconds, steadier "
+                 "when a neighbour takes a core)")
         L.append("")
 
     ee = r.get("equal_error")
@@ -77,7 +80,10 @@ def table(data):
                 f = fit.get(k, {})
                 rows.append([k, _fmt(v["seconds"], ".3f"), _fmt(v["ratio"], ".3f"), _fmt(f.get("samples"), ".0f"),
                              _fmt(f.get("seconds"), ".3f"), _fmt(f.get("ratio"), ".3f")])
-            L += _grid(["mc_ao config", "s (measured)", "x Cycles", "spp needed", "s (fitted)", "x Cycles (fitted)"], rows)
+            for row, k in zip(rows, ee["mc_time_to_cycles128_rmse"]):
+                row.append(_fmt(fit.get(k, {}).get("ratio_cpu"), ".3f"))
+            L += _grid(["mc_ao config", "s (measured)", "x Cycles", "spp needed", "s (fitted)", "x Cycles (fitted)",
+                        "x Cycles (CPU s)"], rows)
             tx = ee["texels"]
             if cf and fit.get("sobol"):
                 L.append(f"  time fits: Cycles {cf['a_s']:.3f} s + {1e3 * cf['b_s_per_spp']:.2f} ms/spp "
