@@ -25,6 +25,9 @@ _RUNS = set()
 # Seconds between two live updates of an image: writing a large image's pixels takes milliseconds.
 LIVE_UPDATE_INTERVAL = 0.25
 TIMER_INTERVAL = 0.1
+# Live updates keep an RGBA float copy of the image (16 bytes a texel): beyond 4096 x 4096 (256 MiB)
+# the image is written once, at the end.
+LIVE_MAX_TEXELS = 4096 * 4096
 
 
 class BakeRun:
@@ -176,6 +179,8 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         if not jobs:
             self.report({"ERROR"}, "Nothing to bake: select a mesh with a UV map")
             return False
+        w, h = self.settings.size
+        live = live and w * h <= LIVE_MAX_TEXELS
         self.run = BakeRun(jobs, self.settings, resolve_threads(context, self.settings), live)
         self.run.start()
         context.window_manager.progress_begin(0.0, 1.0)
