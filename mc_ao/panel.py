@@ -21,6 +21,13 @@ class _McAoPanel:
     bl_region_type = "UI"
     bl_category = "MC AO"
 
+    def split_layout(self):
+        """The panel's layout with labels left of the fields, as Blender's own property panels."""
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        return layout
+
 
 class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
     bl_label = "Ambient Occlusion"
@@ -53,9 +60,7 @@ class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         settings = context.scene.mc_ao
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         col = layout.column()
         col.prop(settings, "samples")
         col.prop(settings, "target_error")
@@ -75,9 +80,7 @@ class VIEW3D_PT_mc_ao_occlusion(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         settings = context.scene.mc_ao
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         col = layout.column()
         col.prop(settings, "occluders")
         col.prop(settings, "max_distance")
@@ -90,9 +93,7 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         settings = context.scene.mc_ao
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         col = layout.column(align=True)
         col.prop(settings, "resolution")
         col.prop(settings, "height")
@@ -120,9 +121,7 @@ class VIEW3D_PT_mc_ao_output(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         settings = context.scene.mc_ao
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         layout.active = settings.save_to_file
         layout.prop(settings, "file_format")
         layout.prop(settings, "output_dir")
