@@ -178,28 +178,51 @@ class _Stop(Exception):
     """Raised inside workers once the bake is cancelled or another worker failed."""
 
 
+def _embree_scene(meshes):
+    """A committed Embree scene of ``meshes`` (one geometry), and its positions and triangles."""
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    positions = np.concatenate([m.positions for m in meshes])
+    offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
+    tris = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
+    scene = rtcore_scene.EmbreeScene()
+    mesh = TriangleMesh(scene, positions.astype(np.float32), tris.astype(np.int32))
+    # Commit (build the BVH) now, once, before any worker thread traces.
+    scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), query="OCCLUDED",
+              dists=np.ones(1, np.float32))
+    return scene, mesh, positions
+
+
 class _Tracer:
-    """Occlusion queries against one committed Embree scene of the target and its occluders."""
+    """Occlusion queries against the committed Embree scene of the target and its occluders.
+
+    Contact: a face of another object lying on the target's surface (a box resting on a floor) sits
+    where the pushed-off ray origin cannot see it: the origin starts inside the box. Cycles, which
+    starts rays on the surface and skips only the triangle they leave, finds that face at distance 0
+    and calls the point occluded, which is right for a point in contact. To agree, samples are first
+    probed against a second scene of the occluders alone with a ray of length 2 * offset crossing the
+    surface along the normal: a hit means other geometry coincides with the surface there, and the
+    sample is occluded in every direction.
+    """
 
     def __init__(self, meshes, ignore_backfaces, falloff, max_distance):
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-
-        positions = np.concatenate([m.positions for m in meshes])
-        offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
-        tris = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
+        self.scene, self._mesh, positions = _embree_scene(meshes)
         self.face_normals = np.concatenate([m.face_normals for m in meshes])
+        self.contact_scene = _embree_scene(meshes[1:])[:2] if len(meshes) > 1 else None
         lo, hi = positions.min(axis=0), positions.max(axis=0)
         self.extent = float(np.linalg.norm(hi - lo))
-        self.scene = rtcore_scene.EmbreeScene()
-        self._mesh = TriangleMesh(self.scene, positions.astype(np.float32), tris.astype(np.int32))
         self.ignore_backfaces = ignore_backfaces
         self.falloff = falloff
         self.max_distance = max_distance
         self.tfar = np.float32(min(max_distance, 1e37))
-        # Commit (build the BVH) now, once, before any worker thread traces.
-        self.scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), query="OCCLUDED",
-                       dists=np.ones(1, np.float32))
+
+    def contact(self, below, normals, lengths):
+        """Per point, whether another object's surface crosses the segment below + [0, lengths] * normals."""
+        if self.contact_scene is None:
+            return np.zeros(len(below), bool)
+        hit = self.contact_scene[0].run(below, normals, query="OCCLUDED", dists=lengths)
+        return hit >= 0
 
     def offset(self, max_abs):
         """Distance to push ray origins off the surface, given each point's largest |coordinate|."""
@@ -349,6 +372,18 @@ class _TileBaker:
         d[2] = lx * sz + ly * tz + lz * n[2]
         above = (d[0] * gn[0] + d[1] * gn[1] + d[2] * gn[2]) > 0
         eps = self.tracer.offset(np.maximum(np.maximum(np.abs(p[0]), np.abs(p[1])), np.abs(p[2])))
+        probe_seconds = 0.0
+        near = frag.contact[sel]
+        if near.any():
+            # Samples where another object's face lies on the surface are occluded (see _Tracer);
+            # only texels whose coarse probes found contact (see _contact_texels) are probed per sample.
+            rows = np.flatnonzero(near)
+            pr, gr, er = p[:, rows].reshape(3, -1), gn[:, rows].reshape(3, -1), eps[rows].ravel()
+            t0 = time.perf_counter()
+            touching = self.tracer.contact(np.ascontiguousarray((pr - gr * er).T), np.ascontiguousarray(gr.T),
+                                           (2.0 * er).astype(np.float32))
+            probe_seconds = time.perf_counter() - t0
+            above[rows] &= ~touching.reshape(len(rows), k)
         # Usually every direction is above the surface: then take the planes whole, not by index.
         idx = slice(None) if above.all() else np.flatnonzero(above.ravel())
         n_rays = above.size if isinstance(idx, slice) else len(idx)
@@ -361,11 +396,49 @@ class _TileBaker:
         vis = np.zeros(above.size)
         t0 = time.perf_counter()
         vis[idx] = self.tracer.visibility(org, dirs)
-        dt = time.perf_counter() - t0
+        dt = time.perf_counter() - t0 + probe_seconds
         vis = vis.reshape(len(sel), k)
         if s["distribution"] == "uniform":
             vis *= 2.0 * lz
         return vis, n_rays, dt
+
+    def _contact_texels(self, frag):
+        """Per texel, whether another object's surface touches this one somewhere in the texel.
+
+        Probes (see _Tracer) at the corners and centre of texels inside one triangle, and at the
+        corners and centroid of every sub-triangle of split texels: contact is a property of the
+        position, not of the direction, so texels that no probe finds in contact skip the per-sample
+        probes. Contact smaller than these probe points are apart can go unnoticed.
+        """
+        n_tex = len(frag.texels)
+        if self.tracer.contact_scene is None or n_tex == 0:
+            return np.zeros(n_tex, bool)
+        if self.s["samples"] <= 8:
+            return np.ones(n_tex, bool)  # as few samples as probe points: probe the samples themselves
+        W = self.width
+        corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0.5, 0.5]])
+        simple = np.flatnonzero(frag.full_tri >= 0)
+        tex = frag.texels[simple]
+        xy_s = (np.stack([tex % W, tex // W], 1)[:, None, :] + corners[None]).reshape(-1, 2)
+        tri_s = np.repeat(frag.full_tri[simple], len(corners))
+        own_s = np.repeat(simple, len(corners))
+        c3 = frag.sub_xy
+        xy_p = np.concatenate([c3, c3.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 2)
+        tri_p = np.repeat(frag.sub_tri, 4)
+        own_p = np.repeat(frag.sub_texel, 4)
+        xy = np.concatenate([xy_s, xy_p])
+        tri = np.concatenate([tri_s, tri_p])
+        own = np.concatenate([own_s, own_p])
+        tab = np.take(self.tris.table_t, tri, axis=1).astype(np.float64)
+        dx = xy[:, 0] - self.tris.origin_xy[tri, 0]
+        dy = xy[:, 1] - self.tris.origin_xy[tri, 1]
+        pos = np.stack([tab[R.TABLE_P0 + c] + dx * tab[R.TABLE_PDX + c] + dy * tab[R.TABLE_PDY + c]
+                        for c in range(3)], axis=1)
+        fn = np.stack([tab[R.TABLE_FN + c] for c in range(3)], axis=1)
+        e = self.tracer.offset(np.abs(pos).max(axis=1))
+        hit = self.tracer.contact((pos - fn * e[:, None]).astype(np.float32), fn.astype(np.float32),
+                                  (2.0 * e).astype(np.float32))
+        return np.bincount(own[hit], minlength=n_tex) > 0
 
     def bake(self, key, tri_ids):
         s, shared = self.s, self.shared
@@ -374,6 +447,7 @@ class _TileBaker:
         x0, y0 = tx * tile, ty * tile
         x1, y1 = min(x0 + tile, self.width), min(y0 + tile, self.height)
         frag = rasterize_tile(self.tris, tri_ids, self.width, self.height, x0, y0, x1, y1)
+        frag.contact = self._contact_texels(frag)
         n_tex = len(frag.texels)
         stats = RunningStats(n_tex)
         if n_tex == 0:

@@ -170,6 +170,7 @@ class TileFragments:
     sub_start: np.ndarray
     coverage: np.ndarray
     sub_key: np.ndarray = None  # sub_texel + sub_cdf: increasing, so one searchsorted finds any texel's pick
+    contact: np.ndarray = None  # (n,) bool, set by the baker: another object touches the texel's surface
 
 
 def _edges(xy):

@@ -238,3 +238,18 @@ def test_written_file_has_the_right_orientation_and_metadata(tmp_path):
 
     raw = oiio.ImageBuf(str(tmp_path / "ao.exr")).get_pixels(oiio.FLOAT)
     assert raw[-1].min() == 1.0 and raw[0].max() == 0.0  # the file's first scanline is the top row
+
+
+@pytest.mark.parametrize("samples", [4, 64])
+def test_a_block_resting_on_the_surface_occludes_it_completely(samples):
+    # The block's bottom face lies in the plane: the plane under it is in contact, AO 0, as in Cycles,
+    # even though the block is taller than max_distance (rays pushed off the surface would start
+    # inside it and find nothing within reach). Found by comparing with Cycles (bench/agreement.py).
+    r = bake_ao(plane(), [box((0.3, 0.3, 0.0), (0.7, 0.7, 0.6))], resolution=32, samples=samples,
+                max_distance=0.5, margin=0)
+    assert np.all(r.ao[11:20, 11:20] == 0.0)
+    assert r.ao[:8].mean() > 0.8  # away from the block the plane stays open
+    # A block floating 0.002 above, with rays reaching 0.001: not in contact, nothing within reach.
+    g = bake_ao(plane(), [box((0.3, 0.3, 0.002), (0.7, 0.7, 0.6))], resolution=32, samples=samples,
+                max_distance=0.001, margin=0)
+    assert np.all(g.ao == 1.0)
