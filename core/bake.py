@@ -125,6 +125,32 @@ def estimate_memory(width, height, triangles, threads, chunk_rays):
     return planes + margin_work + chunks + tris
 
 
+def interval_half_width(n, mean, m2, z, binary, bound):
+    """Half-width of the confidence interval adaptive sampling stops on, per texel.
+
+    A texel whose samples all agree has zero sample variance, yet 16 open rays out of 16 do not
+    prove AO = 1: a texel with AO 0.9 shows that 19% of the time. So for the cosine estimator, whose
+    terms are 0 or 1, the interval is Agresti and Coull's: add z^2/2 successes and z^2/2 failures,
+    p~ = (k + z^2/2) / (n + z^2), half-width z sqrt(p~ (1 - p~) / (n + z^2)). It never collapses, and
+    an all-open texel stops once n is about 2.7 / target (the "rule of three"). Other estimators
+    (uniform directions, falloff) use the sample variance, and the same bound, scaled to the terms'
+    range [0, bound], when every sample agrees.
+    """
+    n = np.asarray(n, dtype=np.float64)
+    z2 = z * z
+    safe = np.maximum(n, 1.0)
+
+    def agresti_coull(p):
+        pt = (p * n + z2 / 2.0) / (n + z2)
+        return z * np.sqrt(pt * (1.0 - pt) / (n + z2))
+
+    if binary:
+        return agresti_coull(np.clip(mean, 0.0, 1.0))
+    var = np.where(n > 1, m2 / np.maximum(n - 1.0, 1.0), 0.0)
+    sample = z * np.sqrt(var / safe)
+    return np.where(var > 0, sample, bound * agresti_coull(np.clip(mean / bound, 0.0, 1.0)))
+
+
 def auto_tile_size(width, height, samples, threads):
     """A power of two between 16 and 256: about 2^17 rays per tile, so fixed costs (rasterising a
     tile, a few dozen numpy calls per chunk) stay small next to tracing, and at least four tiles per
@@ -276,6 +302,10 @@ class _TileBaker:
     def __init__(self, tris, mesh, tracer, pattern, settings, width, height, shared):
         self.tris, self.mesh, self.tracer, self.pattern = tris, mesh, tracer, pattern
         self.s = settings
+        # The terms of each estimator: cosine-weighted without falloff gives 0 or 1; uniform gives
+        # 2 cos(theta) V in [0, 2]; falloff gives values in [0, 1].
+        self.binary = settings["distribution"] == "cosine" and settings["falloff"] == 0
+        self.bound = 2.0 if settings["distribution"] == "uniform" else 1.0
         self.width, self.height = width, height
         self.shared = shared
 
@@ -471,9 +501,9 @@ class _TileBaker:
             start += k
             if not adaptive or start >= total:
                 break
-            se = np.sqrt(np.where(stats.n[active] > 1, stats.m2[active] / np.maximum(stats.n[active] - 1, 1), 0.0)
-                         / stats.n[active])
-            active = active[z * se > s["target_error"]]
+            half = interval_half_width(stats.n[active], stats.mean[active], stats.m2[active], z,
+                                       binary=self.binary, bound=self.bound)
+            active = active[half > s["target_error"]]
             k = min(start, total - start)  # double each round: Sobol' prefixes stay powers of two
         # Credit the work the adaptive stop saved, so progress reaches 1.
         shared.advance(n_tex * total - int(stats.n.sum()), force=False)
@@ -536,8 +566,10 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     min_samples : with adaptive sampling, what every texel takes before it may stop.
     target_error : adaptive sampling when > 0: a texel stops once the half-width of its 95%
         confidence interval is at most this (in AO units, e.g. 0.01), after doubling rounds from
-        ``min_samples``; fully open texels under cosine sampling have zero variance and stop at the
-        minimum. 0 turns adaptive sampling off.
+        ``min_samples``. The interval never takes agreeing samples as proof (see
+        :func:`interval_half_width`): a fully open texel under cosine sampling stops at the first
+        round of at least about 2.7 / target_error samples, so with ``min_samples`` at that or above
+        open texels stop at the minimum. 0 turns adaptive sampling off.
     max_distance : occluders farther than this along a ray do not count (world units).
     distribution : 'cosine' (importance sampling, default) or 'uniform' (weight 2 cos theta).
     source : 'sobol' (Owen-scrambled, default), 'stratified', 'independent' or 'halton'.
