@@ -9,6 +9,9 @@ convergence  docs/convergence.png: RMSE against samples per texel for each sampl
              with the Monte Carlo N^-1/2 slope drawn for reference.
 gallery      docs/gallery.png: the baked AO of every sample scene's objects, through
              scripts/bake_ao.py (the add-on's own geometry gathering).
+cycles       docs/cycles_vs_mc_ao.png: Suzanne of suzanne.blend baked by Cycles' AO bake and by this
+             add-on's operator at the same resolution, samples and threads, with the times and the
+             difference (bench/cycles.py runs Cycles as the benchmark does).
 """
 
 import json
@@ -102,9 +105,43 @@ def gallery(res=256, samples=64):
     fig.savefig(ROOT / "docs" / "gallery.png")
 
 
+def cycles_side_by_side(res=256, samples=128, threads=2):
+    import bpy
+
+    from bench import cycles, mcao
+
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "suzanne.blend"))
+    bpy.context.scene.world = bpy.data.worlds.new("World") if bpy.context.scene.world is None else bpy.context.scene.world
+    bpy.context.scene.world.light_settings.distance = 10.0
+    obj = bpy.data.objects["Suzanne"]
+    # sentinel -1: texels Cycles leaves alone (no triangle at their centre) keep it
+    cyc, cyc_s = cycles.bake(bpy, obj, res, res, samples, threads, margin=0, sentinel=-1.0)
+    both = cyc >= 0
+    mcao.register(bpy)
+    mc, mc_s = mcao.operator_bake(bpy, obj, res, samples, threads, max_distance=10.0, margin=0)[:2]
+    fig, axes = plt.subplots(1, 3, figsize=(9, 3.4), dpi=90)
+    diff = np.where(both, cyc - mc, 0.0)
+    mean, se = diff[both].mean(), diff[both].std() / np.sqrt(both.sum())
+    for ax, img, title in [(axes[0], np.maximum(cyc, 0), f"Cycles AO bake: {cyc_s:.1f} s"),
+                           (axes[1], mc, f"mc_ao: {mc_s:.1f} s"),
+                           (axes[2], np.clip(diff, -0.1, 0.1),
+                            f"Cycles - mc_ao (+-0.1), mean {mean:+.4f} +- {se:.4f}")]:
+        ax.imshow(img, cmap="gray" if "+-" not in title else "RdBu", origin="lower",
+                  vmin=-0.1 if "+-" in title else 0, vmax=0.1 if "+-" in title else 1, interpolation="nearest")
+        ax.set_title(title, fontsize=9)
+        ax.axis("off")
+    fig.suptitle(f"Suzanne, {res}x{res}, {samples} samples per texel, {threads} threads, same machine and run",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "cycles_vs_mc_ao.png")
+    print(f"Cycles {cyc_s:.2f} s, mc_ao {mc_s:.2f} s, mean difference {mean:+.5f} +- {se:.5f} over {both.sum()} texels")
+
+
 if __name__ == "__main__":
-    which = sys.argv[1:] or ["convergence", "gallery"]
+    which = sys.argv[1:] or ["convergence", "gallery", "cycles"]
     if "convergence" in which:
         convergence()
     if "gallery" in which:
         gallery()
+    if "cycles" in which:
+        cycles_side_by_side()
