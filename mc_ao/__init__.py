@@ -28,6 +28,8 @@ def register(addon_name="mc_ao"):
     for cls in _classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.mc_ao = bpy.props.PointerProperty(type=properties.McAoSettings)
+    for handlers in (bpy.app.handlers.undo_pre, bpy.app.handlers.redo_pre):
+        handlers.append(operators.end_bakes_before_undo)
 
 
 def unregister():
@@ -36,6 +38,11 @@ def unregister():
 
     from . import operators
 
+    for handlers in (bpy.app.handlers.undo_pre, bpy.app.handlers.redo_pre):
+        while operators.end_bakes_before_undo in handlers:
+            handlers.remove(operators.end_bakes_before_undo)
+    for session in list(operators._SESSIONS):
+        session.abandon()
     for run in list(operators._RUNS):
         run.stop()
     del bpy.types.Scene.mc_ao

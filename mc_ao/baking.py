@@ -20,18 +20,59 @@ def targets_of(objects):
     return sorted((obj for obj in objects if can_be_target(obj)), key=lambda obj: obj.name)
 
 
+# Object.type -> what to call it in a message, where the identifier is not plain English.
+_KINDS = {
+    "FONT": "text", "META": "metaball", "GPENCIL": "grease pencil", "GREASEPENCIL": "grease pencil",
+    "CURVES": "hair curves", "POINTCLOUD": "point cloud", "LIGHT_PROBE": "light probe",
+}
+
+
+def kind_of(obj):
+    """``obj``'s type as a noun with its article: "a light", "an empty", "a text"."""
+    noun = _KINDS.get(obj.type, obj.type.lower().replace("_", " "))
+    return ("an " if noun[0] in "aeiou" else "a ") + noun
+
+
+def skip_reason(obj):
+    """Why a selected object is not baked ("is a light, not a mesh", "has no UV map"), or None."""
+    if obj.type != "MESH":
+        return f"is {kind_of(obj)}, not a mesh"
+    if not can_be_target(obj):
+        return "has no UV map (unwrap it first: Edit Mode, U)"
+    return None
+
+
+def skip_note(obj, occluders):
+    """The warning for a selected object that is not baked, e.g. "Lamp: skipped, it is a light, not a mesh".
+
+    ``occluders`` is the Occluders setting: a skipped object with a surface still occludes the others
+    unless each object is baked alone.
+    """
+    note = f"{obj.name}: skipped, it {skip_reason(obj)}"
+    if obj.type in GEOMETRY_TYPES and occluders != "SELF":
+        note += "; it still occludes the baked objects"
+    return note
+
+
 def why_not_bakeable(objects):
-    """None when something among ``objects`` (the selection) can be baked, else the reason, for the UI."""
+    """None when something among ``objects`` (the selection) can be baked, else the reason, for the UI.
+
+    The same text is the operator's poll message (the button's tooltip, and the error of a script
+    that calls the operator anyway), the panel's hint, and the operator's report.
+    """
+    objects = list(objects)
     if not objects:
-        return "Select a mesh object to bake"
+        return "Nothing is selected: select a mesh object with a UV map"
+    if any(can_be_target(obj) for obj in objects):
+        return None
+    if len(objects) == 1:
+        return f"{objects[0].name} {skip_reason(objects[0])}"
     meshes = [obj for obj in objects if obj.type == "MESH"]
     if not meshes:
-        return "No mesh object is selected"
-    if not any(can_be_target(obj) for obj in meshes):
-        if len(meshes) == 1:
-            return f"{meshes[0].name} has no UV map"
-        return "None of the selected meshes has a UV map"
-    return None
+        return "None of the selected objects is a mesh"
+    if len(meshes) == 1:
+        return f"{meshes[0].name} {skip_reason(meshes[0])}, and the others are not meshes"
+    return "None of the selected meshes has a UV map"
 
 
 @dataclass

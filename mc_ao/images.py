@@ -2,6 +2,7 @@
 
 import importlib.util
 import os
+import tempfile
 
 import bpy
 import numpy as np
@@ -79,19 +80,37 @@ class Snapshot:
             set_pixels(image, self.pixels)
 
 
+def unusable_reason(image):
+    """Why an existing image cannot take a bake (a UDIM, movie or render image), or None."""
+    if image.source not in {"GENERATED", "FILE"}:
+        return f"image {image.name!r} is a {image.source.lower()} image; bake into a plain image"
+    return None
+
+
+def check_target(name):
+    """Raise ImageError when an existing image ``name`` cannot take a bake (checked before baking)."""
+    image = bpy.data.images.get(name)
+    reason = None if image is None else unusable_reason(image)
+    if reason is not None:
+        raise ImageError(reason)
+
+
 def prepare_image(name, width, height, float_buffer):
     """Create the image ``name`` or make an existing one fit the bake; return (image, Snapshot).
 
-    A new image is Non-Color and float when asked. An existing generated image gets the bake's size
-    and depth; an image from a file is scaled to the size (its depth is the file's). Either way its
-    colour space becomes Non-Color: AO is data, and any other colour space would transform it.
+    A new image is Non-Color and float when asked. An existing image of another size is resized,
+    not refused (the operator's tooltip says so): a generated image gets the bake's size and depth,
+    an image from a file is scaled to the size (its depth is the file's; the file on disk is not
+    touched). Either way its colour space becomes Non-Color: AO is data, and any other colour space
+    would transform it. The Snapshot puts all of that back if the bake does not finish.
     """
     image = bpy.data.images.get(name)
     if image is None:
         image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=float_buffer, is_data=True)
         return image, Snapshot(image, created=True)
-    if image.source not in {"GENERATED", "FILE"}:
-        raise ImageError(f"image {name!r} is a {image.source.lower()} image; bake into a plain image")
+    reason = unusable_reason(image)
+    if reason is not None:
+        raise ImageError(reason)
     snapshot = Snapshot(image, created=False)
     if image.source == "GENERATED":
         if (image.generated_width, image.generated_height, image.use_generated_float) != (
@@ -103,6 +122,28 @@ def prepare_image(name, width, height, float_buffer):
         image.scale(width, height)
     image.colorspace_settings.name = "Non-Color"
     return image, snapshot
+
+
+def output_dir_problem(folder):
+    """Why image files cannot be written into ``folder``, or None when they can.
+
+    A folder that does not exist yet is fine where it can be created (the writers create it): what
+    counts is its nearest existing ancestor, which must be a folder that this process may write.
+    Checked before a bake, so that a typo in the folder does not cost the bake; a write can still
+    fail later (a full disk), and then the existing file is left as it was.
+    """
+    path = os.path.abspath(folder)
+    existing = path
+    while not os.path.exists(existing):
+        parent = os.path.dirname(existing)
+        if parent == existing:
+            break
+        existing = parent
+    if not os.path.isdir(existing):
+        return "it is a file, not a folder" if existing == path else f"{existing!r} is a file, not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return "it is not writable" if existing == path else f"{existing!r} is not writable"
+    return None
 
 
 def oiio_available():
@@ -134,15 +175,24 @@ def save(result, path, settings, metadata=None):
 def save_pixels_with_blender(pixels, path, file_format, float_buffer):
     """Write (H, W, 4) pixels to ``path`` in ``file_format`` (PNG, OPEN_EXR, TIFF) through a temporary image.
 
-    A temporary image, because saving an image to a path turns that image into a file image.
+    A temporary image, because saving an image to a path turns that image into a file image. The
+    file is written beside ``path`` under a temporary name and then renamed over it, so that a failed
+    write leaves an existing file at ``path`` as it was.
     """
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    stem, ext = os.path.splitext(os.path.basename(path))
+    fd, temp_path = tempfile.mkstemp(prefix=f".{stem}.tmp", suffix=ext, dir=directory)
+    os.close(fd)
     h, w = pixels.shape[:2]
     temp = bpy.data.images.new(".mc_ao_save", w, h, alpha=True, float_buffer=float_buffer, is_data=True)
     try:
         temp.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
-        temp.filepath_raw = path
+        temp.filepath_raw = temp_path
         temp.file_format = file_format
         temp.save()
+        os.replace(temp_path, path)
     finally:
         bpy.data.images.remove(temp)
+        if os.path.exists(temp_path):
+            os.remove(temp_path)

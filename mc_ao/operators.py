@@ -2,12 +2,26 @@
 
 One bake is a list of jobs (one per selected mesh) run one after another by core.bake_ao on a worker
 thread. The thread never touches bpy: it only puts messages (progress, finished tiles, results,
-errors) on a queue, which the main thread drains, from a window-manager timer when modal or in a
-blocking loop when not, and applies to Blender's images.
+errors) on a queue. A BakeSession is the main-thread side: it plans the bake, drains the queue,
+applies the messages to Blender's images and ends the bake. The operator drives it from
+window-manager timer events when modal (Esc cancels) or in a blocking loop when not; the tests
+drive it with the same events, since a modal operator cannot run without a window.
+
+What goes wrong, and what the user gets (a report naming the object, images kept as they were):
+
+- a selected object that is not a mesh, or a mesh without a UV map: skipped with a warning; with
+  nothing else selected the button is disabled and the panel and tooltip say why
+- an existing image of another size: resized to the bake's size (reported); put back as it was
+  when its bake does not finish
+- an output folder that cannot be written: refused before baking, nothing changes; a file that
+  fails to write later: the image in Blender keeps the bake, the file on disk is left as it was
+- Esc, Undo during a bake, or a failure in the core: unfinished images are put back as they were,
+  finished ones are kept; a failed object does not stop the others
 """
 
 import os
 import queue
+import sys
 import threading
 import time
 import traceback
@@ -22,6 +36,8 @@ from .settings import BakeSettings
 
 # Bakes in flight, so that unregister() can stop their threads.
 _RUNS = set()
+# Sessions in flight, so that an undo can end them before it replaces the data they write to.
+_SESSIONS = set()
 # Seconds between two live updates of an image: writing a large image's pixels takes milliseconds.
 LIVE_UPDATE_INTERVAL = 0.25
 TIMER_INTERVAL = 0.1
@@ -35,7 +51,8 @@ class BakeRun:
 
     Messages are tuples: ("progress", job, fraction), ("tile", job, rows, cols, block),
     ("done", job, result), ("cancelled", job), ("error", job, exception),
-    ("crash", job, exception, traceback text), and ("end",) last.
+    ("crash", job, exception, traceback text), and ("end",) last. A job that fails does not stop
+    the ones after it; a cancel does.
     """
 
     def __init__(self, jobs, settings, threads, live):
@@ -81,24 +98,35 @@ class BakeRun:
             except self.core.BakeCancelled:
                 put(("cancelled", i))
                 break
-            except self.core.McAoError as exc:
+            except self.core.McAoError as exc:  # this object's input: the others may still bake
                 put(("error", i, exc))
-                break
+                continue
             except Exception as exc:  # a bug, or the machine out of memory: report it, keep the trace
                 put(("crash", i, exc, traceback.format_exc()))
-                break
+                continue
             put(("done", i, result))
         put(("end",))
 
 
+class OutputError(ValueError):
+    """The output folder for saved files cannot be used; raised before any baking."""
+
+
 def _output_dir(settings):
-    """Absolute folder for saved files, or raise ExtractError when "//" has no .blend file to refer to."""
+    """Absolute folder for saved files; OutputError when it is unset, relative to an unsaved .blend
+    file, or cannot be written (a file in its path, no permission)."""
+    if not settings.output_dir.strip():
+        raise OutputError("Save to File is on but no output folder is set; nothing was baked")
     if settings.output_dir.startswith("//") and not bpy.data.filepath:
-        raise ExtractError(
+        raise OutputError(
             f"the output folder {settings.output_dir!r} is relative to the .blend file, "
             "which is not saved yet; save it or choose an absolute folder"
         )
-    return bpy.path.abspath(settings.output_dir)
+    folder = bpy.path.abspath(settings.output_dir)
+    problem = images.output_dir_problem(folder)
+    if problem is not None:
+        raise OutputError(f"Cannot save into the output folder {folder!r}: {problem}; nothing was baked")
+    return folder
 
 
 def _redraw(context):
@@ -116,6 +144,18 @@ def is_running():
     return bool(_RUNS)
 
 
+@bpy.app.handlers.persistent
+def end_bakes_before_undo(*_args):
+    """undo_pre / redo_pre handler: cancel running bakes and put their images back first.
+
+    An undo frees and re-reads datablocks; a bake that went on writing into its images across it
+    would write into what the undo took back (and Blender's undo does not store image pixels, so
+    the previous content would be lost). The modal operator ends at its next event.
+    """
+    for session in list(_SESSIONS):
+        session.finish(bpy.context, cancelled=True, why="by Undo")
+
+
 def summary(job, result):
     """One line per baked object: size, time, samples per texel, ray throughput."""
     h, w = result.ao.shape
@@ -126,27 +166,24 @@ def summary(job, result):
     )
 
 
-class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
-    """Bake ambient occlusion of the selected meshes into images, with the scene's MC AO settings"""
+class BakeSession:
+    """The main-thread side of one bake: plan it, start the worker, apply its messages, end it.
 
-    bl_idname = "object.mc_ao_bake"
-    bl_label = "Bake AO"
-    bl_options = {"REGISTER"}
+    ``report(type, message)`` is the operator's ``self.report`` (or anything that takes the same).
+    Images are prepared when a job first writes into them (created, or resized when they exist with
+    another size), with an images.Snapshot taken then; every image whose job did not finish is put
+    back from its snapshot at the end, so a cancelled or failed bake leaves no partial image.
+    """
 
-    @classmethod
-    def poll(cls, context):
-        # A running bake does not disable the button: Blender 4.3 keeps drawing a button that was
-        # disabled under a resting mouse pointer as disabled, and ignores clicks on it, after it
-        # is enabled again. _start() refuses a second bake instead, and the panel says why.
-        reason = baking.why_not_bakeable(context.selected_objects)
-        if reason is not None:
-            cls.poll_message_set(reason)
-            return False
-        return True
+    def __init__(self, report):
+        self.report = report
+        self.run = None
+        self.area = None  # the area whose header shows the progress (modal only)
+        self.ended = None  # the operator's result, once the session has ended
 
     # -- setting up ---------------------------------------------------------------------------
 
-    def _start(self, context, live):
+    def start(self, context, live):
         """Plan the jobs and start the worker; False (after reporting) when there is nothing to do."""
         if is_running():
             self.report({"WARNING"}, "An AO bake is already running; Esc cancels it")
@@ -156,47 +193,85 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             self.report({"ERROR"}, f"Cannot bake: {missing}")
             return False
         self.settings = BakeSettings.from_properties(context.scene.mc_ao)
-        self.errors = 0
-        self.finished = []
-        self.images = {}  # job index -> (image, Snapshot, live pixel buffer or None)
-        self.pending = set()  # jobs whose live buffer has tiles not yet in the image
-        self.last_flush = 0.0
-        self.fraction = 0.0
-        selected = context.selected_objects
+        selected = list(context.selected_objects)
         targets = baking.targets_of(selected)
-        for obj in selected:
-            if obj.type == "MESH" and obj not in targets:
-                self.report({"WARNING"}, f"{obj.name}: skipped, it has no UV map")
+        if not targets:
+            # The poll refuses this already; a script that gets past it (or a changed selection)
+            # hears the same reason.
+            self.report({"ERROR"}, baking.why_not_bakeable(selected) or "Nothing to bake")
+            return False
         try:
             self.output_dir = _output_dir(self.settings) if self.settings.save_to_file else None
             jobs = baking.plan(
                 context.evaluated_depsgraph_get(), targets, self.settings,
                 selected=selected, view_layer=context.view_layer,
             )
-        except (ExtractError, corelink.load().McAoError) as exc:
+            for job in jobs:
+                try:
+                    images.check_target(job.image_name)
+                except images.ImageError as exc:
+                    raise images.ImageError(f"{job.object_name}: {exc}") from None
+        except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
             self.report({"ERROR"}, str(exc))
             return False
-        if not jobs:
-            self.report({"ERROR"}, "Nothing to bake: select a mesh with a UV map")
-            return False
+        for obj in selected:
+            if obj not in targets:
+                self.report({"WARNING"}, baking.skip_note(obj, self.settings.occluders))
         w, h = self.settings.size
-        live = live and w * h <= LIVE_MAX_TEXELS
-        self.run = BakeRun(jobs, self.settings, resolve_threads(context, self.settings), live)
+        self.live = live and w * h <= LIVE_MAX_TEXELS
+        self.errors = 0
+        self.finished = []
+        self.snapshots = {}  # job index -> images.Snapshot of its image before the bake touched it
+        self.buffers = {}  # job index -> live pixel buffer (H, W, channels)
+        self.pending = set()  # jobs whose live buffer has tiles not yet in the image
+        self.last_flush = 0.0
+        self.fraction = 0.0
+        self.run = BakeRun(jobs, self.settings, resolve_threads(context, self.settings), self.live)
         self.run.start()
+        _SESSIONS.add(self)
         context.window_manager.progress_begin(0.0, 1.0)
         return True
 
-    # -- the main-thread side of the messages ---------------------------------------------------
+    # -- the images ----------------------------------------------------------------------------
 
     def _image(self, i):
-        """The image of job i, prepared (created, resized) on first use; its live buffer if live."""
-        if i not in self.images:
-            job = self.run.jobs[i]
-            w, h = self.settings.size
+        """The image of job i, ready for the bake's pixels; prepared (and snapshot) on first use.
+
+        Looked up by name every time and never kept: an undo frees and re-reads image datablocks,
+        and a kept reference would then point at freed memory.
+        """
+        job = self.run.jobs[i]
+        w, h = self.settings.size
+        image = bpy.data.images.get(job.image_name)
+        if i not in self.snapshots:
             image, snapshot = images.prepare_image(job.image_name, w, h, self.settings.float_buffer)
-            buffer = images.pixels_of(image) if self.run.live else None
-            self.images[i] = (image, snapshot, buffer)
-        return self.images[i]
+            self.snapshots[i] = snapshot
+            if not snapshot.created and all(snapshot.size) and snapshot.size != (w, h):
+                self.report(
+                    {"INFO"},
+                    f"{job.object_name}: image {job.image_name!r} was {snapshot.size[0]}x{snapshot.size[1]}, "
+                    f"resized to {w}x{h}",
+                )
+        elif image is None or tuple(image.size) != (w, h):
+            image, _ = images.prepare_image(job.image_name, w, h, self.settings.float_buffer)
+        return image
+
+    def _buffer(self, i):
+        """The live pixel buffer of job i (None when its image cannot take the bake)."""
+        if i not in self.buffers:
+            try:
+                self.buffers[i] = images.pixels_of(self._image(i))
+            except images.ImageError:
+                self.buffers[i] = None  # reported when the job is done
+        return self.buffers[i]
+
+    def _restore_unfinished(self):
+        """Put back the images of jobs that did not finish: no partial image is left behind."""
+        for i, snapshot in self.snapshots.items():
+            if i not in self.finished:
+                snapshot.restore()
+
+    # -- the worker's messages -----------------------------------------------------------------
 
     def _handle(self, context, message):
         """Apply one worker message; return True at the end of the run."""
@@ -207,22 +282,20 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             context.window_manager.progress_update(self.fraction)
         elif kind == "tile":
             i, rows, cols, block = args
-            try:
-                _, _, buffer = self._image(i)
-            except images.ImageError:
-                return False  # reported when the job is done
-            buffer[rows, cols] = images.rgba(block, buffer.shape[2])
-            self.pending.add(i)
+            buffer = self._buffer(i)
+            if buffer is not None:
+                buffer[rows, cols] = images.rgba(block, buffer.shape[2])
+                self.pending.add(i)
         elif kind == "done":
             self._finish_job(context, *args)
         elif kind == "error":
             i, exc = args
-            self.errors += 1
+            self._failed(i)
             self.report({"ERROR"}, f"{self.run.jobs[i].object_name}: {exc}")
         elif kind == "crash":
             i, exc, trace = args
-            self.errors += 1
-            print(trace)
+            self._failed(i)
+            print(f"mc_ao: the bake of {self.run.jobs[i].object_name} failed:\n{trace}", file=sys.stderr)
             self.report(
                 {"ERROR"},
                 f"{self.run.jobs[i].object_name}: bake failed ({type(exc).__name__}: {exc}); see the console",
@@ -231,11 +304,19 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             return True
         return False
 
+    def _failed(self, i):
+        self.errors += 1
+        self.pending.discard(i)
+        self.buffers.pop(i, None)
+        if i in self.snapshots:
+            self.snapshots[i].restore()
+
     def _finish_job(self, context, i, result):
         job = self.run.jobs[i]
         self.pending.discard(i)
+        self.buffers.pop(i, None)
         try:
-            image, _, _ = self._image(i)
+            image = self._image(i)
         except images.ImageError as exc:
             self.errors += 1
             self.report({"ERROR"}, f"{job.object_name}: {exc}")
@@ -247,88 +328,66 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         for note in baking.input_notes(result):
             self.report({"WARNING"}, f"{job.object_name}: {note}")
         if self.output_dir is not None:
-            path = os.path.join(self.output_dir, self.settings.file_name_for(job.object_name))
-            metadata = {"object": job.object_name, "blend": bpy.path.basename(bpy.data.filepath)}
-            try:
-                how = images.save(result, path, self.settings, metadata)
-            except (corelink.load().McAoError, OSError, RuntimeError) as exc:
-                self.errors += 1
-                self.report({"ERROR"}, f"{job.object_name}: could not save {path}: {exc}")
-            else:
-                self.report({"INFO"}, f"{job.object_name}: saved {path} ({how})")
+            self._save(job, result)
+
+    def _save(self, job, result):
+        path = os.path.join(self.output_dir, self.settings.file_name_for(job.object_name))
+        metadata = {"object": job.object_name, "blend": bpy.path.basename(bpy.data.filepath)}
+        try:
+            how = images.save(result, path, self.settings, metadata)
+        except (corelink.load().McAoError, OSError, RuntimeError) as exc:
+            self.errors += 1
+            why = str(exc) if path in str(exc) else f"{path}: {exc}"
+            self.report(
+                {"ERROR"},
+                f"{job.object_name}: the bake is in image {job.image_name!r}, but its file was not saved "
+                f"(any file already there is unchanged): {why}",
+            )
+        else:
+            self.report({"INFO"}, f"{job.object_name}: saved {path} ({how})")
 
     def _flush_live(self, context):
         now = time.monotonic()
         if not self.pending or now - self.last_flush < LIVE_UPDATE_INTERVAL:
             return
         for i in self.pending:
-            image, _, buffer = self.images[i]
-            images.set_pixels(image, buffer)
+            image = self._image(i)
+            buffer = self.buffers.get(i)
+            if buffer is not None and tuple(image.size) == (buffer.shape[1], buffer.shape[0]):
+                images.set_pixels(image, buffer)
         self.pending.clear()
         self.last_flush = now
         _redraw(context)
 
-    def _restore_unfinished(self):
-        """Put back the images of jobs that did not finish: a cancelled bake leaves no partial image."""
-        for i, (_, snapshot, _) in self.images.items():
-            if i not in self.finished:
-                snapshot.restore()
+    def _next_message(self):
+        # A timeout, so that Ctrl-C (KeyboardInterrupt) gets through while nothing arrives.
+        while True:
+            try:
+                return self.run.messages.get(timeout=0.25)
+            except queue.Empty:
+                pass
 
-    def _end(self, context, cancelled=False):
-        self.run.stop()
-        if cancelled or self.errors:
-            self._restore_unfinished()
-        context.window_manager.progress_end()
-        self._set_texts(context, None)
-        _redraw(context)  # restored images, and the panel without its "Baking" line
-        if cancelled:
-            kept = [self.run.jobs[i].object_name for i in self.finished]
-            note = f"; kept the finished bakes of {', '.join(kept)}" if kept else ""
-            self.report({"WARNING"}, f"AO bake cancelled{note}")
-            return {"CANCELLED"}
-        return {"CANCELLED"} if self.errors else {"FINISHED"}
+    # -- driving it ----------------------------------------------------------------------------
 
-    # -- running to the end (scripts, background mode) -------------------------------------------
-
-    def execute(self, context):
-        if not self._start(context, live=False):
-            return {"CANCELLED"}
+    def wait(self, context):
+        """Apply messages until the bake ends (scripts, background mode); return the operator's result."""
         try:
-            while not self._handle(context, self.run.messages.get()):
+            while not self._handle(context, self._next_message()):
                 pass
         except KeyboardInterrupt:
-            return self._end(context, cancelled=True)
-        return self._end(context)
+            return self.finish(context, cancelled=True)
+        return self.finish(context)
 
-    # -- modal, from the UI ----------------------------------------------------------------------
+    def on_event(self, context, event_type):
+        """One modal event: Esc cancels, a timer tick applies the messages; returns the operator's result.
 
-    def invoke(self, context, event):
-        if bpy.app.background:
-            return self.execute(context)
-        if not self._start(context, live=True):
-            return {"CANCELLED"}
-        self.area = context.area
-        wm = context.window_manager
-        self.timer = wm.event_timer_add(TIMER_INTERVAL, window=context.window)
-        wm.modal_handler_add(self)
-        self._set_texts(context, "MC AO: starting the bake")
-        return {"RUNNING_MODAL"}
-
-    def modal(self, context, event):
-        try:
-            return self._modal(context, event)
-        except Exception as exc:  # a bug here must not leave the worker and the timer running
-            traceback.print_exc()
-            self.report({"ERROR"}, f"AO bake stopped by an internal error ({type(exc).__name__}: {exc}); see the console")
-            self._remove_timer(context)
-            self._end(context, cancelled=True)
-            return {"CANCELLED"}
-
-    def _modal(self, context, event):
-        if event.type == "ESC":
-            self._remove_timer(context)
-            return self._end(context, cancelled=True)
-        if event.type != "TIMER":
+        {"PASS_THROUGH"} while the bake runs (the UI stays usable), the final result once it ended.
+        """
+        if self.ended is not None:  # ended from outside the modal (an undo)
+            return self.ended
+        if event_type == "ESC":
+            return self.finish(context, cancelled=True)
+        if event_type != "TIMER":
             return {"PASS_THROUGH"}
         ended = False
         while not ended:
@@ -337,20 +396,148 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             except queue.Empty:
                 break
         if ended:
-            self._remove_timer(context)
-            return self._end(context)
+            return self.finish(context)
         self._flush_live(context)
         self._show_progress(context)
         return {"PASS_THROUGH"}
 
+    def finish(self, context, cancelled=False, why=""):
+        """End the bake: stop the worker, put back unfinished images, report; the operator's result.
+
+        {"FINISHED"} when at least one object was baked and the bake was not cancelled, else
+        {"CANCELLED"}. Calling it again returns the same result.
+        """
+        if self.ended is not None:
+            return self.ended
+        self.run.stop()
+        _SESSIONS.discard(self)
+        self._restore_unfinished()
+        self.buffers.clear()
+        self.pending.clear()
+        try:
+            context.window_manager.progress_end()
+            self.set_texts(context, None)
+            _redraw(context)  # restored images, and the panel without its "Baking" line
+        except (AttributeError, ReferenceError, RuntimeError):
+            pass
+        done = [self.run.jobs[i].object_name for i in self.finished]
+        total = len(self.run.jobs)
+        if cancelled:
+            kept = f"kept the finished bakes of {', '.join(done)}; the other images" if done else "the images"
+            self.report({"WARNING"}, f"AO bake cancelled{' ' + why if why else ''}; {kept} are as they were")
+            self.ended = {"CANCELLED"}
+        else:
+            if self.errors and total > 1:
+                self.report({"WARNING"}, f"AO bake: {len(done)} of {total} objects baked, the failed ones' images are as they were")
+            self.ended = {"FINISHED"} if done else {"CANCELLED"}
+        # Blender keeps the last registered operators, and with them this session, for its redo
+        # and history: keep nothing heavy (the jobs' geometry, the images' old pixels) past the end.
+        self.run = None
+        self.snapshots = {}
+        return self.ended
+
+    def abandon(self):
+        """Stop the worker without touching Blender data (Blender ends the operator: file loaded, ...)."""
+        if self.run is not None:
+            self.run.stop()
+        _SESSIONS.discard(self)
+        self.ended = {"CANCELLED"}
+
+    # -- progress text -------------------------------------------------------------------------
+
+    def _show_progress(self, context):
+        i = min(int(self.fraction * len(self.run.jobs)), len(self.run.jobs) - 1)
+        name = self.run.jobs[i].object_name
+        self.set_texts(
+            context,
+            f"MC AO: baking {name} ({i + 1}/{len(self.run.jobs)}), {self.fraction:.0%} - Esc to cancel",
+        )
+
+    def set_texts(self, context, text):
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
+        if self.area is not None:
+            try:
+                self.area.header_text_set(text)
+            except ReferenceError:
+                self.area = None
+
+
+class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
+    bl_idname = "object.mc_ao_bake"
+    bl_label = "Bake AO"
+    # The tooltip. It documents the choices a user would otherwise have to guess.
+    bl_description = (
+        "Bake ambient occlusion of the selected meshes into one image each, with the scene's MC AO "
+        "settings. An existing image of another size is resized to the bake's size. Objects that are "
+        "not meshes or have no UV map are skipped. Esc cancels; a cancelled or failed bake leaves "
+        "each image as it was"
+    )
+    # UNDO: a finished bake is one undo step, so Ctrl-Z takes back exactly the bake (its new images
+    # go, a reused image gets its former size and settings) and not the step before it too, as it
+    # would without one. Blender's undo stores no image pixels, though: pixels come back only where
+    # the image datablock did not change, and a redo brings back a bake's new image blank. Nothing
+    # is pushed for a cancelled or failed bake, which puts its images back itself.
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        # A running bake does not disable the button: Blender 4.3 keeps drawing a button that was
+        # disabled under a resting mouse pointer as disabled, and ignores clicks on it, after it
+        # is enabled again. start() refuses a second bake instead, and the panel says why.
+        reason = baking.why_not_bakeable(context.selected_objects)
+        if reason is not None:
+            cls.poll_message_set(reason)
+            return False
+        return True
+
+    # -- running to the end (scripts, background mode) -------------------------------------------
+
+    def execute(self, context):
+        self.session = BakeSession(self.report)
+        if not self.session.start(context, live=False):
+            return {"CANCELLED"}
+        return self.session.wait(context)
+
+    # -- modal, from the UI ----------------------------------------------------------------------
+
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        self.session = BakeSession(self.report)
+        if not self.session.start(context, live=True):
+            return {"CANCELLED"}
+        self.session.area = context.area
+        wm = context.window_manager
+        self.timer = wm.event_timer_add(TIMER_INTERVAL, window=context.window)
+        wm.modal_handler_add(self)
+        self.session.set_texts(context, "MC AO: starting the bake")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        try:
+            result = self.session.on_event(context, event.type)
+        except Exception as exc:  # a bug here must not leave the worker and the timer running
+            traceback.print_exc()
+            self.report({"ERROR"}, f"AO bake stopped by an internal error ({type(exc).__name__}: {exc}); see the console")
+            try:
+                self.session.finish(context, cancelled=True)
+            except Exception:
+                traceback.print_exc()
+                self.session.abandon()
+            result = {"CANCELLED"}
+        if not result & {"RUNNING_MODAL", "PASS_THROUGH"}:
+            self._remove_timer(context)
+        return result
+
     def cancel(self, context):
         # Blender ends the operator without a modal event (file loaded, window closed, add-on
         # unregistered): stop the worker; the data it would restore may be gone, so leave it.
-        self.run.stop()
+        self.session.abandon()
         self._remove_timer(context)
         try:
             context.window_manager.progress_end()
-            self._set_texts(context, None)
+            self.session.set_texts(context, None)
             _redraw(context)
         except (AttributeError, ReferenceError, RuntimeError):
             pass
@@ -359,21 +546,3 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         if getattr(self, "timer", None) is not None:
             context.window_manager.event_timer_remove(self.timer)
             self.timer = None
-
-    def _show_progress(self, context):
-        i = min(int(self.fraction * len(self.run.jobs)), len(self.run.jobs) - 1)
-        name = self.run.jobs[i].object_name
-        self._set_texts(
-            context,
-            f"MC AO: baking {name} ({i + 1}/{len(self.run.jobs)}), {self.fraction:.0%} - Esc to cancel",
-        )
-
-    def _set_texts(self, context, text):
-        if context.workspace is not None:
-            context.workspace.status_text_set(text)
-        area = getattr(self, "area", None)
-        if area is not None:
-            try:
-                area.header_text_set(text)
-            except ReferenceError:
-                self.area = None

@@ -235,11 +235,11 @@ def test_poll_says_why_nothing_can_be_baked(bpy, scene):
 
     select_only(bpy)
     assert not bpy.ops.object.mc_ao_bake.poll()
-    assert baking.why_not_bakeable([]) == "Select a mesh object to bake"
+    assert baking.why_not_bakeable([]) == "Nothing is selected: select a mesh object with a UV map"
     ground = add_plane(bpy, "Ground", size=4)
     ground.data.uv_layers.remove(ground.data.uv_layers[0])
     select_only(bpy, ground)
-    assert baking.why_not_bakeable([ground]) == "Ground has no UV map"
+    assert baking.why_not_bakeable([ground]) == "Ground has no UV map (unwrap it first: Edit Mode, U)"
     with pytest.raises(RuntimeError, match="Ground has no UV map"):
         bpy.ops.object.mc_ao_bake()
 
