@@ -28,8 +28,8 @@ def register(addon_name="mc_ao"):
     for cls in _classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.mc_ao = bpy.props.PointerProperty(type=properties.McAoSettings)
-    for handlers in (bpy.app.handlers.undo_pre, bpy.app.handlers.redo_pre):
-        handlers.append(operators.end_bakes_before_undo)
+    for name, handler in operators.UNDO_HANDLERS.items():
+        getattr(bpy.app.handlers, name).append(handler)
 
 
 def unregister():
@@ -38,9 +38,10 @@ def unregister():
 
     from . import operators
 
-    for handlers in (bpy.app.handlers.undo_pre, bpy.app.handlers.redo_pre):
-        while operators.end_bakes_before_undo in handlers:
-            handlers.remove(operators.end_bakes_before_undo)
+    for name, handler in operators.UNDO_HANDLERS.items():
+        handlers = getattr(bpy.app.handlers, name)
+        while handler in handlers:
+            handlers.remove(handler)
     for session in list(operators._SESSIONS):
         session.abandon()
     for run in list(operators._RUNS):

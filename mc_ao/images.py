@@ -38,6 +38,12 @@ def pixels_of(image):
 
 def set_pixels(image, pixels):
     """Write (H, W, channels) float pixels into the image (same size) and let viewers redraw it."""
+    h, w, channels = pixels.shape
+    if (tuple(image.size), image.channels) != ((w, h), channels):
+        raise ImageError(
+            f"image {image.name!r} is {image.size[0]}x{image.size[1]} with {image.channels} channels, "
+            f"not {w}x{h} with {channels}: it changed during the bake"
+        )
     image.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
     image.update()
     # The 3D Viewport's texture of the image follows only a depsgraph tag (checked in Blender 4.3:
@@ -112,6 +118,8 @@ def prepare_image(name, width, height, float_buffer):
     if reason is not None:
         raise ImageError(reason)
     snapshot = Snapshot(image, created=False)
+    # The colour space first: changing it reloads an image from its file, which would undo a resize.
+    image.colorspace_settings.name = "Non-Color"
     if image.source == "GENERATED":
         if (image.generated_width, image.generated_height, image.use_generated_float) != (
             width, height, float_buffer,
@@ -120,7 +128,9 @@ def prepare_image(name, width, height, float_buffer):
             image.use_generated_float = float_buffer
     elif tuple(image.size) != (width, height):
         image.scale(width, height)
-    image.colorspace_settings.name = "Non-Color"
+    if tuple(image.size) != (width, height):
+        snapshot.restore()
+        raise ImageError(f"image {name!r} could not be resized from {image.size[0]}x{image.size[1]} to {width}x{height}")
     return image, snapshot
 
 

@@ -145,15 +145,32 @@ def is_running():
 
 
 @bpy.app.handlers.persistent
-def end_bakes_before_undo(*_args):
-    """undo_pre / redo_pre handler: cancel running bakes and put their images back first.
+def stop_bakes_before_undo(*_args):
+    """undo_pre / redo_pre handler: stop the workers of running bakes before the undo runs.
 
-    An undo frees and re-reads datablocks; a bake that went on writing into its images across it
-    would write into what the undo took back (and Blender's undo does not store image pixels, so
-    the previous content would be lost). The modal operator ends at its next event.
+    An undo frees and re-reads datablocks, and Blender's undo stores no image pixels: a bake that
+    went on writing into its images across it would write into what the undo took back, and the
+    images' previous content would be lost. UNDO_HANDLERS lists where each handler goes.
     """
     for session in list(_SESSIONS):
-        session.finish(bpy.context, cancelled=True, why="by Undo")
+        session.interrupt()
+
+
+@bpy.app.handlers.persistent
+def end_bakes_after_undo(*_args):
+    """undo_post / redo_post handler: end the stopped bakes, putting back the images' previous pixels."""
+    for session in list(_SESSIONS):
+        if session.interrupted:
+            session.finish(bpy.context, cancelled=True, why="by Undo")
+
+
+# bpy.app.handlers list name -> handler; register() appends them, unregister() removes them.
+UNDO_HANDLERS = {
+    "undo_pre": stop_bakes_before_undo,
+    "redo_pre": stop_bakes_before_undo,
+    "undo_post": end_bakes_after_undo,
+    "redo_post": end_bakes_after_undo,
+}
 
 
 def summary(job, result):
@@ -180,6 +197,7 @@ class BakeSession:
         self.run = None
         self.area = None  # the area whose header shows the progress (modal only)
         self.ended = None  # the operator's result, once the session has ended
+        self.interrupted = False  # an undo stopped the worker; the session ends after it
 
     # -- setting up ---------------------------------------------------------------------------
 
@@ -266,10 +284,21 @@ class BakeSession:
         return self.buffers[i]
 
     def _restore_unfinished(self):
-        """Put back the images of jobs that did not finish: no partial image is left behind."""
+        """Put back the images of jobs that did not finish: no partial image is left behind.
+
+        After an undo, an image the bake created is already gone (the undo went back to before
+        the bake), and a datablock of that name, if any, is the undo's: only reused images, whose
+        pixels Blender's undo does not keep, are put back then.
+        """
         for i, snapshot in self.snapshots.items():
-            if i not in self.finished:
+            if i not in self.finished and not (self.interrupted and snapshot.created):
                 snapshot.restore()
+
+    def interrupt(self):
+        """Stop the worker now, write nothing more; finish() follows (after the undo that called this)."""
+        if self.ended is None and self.run is not None:
+            self.run.stop()
+            self.interrupted = True
 
     # -- the worker's messages -----------------------------------------------------------------
 
@@ -317,11 +346,11 @@ class BakeSession:
         self.buffers.pop(i, None)
         try:
             image = self._image(i)
+            images.set_pixels(image, images.rgba(result.ao, image.channels))
         except images.ImageError as exc:
-            self.errors += 1
+            self._failed(i)
             self.report({"ERROR"}, f"{job.object_name}: {exc}")
             return
-        images.set_pixels(image, images.rgba(result.ao, image.channels))
         _redraw(context)
         self.finished.append(i)
         self.report({"INFO"}, summary(job, result))
@@ -376,7 +405,20 @@ class BakeSession:
                 pass
         except KeyboardInterrupt:
             return self.finish(context, cancelled=True)
+        except Exception as exc:  # a bug here must not leave the worker running, nor reach the user as a trace
+            return self.fail(context, exc)
         return self.finish(context)
+
+    def fail(self, context, exc):
+        """End the bake after an unexpected error on the main thread: report it, put the images back."""
+        traceback.print_exc()
+        self.report({"ERROR"}, f"AO bake stopped by an internal error ({type(exc).__name__}: {exc}); see the console")
+        try:
+            return self.finish(context, cancelled=True)
+        except Exception:
+            traceback.print_exc()
+            self.abandon()
+            return {"CANCELLED"}
 
     def on_event(self, context, event_type):
         """One modal event: Esc cancels, a timer tick applies the messages; returns the operator's result.
@@ -385,6 +427,8 @@ class BakeSession:
         """
         if self.ended is not None:  # ended from outside the modal (an undo)
             return self.ended
+        if self.interrupted:  # stopped for an undo that did not come back to say it is done
+            return self.finish(context, cancelled=True, why="by Undo")
         if event_type == "ESC":
             return self.finish(context, cancelled=True)
         if event_type != "TIMER":
@@ -518,14 +562,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         try:
             result = self.session.on_event(context, event.type)
         except Exception as exc:  # a bug here must not leave the worker and the timer running
-            traceback.print_exc()
-            self.report({"ERROR"}, f"AO bake stopped by an internal error ({type(exc).__name__}: {exc}); see the console")
-            try:
-                self.session.finish(context, cancelled=True)
-            except Exception:
-                traceback.print_exc()
-                self.session.abandon()
-            result = {"CANCELLED"}
+            result = self.session.fail(context, exc)
         if not result & {"RUNNING_MODAL", "PASS_THROUGH"}:
             self._remove_timer(context)
         return result

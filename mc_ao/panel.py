@@ -9,6 +9,8 @@ from .settings import BakeSettings
 
 # UILayout.prop() takes a placeholder for an empty text field in newer Blender versions (4.3 and
 # 5.0 have it), not in every version this extension supports.
+# Selected objects that will not be baked are listed under the button, up to this many lines.
+MAX_SKIPPED_LINES = 3
 _HAS_PLACEHOLDER = "placeholder" in bpy.types.UILayout.bl_rna.functions["prop"].parameters
 
 
@@ -52,6 +54,12 @@ class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
             layout.label(text=f"Into {image_name}", icon="IMAGE_DATA")
         else:
             layout.label(text=f"{len(targets)} objects, one image each", icon="IMAGE_DATA")
+        skipped = [obj for obj in selected if obj not in targets]
+        for obj in skipped[:MAX_SKIPPED_LINES]:
+            why = "no UV map" if obj.type == "MESH" else "not a mesh"
+            layout.label(text=f"Skipped: {obj.name} ({why})", icon="ERROR")
+        if len(skipped) > MAX_SKIPPED_LINES:
+            layout.label(text=f"... and {len(skipped) - MAX_SKIPPED_LINES} more skipped", icon="ERROR")
 
 
 class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):

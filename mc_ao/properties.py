@@ -35,7 +35,12 @@ class McAoSettings(bpy.types.PropertyGroup):
         default=_DEFAULTS.target_error, min=0.0, max=1.0, soft_max=0.1, step=0.1, precision=4,
     )
     resolution: IntProperty(
-        name="Size", description="Width of the image in pixels", default=_DEFAULTS.resolution,
+        name="Size",
+        description=(
+            "Width of the image in pixels. An existing image of another size is resized to this size "
+            "(and put back as it was if its bake is cancelled or fails)"
+        ),
+        default=_DEFAULTS.resolution,
         min=1, soft_min=16, soft_max=8192, subtype="PIXEL",
     )
     height: IntProperty(
@@ -83,7 +88,10 @@ class McAoSettings(bpy.types.PropertyGroup):
     )
     image_name: StringProperty(
         name="Image",
-        description='Image to bake into; empty for "<object>_AO"; "{object}" is replaced by the object name',
+        description=(
+            'Image to bake into; empty for "<object>_AO"; "{object}" is replaced by the object name. '
+            "An existing image is reused, resized to the bake's size"
+        ),
         default=_DEFAULTS.image_name,
     )
     float_buffer: BoolProperty(
@@ -104,7 +112,12 @@ class McAoSettings(bpy.types.PropertyGroup):
         default=_DEFAULTS.file_format,
     )
     output_dir: StringProperty(
-        name="Folder", description='Folder for the files ("//" is the .blend file\'s folder)',
+        name="Folder",
+        description=(
+            'Folder for the files ("//" is the .blend file\'s folder), created if missing. A folder that '
+            "cannot be written is refused before baking; if a file fails to write after the bake, the "
+            "image in Blender keeps the bake and any file already on disk is left as it was"
+        ),
         default=_DEFAULTS.output_dir, subtype="DIR_PATH", options=_BLEND_RELATIVE,
     )
     seed: IntProperty(

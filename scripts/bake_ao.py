@@ -10,9 +10,12 @@ or by a Python that has the bpy module (then the .blend file is the first argume
     python scripts/bake_ao.py scene.blend --objects A B --samples 128 --resolution 1024 --output out/
 
 Writes <object>_AO.png (and/or .exr, .tif, per --format) for each object into the output folder,
-prints a summary, and exits with 0 on success, 1 when a bake or a file failed, 2 for bad arguments
-(an unknown object, an unreadable .blend file, ...). The bake is the add-on's: the same geometry
-gathering (modifiers applied, world space, corner normals, the chosen UV map) and the same core.
+prints a summary, and exits with 0 on success, 1 when a bake or a file failed (the other objects are
+still baked), 2 for bad arguments or input found before baking (an unknown object, a named object
+that is not a mesh or has no UV map, an output folder that cannot be written, an unreadable .blend
+file, ...), 130 on Ctrl-C. A file that fails to write leaves any file already at its path as it was.
+The bake is the add-on's: the same geometry gathering (modifiers applied, world space, corner
+normals, the chosen UV map) and the same core.
 """
 
 import argparse
@@ -157,7 +160,10 @@ def run_job(job, settings, threads, bar):
 
 
 def pick_objects(bpy, names, baking):
-    """The objects to bake: the named ones, else the selected bakeable ones, else every bakeable one."""
+    """The objects to bake: the named ones, else the selected bakeable ones, else every bakeable one.
+
+    Named objects that cannot be baked are an error (exit 2); selected ones are skipped with a note.
+    """
     layer_objects = bpy.context.view_layer.objects
     if names:
         missing = [n for n in names if n not in layer_objects]
@@ -170,14 +176,23 @@ def pick_objects(bpy, names, baking):
         objects = [layer_objects[n] for n in names]
         for obj in objects:
             if not baking.can_be_target(obj):
-                why = "is not a mesh" if obj.type != "MESH" else "has no UV map"
-                raise UsageError(f"{obj.name} {why}")
+                raise UsageError(f"{obj.name} {baking.skip_reason(obj)}")
         return objects
-    objects = baking.targets_of(o for o in layer_objects if o.select_get())
-    if not objects:
-        objects = baking.targets_of(layer_objects)
+    selected = [o for o in layer_objects if o.select_get()]
+    objects = baking.targets_of(selected)
+    if objects:
+        for obj in selected:
+            if obj not in objects:
+                print(f"bake_ao: {obj.name}: skipped, it {baking.skip_reason(obj)}", file=sys.stderr)
+        return objects
+    objects = baking.targets_of(layer_objects)
     if not objects:
         raise UsageError("the file has no mesh with a UV map to bake")
+    print(
+        f"bake_ao: {'no mesh with a UV map is selected' if selected else 'nothing is selected'}; "
+        f"baking every mesh with a UV map: {', '.join(o.name for o in objects)}",
+        file=sys.stderr,
+    )
     return objects
 
 
@@ -211,7 +226,8 @@ def main(argv=None):
         print(f"bake_ao: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("\nbake_ao: cancelled", file=sys.stderr)
+        print("\nbake_ao: cancelled; the files of finished objects are written, nothing of the "
+              "cancelled one was", file=sys.stderr)
         return 130
     except Exception:
         # Under Blender an escaping exception would end the script with exit status 0.
@@ -259,6 +275,9 @@ def bake(args, in_blender):
         image_name=args.image_name, seed=args.seed, threads=args.threads,
         ignore_backfaces=args.ignore_backfaces,
     )
+    problem = images.output_dir_problem(args.output)
+    if problem is not None:
+        raise UsageError(f"cannot write to the output folder '{args.output}': {problem}; nothing was baked")
     objects = pick_objects(bpy, args.objects, baking)
     try:
         jobs = baking.plan(
@@ -271,6 +290,7 @@ def bake(args, in_blender):
     bar = ProgressBar(enabled=not args.quiet)
     rows, failures = [], 0
     for n, job in enumerate(jobs, 1):
+        print(f"bake_ao: [{n}/{len(jobs)}] baking {job.object_name}", flush=True)
         bar.begin(f"[{n}/{len(jobs)}] {job.object_name}")
         try:
             result = run_job(job, settings, args.threads or None, bar)
