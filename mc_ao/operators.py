@@ -78,6 +78,13 @@ class BakeRun:
         _RUNS.discard(self)
 
     def _work(self):
+        try:
+            self._work_jobs()
+        finally:
+            # Always last, whatever happened above: the main thread waits for it.
+            self.messages.put(("end",))
+
+    def _work_jobs(self):
         put = self.messages.put
         for i, job in enumerate(self.jobs):
             if self.cancel.is_set():
@@ -105,7 +112,6 @@ class BakeRun:
                 put(("crash", i, exc, traceback.format_exc()))
                 continue
             put(("done", i, result))
-        put(("end",))
 
 
 class OutputError(ValueError):

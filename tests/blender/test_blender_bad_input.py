@@ -290,6 +290,7 @@ def test_an_image_of_another_size_is_resized_and_reported(bpy, scene, capfd):
     assert ("INFO", "Ground: image 'Ground_AO' was 8x6, resized to 24x24") in reports
     image = bpy.data.images["Ground_AO"]
     assert image.as_pointer() == pointer and tuple(image.size) == (24, 24) and image.is_float
+    assert image.colorspace_settings.name == "Non-Color"
 
 
 def test_a_file_image_of_another_size_is_resized_and_its_file_left_alone(bpy, scene, capfd, tmp_path):
@@ -308,7 +309,8 @@ def test_a_file_image_of_another_size_is_resized_and_its_file_left_alone(bpy, sc
     result, _, reports, _ = run_operator(bpy, capfd)
     assert result == {"FINISHED"}
     assert ("INFO", "Ground: image 'Ground_AO' was 8x4, resized to 24x24") in reports
-    assert tuple(bpy.data.images["Ground_AO"].size) == (24, 24)
+    image = bpy.data.images["Ground_AO"]
+    assert tuple(image.size) == (24, 24) and image.colorspace_settings.name == "Non-Color"
     assert (tmp_path / "Ground_AO.png").read_bytes() == on_disk
 
 
