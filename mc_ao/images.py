@@ -119,7 +119,10 @@ def prepare_image(name, width, height, float_buffer):
         raise ImageError(reason)
     snapshot = Snapshot(image, created=False)
     # The colour space first: changing it reloads an image from its file, which would undo a resize.
-    image.colorspace_settings.name = "Non-Color"
+    # Only when it differs: setting it, even to the same name, also wipes a generated image's pixels
+    # (Blender regenerates them), and a live bake shows its tiles over the previous pixels.
+    if image.colorspace_settings.name != "Non-Color":
+        image.colorspace_settings.name = "Non-Color"
     if image.source == "GENERATED":
         if (image.generated_width, image.generated_height, image.use_generated_float) != (
             width, height, float_buffer,

@@ -33,11 +33,11 @@ def scene(bpy, addon):
 
 # -- helpers ----------------------------------------------------------------------------------------
 
-def pattern_image(bpy, name, width, height, float_buffer=False):
+def pattern_image(bpy, name, width, height, float_buffer=False, is_data=False):
     """An image with recognisable pixels (what a user's previous bake or painting would be)."""
     from mc_ao import images
 
-    image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=float_buffer)
+    image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=float_buffer, is_data=is_data)
     pattern = np.random.default_rng(len(name)).random((height, width, 4), dtype=np.float32)
     pattern = np.round(pattern * 255) / 255  # exact in an 8-bit image too
     images.set_pixels(image, pattern)
@@ -456,6 +456,28 @@ def test_esc_during_a_bake_puts_the_images_back(bpy, scene, hold_bake):
 
     assert not operators._RUNS and not operators._SESSIONS
     assert session.on_event(bpy.context, "TIMER") == {"CANCELLED"}  # the modal ends at its next event
+
+
+def test_a_live_bake_draws_its_tiles_over_the_previous_pixels(bpy, scene, hold_bake):
+    """A rebake into an image of the same size: the texels not baked yet still show the previous bake."""
+    ground = add_plane(bpy, "Ground", size=4)
+    scene.mc_ao.resolution = 64
+    scene.mc_ao.threads = 1
+    old = pattern_image(bpy, "Ground_AO", 64, 64, float_buffer=True, is_data=True)
+    held = hold_bake("Ground")
+    select_only(bpy, ground)
+    session, _ = new_session()
+    assert session.start(bpy.context, live=True)
+    tick_until(bpy, session, lambda: held.is_set() and not session.pending)
+
+    from mc_ao import images
+
+    live = images.pixels_of(bpy.data.images["Ground_AO"])
+    changed = np.any(live != old, axis=2)
+    assert changed.any()  # the first tile is in ...
+    assert 0 < changed.sum() <= 32 * 32  # ... and only the first tile (32 x 32 texels here)
+    assert session.on_event(bpy.context, "ESC") == {"CANCELLED"}
+    assert_unchanged(bpy, "Ground_AO", old)
 
 
 def test_ctrl_c_during_a_blocking_bake_puts_the_images_back(bpy, scene, capfd, monkeypatch):
