@@ -8,7 +8,6 @@ import bpy
 import numpy as np
 
 from . import corelink
-from .settings import FILE_FORMATS
 
 
 class ImageError(ValueError):
@@ -133,7 +132,9 @@ def prepare_image(name, width, height, float_buffer):
         image.scale(width, height)
     if tuple(image.size) != (width, height):
         snapshot.restore()
-        raise ImageError(f"image {name!r} could not be resized from {image.size[0]}x{image.size[1]} to {width}x{height}")
+        raise ImageError(
+            f"image {name!r} could not be resized from {image.size[0]}x{image.size[1]} to {width}x{height}"
+        )
     return image, snapshot
 
 

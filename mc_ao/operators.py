@@ -478,7 +478,10 @@ class BakeSession:
             self.ended = {"CANCELLED"}
         else:
             if self.errors and total > 1:
-                self.report({"WARNING"}, f"AO bake: {len(done)} of {total} objects baked, the failed ones' images are as they were")
+                self.report(
+                    {"WARNING"},
+                    f"AO bake: {len(done)} of {total} objects baked, the failed ones' images are as they were",
+                )
             self.ended = {"FINISHED"} if done else {"CANCELLED"}
         # Blender keeps the last registered operators, and with them this session, for its redo
         # and history: keep nothing heavy (the jobs' geometry, the images' old pixels) past the end.

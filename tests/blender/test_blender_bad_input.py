@@ -390,6 +390,7 @@ def test_a_failed_file_write_keeps_the_bake_in_blender_and_the_old_file(bpy, sce
             fh.write(b"half a PNG")
         raise OSError(errno.ENOSPC, "No space left on device")
 
+    # core.imageio writes a temporary file through this function, then renames it over the target.
     monkeypatch.setattr(imageio, "_write_temp", disk_full)
     scene.mc_ao.save_to_file = True
     scene.mc_ao.output_dir = str(tmp_path)
@@ -448,7 +449,9 @@ def test_esc_during_a_bake_puts_the_images_back(bpy, scene, hold_bake):
     baked_ground = np.array(bpy.data.images["Ground_AO"].pixels[:])
 
     assert session.on_event(bpy.context, "ESC") == {"CANCELLED"}
-    assert reports[-1] == ("WARNING", "AO bake cancelled; kept the finished bakes of Ground; the other images are as they were")
+    assert reports[-1] == (
+        "WARNING", "AO bake cancelled; kept the finished bakes of Ground; the other images are as they were"
+    )
     assert_unchanged(bpy, "Wall_AO", wall_old)
     assert "Zed_AO" not in bpy.data.images
     np.testing.assert_array_equal(np.array(bpy.data.images["Ground_AO"].pixels[:]), baked_ground)
@@ -586,8 +589,6 @@ def test_undo_and_redo_after_a_bake(bpy, scene):
     bpy.ops.ed.undo_push(message="scene")
     add_cube(bpy, "Marker", size=0.5, location=(5, 5, 0))  # the step just before the bake
     bpy.ops.ed.undo_push(message="marker")
-    select_only(bpy, bpy.data.objects["Ground"])
-    bpy.context.scene.mc_ao.image_name = "{object}_AO"
     select_only(bpy, bpy.data.objects["Ground"])
     assert bpy.ops.object.mc_ao_bake("EXEC_DEFAULT", True) == {"FINISHED"}
     bpy.context.scene.mc_ao.image_name = "Old"
