@@ -16,3 +16,9 @@ from .stats import RunningStats
 from .mesh import Mesh
 from .bake import BakeResult, bake_ao
 from .imageio import ImageReadError
+
+__all__ = [
+    "__version__", "Mesh", "bake_ao", "BakeResult", "integrate", "estimate", "Estimate", "RunningStats",
+    "stats", "warps", "McAoError", "MeshError", "MeshTypeError", "SettingsError", "BakeMemoryError",
+    "BakeCancelled", "ImageWriteError", "ImageReadError",
+]

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._version import __version__
-from .errors import BakeCancelled, BakeMemoryError, McAoError, MeshError, SettingsError
+from .errors import BakeCancelled, BakeMemoryError, MeshError, SettingsError
 from .margin import dilate
 from .mesh import Mesh
 from .patterns import SOURCE_NAMES, TexelPattern
@@ -691,4 +691,4 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                       report=report)
 
 
-__all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "estimate_memory", "available_memory", "McAoError"]
+__all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "estimate_memory", "available_memory", "interval_half_width"]

@@ -457,7 +457,26 @@ class Stratified(_Source):
         return out
 
 
-class Sobol(_Source):
+class _Sequence(_Source):
+    """A deterministic sequence randomised once at construction (Sobol', Halton): ``reset`` replays
+    the same points, and points are indexed by 32-bit integers."""
+
+    def reset(self):
+        # The scrambles were drawn at construction and stay: reset replays the same points.
+        self.num_generated = 0
+        return self
+
+    def _check_room(self, n):
+        if self.num_generated + n > _MAX_INDEX:
+            raise SettingsError(
+                f"{type(self).__name__}: cannot go past 2**32 points ({self.num_generated} drawn, {n} more asked)"
+            )
+
+    def _fast_forward(self, n):
+        self._check_room(n)
+
+
+class Sobol(_Sequence):
     """Sobol' sequence (Joe-Kuo direction numbers), Owen-scrambled by default.
 
     Parameters
@@ -491,20 +510,6 @@ class Sobol(_Source):
             self.rng.integers(0, 2**32, size=self.d, dtype=np.uint32) if self.scramble else None
         )
 
-    def reset(self):
-        # The scramble seeds were drawn at construction and stay: reset replays the same points.
-        self.num_generated = 0
-        return self
-
-    def _check_room(self, n):
-        if self.num_generated + n > _MAX_INDEX:
-            raise SettingsError(
-                f"Sobol: cannot go past 2**32 points ({self.num_generated} drawn, {n} more asked)"
-            )
-
-    def _fast_forward(self, n):
-        self._check_room(n)
-
     def _random(self, n):
         self._check_room(n)
         i = np.arange(self.num_generated, self.num_generated + n, dtype=np.uint64)
@@ -532,7 +537,7 @@ def _primes(k):
         limit *= 2
 
 
-class Halton(_Source):
+class Halton(_Sequence):
     """Halton sequence (bases 2, 3, 5, 7, 11, ...) randomised by random digit permutations.
 
     Dimension j with base b maps index i = sum_k d_k b^k to sum_k pi_{j,k}(d_k) b^-(k+1), where
@@ -584,20 +589,6 @@ class Halton(_Source):
             # Digits above the largest index are all 0: their permuted values add a constant.
             tail = np.concatenate([np.cumsum(contrib[::-1, 0])[::-1], np.zeros(1, dtype=_U64)])
             self._digits.append((np.uint64(b), contrib, tail, float(b**ndig)))
-
-    def reset(self):
-        # The permutations were drawn at construction and stay: reset replays the same points.
-        self.num_generated = 0
-        return self
-
-    def _check_room(self, n):
-        if self.num_generated + n > _MAX_INDEX:
-            raise SettingsError(
-                f"Halton: cannot go past 2**32 points ({self.num_generated} drawn, {n} more asked)"
-            )
-
-    def _fast_forward(self, n):
-        self._check_room(n)
 
     def _random(self, n):
         self._check_room(n)
