@@ -171,20 +171,7 @@ def lid_scene():
     return pv, QUAD, pv[QUAD[0]][:, :2], lid, QUAD
 
 
-def polygon_form_factor(x, verts):
-    """Lambert's contour integral: form factor from points x (m, 3) with normal +z to a planar polygon
-    (k, 3) above their horizon, F = |sum_i gamma_i (n . unit(R_i x R_{i+1}))| / (2 pi)."""
-    total = np.zeros(len(x))
-    k = len(verts)
-    for i in range(k):
-        a = verts[i] - x
-        b = verts[(i + 1) % k] - x
-        a /= np.linalg.norm(a, axis=1, keepdims=True)
-        b /= np.linalg.norm(b, axis=1, keepdims=True)
-        c = np.cross(a, b)
-        gamma = np.arccos(np.clip(np.einsum("ij,ij->i", a, b), -1, 1))
-        total += gamma * c[:, 2] / np.linalg.norm(c, axis=1)
-    return np.abs(total) / (2 * math.pi)
+from core.analytic import polygon_form_factor  # noqa: E402  (Lambert's form factor, one copy)
 
 
 def lid_truth(width, height, order=6, footprint=1.0):

@@ -42,3 +42,17 @@ def addon(bpy):
     mc_ao.register()
     yield mc_ao
     mc_ao.unregister()
+
+
+@pytest.fixture
+def scene(bpy, addon):
+    """A clean scene with small, fast bake settings (24 x 24, 16 samples, margin 2, 2 threads)."""
+    from blender_helpers import clean_scene
+
+    scene = clean_scene(bpy)
+    settings = scene.mc_ao
+    settings.resolution = 24
+    settings.samples = 16
+    settings.margin = 2
+    settings.threads = 2
+    return scene

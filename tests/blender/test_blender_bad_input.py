@@ -15,20 +15,9 @@ import types
 import numpy as np
 import pytest
 
-from blender_helpers import add_cube, add_plane, clean_scene, select_only
+from blender_helpers import add_cube, add_plane, select_only
 
 pytestmark = pytest.mark.blender
-
-
-@pytest.fixture
-def scene(bpy, addon):
-    scene = clean_scene(bpy)
-    settings = scene.mc_ao
-    settings.resolution = 24
-    settings.samples = 16
-    settings.margin = 2
-    settings.threads = 2
-    return scene
 
 
 # -- helpers ----------------------------------------------------------------------------------------

@@ -5,20 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from blender_helpers import add_cube, add_plane, clean_scene, image_ao, select_only
+from blender_helpers import add_cube, add_plane, image_ao, select_only
 
 pytestmark = pytest.mark.blender
-
-
-@pytest.fixture
-def scene(bpy, addon):
-    scene = clean_scene(bpy)
-    settings = scene.mc_ao
-    settings.resolution = 24
-    settings.samples = 16
-    settings.margin = 2
-    settings.threads = 2
-    return scene
 
 
 def world_arrays(bpy, obj, with_uvs):
