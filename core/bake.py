@@ -146,7 +146,7 @@ def interval_half_width(n, mean, m2, z, binary, bound):
 
     if binary:
         return agresti_coull(np.clip(mean, 0.0, 1.0))
-    var = np.where(n > 1, m2 / np.maximum(n - 1.0, 1.0), 0.0)
+    var = np.nan_to_num(RunningStats.from_moments(n, mean, m2).variance)  # 0 where n < 2
     sample = z * np.sqrt(var / safe)
     return np.where(var > 0, sample, bound * agresti_coull(np.clip(mean / bound, 0.0, 1.0)))
 
@@ -243,11 +243,14 @@ class _Tracer:
         self.max_distance = max_distance
         self.tfar = np.float32(min(max_distance, 1e37))
 
-    def contact(self, below, normals, lengths):
-        """Per point, whether another object's surface crosses the segment below + [0, lengths] * normals."""
-        if self.contact_scene is None:
-            return np.zeros(len(below), bool)
-        hit = self.contact_scene[0].run(below, normals, query="OCCLUDED", dists=lengths)
+    def contact(self, points, normals):
+        """Per surface point (n, 3), whether another object's surface crosses the segment of length
+        2 * offset through it along its unit geometric normal (n, 3): whether something touches it."""
+        points = np.asarray(points, dtype=np.float64)
+        e = self.offset(np.abs(points).max(axis=1))
+        below = (points - normals * e[:, None]).astype(np.float32)
+        hit = self.contact_scene[0].run(below, np.ascontiguousarray(normals, dtype=np.float32), query="OCCLUDED",
+                                        dists=(2.0 * e).astype(np.float32))
         return hit >= 0
 
     def offset(self, max_abs):
@@ -298,6 +301,12 @@ class _Tracer:
         return vis
 
 
+def _affine(col, tab, first, dx, dy):
+    """One component of a per-triangle affine map of the packed table (core.raster.TABLE_*): the
+    value at the origin plus dx and dy times its derivatives, which sit 3 and 6 columns further."""
+    return col(tab, first) + dx * col(tab, first + 3) + dy * col(tab, first + 6)
+
+
 class _TileBaker:
     def __init__(self, tris, mesh, tracer, pattern, settings, width, height, shared):
         self.tris, self.mesh, self.tracer, self.pattern = tris, mesh, tracer, pattern
@@ -310,8 +319,8 @@ class _TileBaker:
         self.shared = shared
 
     def _surface(self, frag, sel, ux, uy, k):
-        """Surface samples of the chunk as component planes (g, k): position (float64), unit shading
-        normal and geometric normal oriented to the shading normal's side (float32).
+        """Surface samples of the chunk as float32 component planes (3, g, k): position, unit shading
+        normal and geometric normal oriented to the shading normal's side.
 
         Texels inside one triangle (the common case) gather that triangle's row of the packed table
         once per texel and broadcast it over their k samples; split texels pick a sub-triangle per
@@ -330,8 +339,8 @@ class _TileBaker:
 
         def fill(rows, tab, dx, dy, col):
             for c in range(3):
-                pos[c, rows] = col(tab, R.TABLE_P0 + c) + dx * col(tab, R.TABLE_PDX + c) + dy * col(tab, R.TABLE_PDY + c)
-                nrm[c, rows] = col(tab, R.TABLE_N0 + c) + dx * col(tab, R.TABLE_NDX + c) + dy * col(tab, R.TABLE_NDY + c)
+                pos[c, rows] = _affine(col, tab, R.TABLE_P0 + c, dx, dy)
+                nrm[c, rows] = _affine(col, tab, R.TABLE_N0 + c, dx, dy)
                 gn[c, rows] = col(tab, R.TABLE_FN + c)
 
         if simple.any():
@@ -408,10 +417,8 @@ class _TileBaker:
             # Samples where another object's face lies on the surface are occluded (see _Tracer);
             # only texels whose coarse probes found contact (see _contact_texels) are probed per sample.
             rows = np.flatnonzero(near)
-            pr, gr, er = p[:, rows].reshape(3, -1), gn[:, rows].reshape(3, -1), eps[rows].ravel()
             t0 = time.perf_counter()
-            touching = self.tracer.contact(np.ascontiguousarray((pr - gr * er).T), np.ascontiguousarray(gr.T),
-                                           (2.0 * er).astype(np.float32))
+            touching = self.tracer.contact(p[:, rows].reshape(3, -1).T, gn[:, rows].reshape(3, -1).T)
             probe_seconds = time.perf_counter() - t0
             above[rows] &= ~touching.reshape(len(rows), k)
         # Usually every direction is above the surface: then take the planes whole, not by index.
@@ -462,12 +469,10 @@ class _TileBaker:
         tab = np.take(self.tris.table_t, tri, axis=1).astype(np.float64)
         dx = xy[:, 0] - self.tris.origin_xy[tri, 0]
         dy = xy[:, 1] - self.tris.origin_xy[tri, 1]
-        pos = np.stack([tab[R.TABLE_P0 + c] + dx * tab[R.TABLE_PDX + c] + dy * tab[R.TABLE_PDY + c]
-                        for c in range(3)], axis=1)
+        row = lambda t, i: t[i]  # noqa: E731
+        pos = np.stack([_affine(row, tab, R.TABLE_P0 + c, dx, dy) for c in range(3)], axis=1)
         fn = np.stack([tab[R.TABLE_FN + c] for c in range(3)], axis=1)
-        e = self.tracer.offset(np.abs(pos).max(axis=1))
-        hit = self.tracer.contact((pos - fn * e[:, None]).astype(np.float32), fn.astype(np.float32),
-                                  (2.0 * e).astype(np.float32))
+        hit = self.tracer.contact(pos, fn)
         return np.bincount(own[hit], minlength=n_tex) > 0
 
     def bake(self, key, tri_ids):
