@@ -38,6 +38,12 @@ from .warps import TWO_PI, basis_components, concentric_disk_xy
 DISTRIBUTIONS = ("cosine", "uniform")
 #: Largest image side the baker accepts (the same as Blender's image size limit).
 MAX_RESOLUTION = 65536
+#: Most samples per texel. Chunks stay bounded for any count (a texel's samples are traced in
+#: pieces), but the sample tables grow with it: 2^20 keeps them to tens of MiB, and a reference
+#: bake rarely needs a tenth of it.
+MAX_SAMPLES = 1 << 20
+#: Samples of one texel traced in one piece; more are traced in pieces of this many.
+SAMPLE_PIECE = 1 << 16
 #: Offsets off the surface: relative to the scene's bounding-box diagonal and to |position|.
 EPS_SCENE = 1e-6
 EPS_POSITION = 2.0 ** -18
@@ -114,15 +120,22 @@ def available_memory():
         return None
 
 
-def estimate_memory(width, height, triangles, threads, chunk_rays):
-    """Peak bytes a bake needs: output planes, margin work, per-thread chunks, triangle tables."""
+def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1):
+    """Peak bytes a bake needs: output planes, margin work, per-thread chunks, sample tables, triangles.
+
+    A chunk holds at most ``max(chunk_rays, SAMPLE_PIECE)`` rays (a texel with more samples is
+    traced in pieces), but the sample sources keep tables as long as the largest sample count: the base
+    sequence (Sobol', Halton) and, for stratified points, one key per stratum of the texels in a
+    chunk.
+    """
     texels = width * height
     planes = texels * (4 + 4 + 4 + 1)          # ao, stderr, samples, mask
     margin_work = texels * (4 + 4 + 1 + 1)      # dilation sums, counts and masks
     per_ray = 600                               # float64 temporaries of one chunk, generously
-    chunks = threads * chunk_rays * per_ray
+    chunks = threads * max(chunk_rays, min(samples, SAMPLE_PIECE)) * per_ray
+    tables = samples * 48 + threads * samples * 24
     tris = triangles * 300                      # texel-space corners, affine maps, Embree buffers
-    return planes + margin_work + chunks + tris
+    return planes + margin_work + chunks + tables + tris
 
 
 def interval_half_width(n, mean, m2, z, binary, bound):
@@ -169,7 +182,12 @@ def _cancelled(cancel):
 
 
 class _Shared:
-    """State the worker threads share: progress, cancellation, errors, timing."""
+    """State the worker threads share: progress, cancellation, errors, timing.
+
+    Progress is reported on the bake's own events (each chunk of rays traced, each tile finished),
+    never throttled by a clock: what a caller sees does not depend on how fast the machine is.
+    Callers that draw a progress bar throttle their drawing themselves.
+    """
 
     def __init__(self, total_work, progress, cancel):
         self.lock = threading.Lock()
@@ -180,7 +198,6 @@ class _Shared:
         self.stop = threading.Event()
         self.trace_seconds = 0.0
         self.rays = 0
-        self.last_report = 0.0
 
     def check(self):
         if self.stop.is_set():
@@ -189,14 +206,12 @@ class _Shared:
             self.stop.set()
             raise _Stop()
 
-    def advance(self, work, rays=0, trace_seconds=0.0, force=False):
+    def advance(self, work, rays=0, trace_seconds=0.0):
         with self.lock:
             self.done += work
             self.rays += rays
             self.trace_seconds += trace_seconds
-            now = time.perf_counter()
-            if self.progress is not None and (force or now - self.last_report >= 0.1):
-                self.last_report = now
+            if self.progress is not None and work > 0:
                 self.progress(min(self.done / self.total, 1.0))
 
 
@@ -495,14 +510,22 @@ class _TileBaker:
         active = np.argsort(frag.full_tri < 0, kind="stable")
         z = z_for_confidence(0.95)
         while len(active):
-            g = max(1, s["chunk_rays"] // k)
+            # A texel with more than SAMPLE_PIECE samples is traced in pieces of that many, so a
+            # chunk holds at most max(chunk_rays, SAMPLE_PIECE) rays. The pieces do not depend on
+            # chunk_rays, so neither do the sums (bit for bit). Stratified points sort one key per
+            # stratum of every texel in the chunk, so their chunks hold fewer texels.
+            step = min(k, SAMPLE_PIECE)
+            per_texel = max(step, total) if s["source"] == "stratified" else step
+            g = max(1, s["chunk_rays"] // per_texel)
             for c0 in range(0, len(active), g):
-                shared.check()
                 sel = active[c0:c0 + g]
-                values, rays, dt = self._values(frag, sel, start, k)
-                part = RunningStats.from_moments(stats.n[sel], stats.mean[sel], stats.m2[sel]).add(values)
-                stats.n[sel], stats.mean[sel], stats.m2[sel] = part.n, part.mean, part.m2
-                shared.advance(len(sel) * k, rays, dt)
+                for j0 in range(0, k, step):
+                    shared.check()
+                    m = min(step, k - j0)
+                    values, rays, dt = self._values(frag, sel, start + j0, m)
+                    part = RunningStats.from_moments(stats.n[sel], stats.mean[sel], stats.m2[sel]).add(values)
+                    stats.n[sel], stats.mean[sel], stats.m2[sel] = part.n, part.mean, part.m2
+                    shared.advance(len(sel) * m, rays, dt)
             start += k
             if not adaptive or start >= total:
                 break
@@ -511,7 +534,7 @@ class _TileBaker:
             active = active[half > s["target_error"]]
             k = min(start, total - start)  # double each round: Sobol' prefixes stay powers of two
         # Credit the work the adaptive stop saved, so progress reaches 1.
-        shared.advance(n_tex * total - int(stats.n.sum()), force=False)
+        shared.advance(n_tex * total - int(stats.n.sum()))
         return frag, stats
 
 
@@ -527,6 +550,8 @@ def _validate(target, occluders, resolution, samples, min_samples, target_error,
             raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
     w, h = _resolution(resolution)
     samples = _positive_int(samples, "samples")
+    if samples > MAX_SAMPLES:
+        raise SettingsError(f"samples must be at most {MAX_SAMPLES} per texel, got {samples}")
     min_samples = _positive_int(min_samples, "min_samples")
     try:
         target_error = float(target_error)
@@ -554,6 +579,48 @@ def _validate(target, occluders, resolution, samples, min_samples, target_error,
     return dict(occluders=occluders, width=w, height=h, samples=samples, min_samples=min(min_samples, samples),
                 target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
                 margin=margin, seed=seed, threads=threads, falloff=falloff)
+
+
+#: Occluders farther than this many target sizes from the target are refused: float32 rays cannot
+#: hold both (and so far away they cannot occlude it measurably).
+MAX_SCENE_SPAN = 1e15
+
+
+def _normalized_scene(target, occluders):
+    """The target and its occluders in a frame centred on the target and scaled to its size.
+
+    AO does not depend on the unit (max_distance scales with it), but float32 rays do: a scene
+    modelled in metres at 1e13 or at 1e-14 loses the offsets that keep rays off their own surface.
+    In this frame the target spans about 1 around the origin whatever units the input used.
+    Occluders that are the target again (the same object or the same surface) are dropped: a
+    surface coinciding with the target would hide every ray.
+
+    Returns (target, occluders, unit): the world length of one unit of the new frame.
+    """
+    kept = []
+    for o in occluders:
+        if o is target or target.same_geometry(o) or any(o is k or k.same_geometry(o) for k in kept):
+            continue
+        kept.append(o)
+    lo, hi = target.positions.min(axis=0), target.positions.max(axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        unit = float(np.max(hi - lo))
+    if not math.isfinite(unit):
+        raise MeshError(f"mesh {target.name!r} spans more than the largest float ({unit}); scale it down")
+    if unit <= 0 or unit < np.finfo(np.float64).tiny * 1e3:
+        unit = 1.0  # a point: every triangle is degenerate and skipped anyway
+    centre = (lo + hi) / 2.0
+    scene = []
+    for o in kept:
+        m = o.transformed(centre, unit)
+        far = float(np.abs(m.positions).max())
+        if not far < MAX_SCENE_SPAN:
+            raise MeshError(
+                f"occluder {o.name!r} reaches {far:.3g} times the size of {target.name!r} away from it; "
+                "ray tracing in single precision cannot hold both: leave it out of the occluders"
+            )
+        scene.append(m)
+    return target.transformed(centre, unit), scene, unit
 
 
 def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
@@ -585,8 +652,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         do not occlude; the ray continues past them.
     falloff : 0 for plain AO; p > 0 weighs a hit at distance t by (1 - t / max_distance)^p, so
         distant occluders darken less (needs a finite max_distance).
-    progress : called as progress(fraction) from worker threads, one call at a time, about every
-        0.1 s while rays are traced.
+    progress : called as progress(fraction) from worker threads, one call at a time, after every
+        chunk of rays and every finished tile (not on a clock: the calls a bake makes do not depend
+        on the machine's speed), and once with 1.0 at the end. Throttle any drawing in the callback.
     cancel : a threading.Event or a callable returning True to stop; checked between chunks of
         rays. A cancelled bake raises BakeCancelled and returns nothing.
     on_tile : called as on_tile(rows, cols, ao_block) from worker threads when a tile of texels is
@@ -606,9 +674,13 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     t_start = time.perf_counter()
     cfg = _validate(target, occluders, resolution, samples, min_samples, target_error, max_distance,
                     distribution, source, margin, seed, threads, falloff)
+    target, cfg["occluders"], unit = _normalized_scene(target, cfg["occluders"])
+    max_distance_world = cfg["max_distance"]
+    cfg["max_distance"] = cfg["max_distance"] / unit
     w, h = cfg["width"], cfg["height"]
     tri_total = target.triangle_count + sum(o.triangle_count for o in cfg["occluders"])
-    need = estimate_memory(w, h, tri_total, cfg["threads"], chunk_rays)
+    chunk_rays = _positive_int(chunk_rays, "chunk_rays")
+    need = estimate_memory(w, h, tri_total, cfg["threads"], chunk_rays, cfg["samples"])
     avail = available_memory()
     if avail is not None and need > avail:
         raise BakeMemoryError(f"a {w} x {h} bake of {tri_total} triangles needs about {need / 2**30:.2f} GiB, "
@@ -685,7 +757,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     metadata = {
         "samples": cfg["samples"], "min_samples": cfg["min_samples"], "target_error": cfg["target_error"],
         "sample_source": cfg["source"], "distribution": cfg["distribution"], "seed": cfg["seed"],
-        "max_distance": cfg["max_distance"], "falloff": cfg["falloff"], "ignore_backfaces": bool(ignore_backfaces),
+        "max_distance": max_distance_world, "falloff": cfg["falloff"], "ignore_backfaces": bool(ignore_backfaces),
         "margin": cfg["margin"], "resolution": f"{w}x{h}", "version": __version__, "rays": shared.rays,
     }
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": tris.degenerate,
@@ -696,4 +768,4 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                       report=report)
 
 
-__all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "estimate_memory", "available_memory", "interval_half_width"]
+__all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "estimate_memory", "available_memory", "interval_half_width"]

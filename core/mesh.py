@@ -4,9 +4,15 @@ Everything that can be wrong with the arrays is found here, before any heavy wor
 the mesh's name and the exact problem (see :mod:`core.errors`).
 """
 
+import copy
+
 import numpy as np
 
 from .errors import MeshError, MeshTypeError
+
+#: Largest |u| or |v| accepted. UV maps live in [0, 1] (UDIM tiles reach u = 10, v = 100); values far
+#: beyond come from broken importers or scripts, and texel coordinates of 1e17 lose all precision.
+MAX_UV = float(1 << 16)
 
 
 def _real_array(a, what, name):
@@ -86,6 +92,14 @@ class Mesh:
             uv = _real_array(uvs, "uvs", self.name)
             _check_shape(uv, (T, 3, 2), "uvs (one UV per triangle corner)", self.name)
             _check_finite(uv, "uvs", self.name)
+            far = np.abs(uv) > MAX_UV
+            if far.any():
+                tri = int(np.argwhere(far)[0][0])
+                raise MeshError(
+                    f"mesh {self.name!r}: {int(far.any(axis=(1, 2)).sum())} triangles have UV coordinates "
+                    f"beyond +-{MAX_UV:g} (largest {float(np.abs(uv).max()):.3g}, first at triangle {tri}); "
+                    "a UV map lies in [0, 1]: unwrap again or fix the UV map"
+                )
             self.uvs = uv.astype(np.float64)
 
         corners = self.positions[self.triangles]
@@ -105,6 +119,35 @@ class Mesh:
             ln = np.linalg.norm(n, axis=2, keepdims=True)
             self.normals = np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), self.face_normals[:, None, :])
             self.has_corner_normals = True
+
+    def transformed(self, centre, scale):
+        """A copy with positions (p - centre) / scale: the same surface in another unit and origin.
+
+        Face normals and areas are recomputed from the new positions (they keep their precision
+        when the original coordinates were tiny or huge); corner normals and UVs are unchanged. No
+        validation is repeated.
+        """
+        out = copy.copy(self)
+        out.positions = (self.positions - np.asarray(centre, dtype=np.float64)) / float(scale)
+        corners = out.positions[self.triangles]
+        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        length = np.linalg.norm(cross, axis=1)
+        out.areas = 0.5 * length
+        out.face_normals = np.where(length[:, None] > 0, cross / np.where(length > 0, length, 1.0)[:, None], 0.0)
+        if not self.has_corner_normals:
+            out.normals = np.repeat(out.face_normals[:, None, :], 3, axis=1)
+        else:
+            lost = ~np.any(self.normals != 0, axis=2)  # corners that fell back to a zero face normal
+            if lost.any():
+                out.normals = np.where(lost[..., None], out.face_normals[:, None, :], self.normals)
+        return out
+
+    def same_geometry(self, other):
+        """Whether ``other`` has exactly the same vertex positions and triangles (the same surface)."""
+        return (self is other or (self.positions.shape == other.positions.shape
+                                  and self.triangles.shape == other.triangles.shape
+                                  and np.array_equal(self.triangles, other.triangles)
+                                  and np.array_equal(self.positions, other.positions)))
 
     @property
     def triangle_count(self):

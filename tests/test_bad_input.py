@@ -85,6 +85,7 @@ def test_cancel_at_any_point_leaves_no_result(after):
 
 
 def test_cancel_from_another_thread_mid_bake():
+    """Cancelled from the progress callback, at 30%: the bake stops there, on any machine."""
     ev = threading.Event()
     seen = []
 
@@ -160,3 +161,93 @@ def test_any_non_finite_value_is_refused_by_name(mesh, which, idx, value):
     a.flat[idx % a.size] = value
     with pytest.raises(MeshError, match=which):
         Mesh(arrays["positions"], mesh.triangles, arrays["uvs"], arrays["normals"], name="random")
+
+
+# --- trust: scale, duplicated occluders, broken UVs, memory, events -------------------------------
+
+LID_Q = np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]])
+
+
+@pytest.mark.parametrize("scale", [1e13, 1e-14, 1e20, 1e-20, 1e6])
+@pytest.mark.parametrize("max_distance", [float("inf"), 0.5])
+def test_the_unit_of_the_scene_does_not_change_the_ao(scale, max_distance):
+    """A scene modelled at 1e13 or 1e-14 bakes the AO of the same scene at 1 (offsets follow the size)."""
+    def bake(s, offset):
+        p = plane()
+        target = Mesh((p.positions + offset) * s, p.triangles, p.uvs, name="t")
+        lid = Mesh((LID_Q + offset) * s, F, name="lid")
+        return bake_ao(target, [lid], resolution=8, samples=64, margin=0, max_distance=max_distance * s,
+                       seed=2, threads=1)
+    ref = bake(1.0, 0.0)
+    assert 0.3 < ref.ao.mean() < 0.95
+    got = bake(scale, 3.0)
+    # The same rays up to rounding: at most a ray or two of 64 per texel may flip at an edge.
+    assert np.abs(got.ao - ref.ao).max() <= 2 / 64
+    assert abs(float(got.ao.mean() - ref.ao.mean())) < 1e-3
+
+
+def test_the_target_among_its_own_occluders_is_ignored():
+    p = plane()
+    lid = Mesh(LID_Q, F, name="lid")
+    ref = bake_ao(p, [lid], resolution=8, samples=32, seed=1, threads=1)
+    twin = Mesh(p.positions.copy(), p.triangles.copy(), name="twin")  # the same surface, another object
+    for occ in ([p, lid], [lid, p, p], [twin, lid, twin]):
+        r = bake_ao(p, occ, resolution=8, samples=32, seed=1, threads=1)
+        assert np.array_equal(r.ao, ref.ao)
+
+
+@pytest.mark.parametrize("value", [1e17, -1e17, 1e9])
+def test_uvs_far_outside_any_uv_map_are_refused_by_name(value):
+    uv = UV.copy()
+    uv[1, 2, 0] = value
+    with pytest.raises(MeshError, match=r"'crate': 1 triangles have UV coordinates beyond"):
+        Mesh(P, F, uv, name="crate")
+
+
+def test_udim_range_uvs_are_accepted():
+    Mesh(P, F, UV + [9, 99], name="crate")
+
+
+@pytest.mark.parametrize("samples", [2 ** 20 + 1, 2 ** 31])
+def test_too_many_samples_are_refused_before_any_work(samples):
+    with pytest.raises(SettingsError, match="samples must be at most"):
+        bake_ao(plane(), resolution=1, samples=samples)
+
+
+def test_the_memory_estimate_counts_samples_and_chunks():
+    from core.bake import estimate_memory
+
+    small = estimate_memory(1, 1, 2, 1, 1 << 16, samples=16)
+    big = estimate_memory(1, 1, 2, 1, 1 << 16, samples=1 << 20)
+    assert big - small > (1 << 20) * 40  # the sample tables
+
+
+def test_a_texel_with_many_samples_is_traced_in_bounded_pieces():
+    """2^17 samples of one texel: chunks of at most 2^16 rays, and the same numbers as in one piece."""
+    sizes = []
+    from core import bake as B
+
+    real = B._TileBaker._values
+
+    def spy(self, frag, sel, start, k):
+        sizes.append(len(sel) * k)
+        return real(self, frag, sel, start, k)
+
+    B._TileBaker._values = spy
+    try:
+        r = bake_ao(plane(), [Mesh(LID_Q, F, name="lid")], resolution=1, samples=1 << 17, margin=0, threads=1)
+    finally:
+        B._TileBaker._values = real
+    assert max(sizes) <= B.SAMPLE_PIECE and sum(sizes) == 1 << 17
+    assert r.samples[0, 0] == 1 << 17
+
+
+def test_progress_follows_the_bakes_events_not_a_clock():
+    """Every chunk reports progress, however fast the machine: a fast bake still shows its middle."""
+    seen = []
+    bake_ao(plane(), [plane(z=0.3, uv=False, name="lid")], resolution=32, samples=16, chunk_rays=512,
+            tile_size=16, progress=seen.append, threads=1)
+    # 32 x 32 texels x 16 samples = 16384 texel-samples in chunks of 512: 32 chunks, plus the end.
+    assert len(seen) >= 32
+    assert seen == sorted(seen) and seen[-1] == 1.0
+    assert sum(0.2 < f < 0.8 for f in seen) >= 16
