@@ -1,0 +1,198 @@
+"""``scripts/bake_batch.py``: bake every .blend file of a manifest, one process per file.
+
+Exit status: 0 when every task succeeded (or was already done), 1 when any task failed, 2 for a bad
+manifest or bad arguments (nothing baked), 130 when interrupted.
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from core._version import __version__
+
+from .manifest import BATCH_SUMMARY, ManifestError, plan
+from .report import Progress, counts, table, write_json_atomic
+
+EPILOG = """\
+engines:
+  local      N processes at a time on this machine (default)
+  dask       a Dask LocalCluster of N worker processes on 127.0.0.1, or --scheduler ADDRESS
+  flamenco   write (--job-file) or submit (--manager URL) a Flamenco job of the tasks not done yet
+  openjd     write the parameters of farm/openjd/mc_ao_bake.yaml (--job-params) for openjd run or
+             a farm that runs Open Job Description (AWS Deadline Cloud)
+"""
+
+
+def default_workers():
+    return max(1, (os.cpu_count() or 1) // 2)
+
+
+def make_parser():
+    p = argparse.ArgumentParser(
+        prog="bake_batch.py", description="Bake AO of every .blend file in a manifest, one process per file.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("manifest", type=Path, help="the manifest (TOML): [defaults] and [[bake]] entries")
+    p.add_argument("--output", "-o", type=Path, required=True,
+                   help="output folder; each .blend file bakes into OUTPUT/<file stem>/")
+    p.add_argument("--runner", choices=("local", "dask", "flamenco", "openjd"), default="local")
+    p.add_argument("--workers", "-j", type=int, default=None,
+                   help=f"tasks at a time (local, dask); default: half the cores, here {default_workers()}")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="dask: connect to this scheduler (tcp://host:8786) instead of starting a local cluster")
+    p.add_argument("--force", action="store_true", help="bake every task, also those already done")
+    p.add_argument("--blender", default="auto", metavar="PATH|auto|bpy",
+                   help="the Blender executable that bakes; auto (default): $BLENDER or blender on the "
+                        "PATH, else the bpy module of this Python; bpy: the bpy module")
+    p.add_argument("--summary", type=Path, metavar="PATH",
+                   help=f"the batch's JSON summary (default: OUTPUT/{BATCH_SUMMARY}; none with --entry)")
+    p.add_argument("--entry", type=int, metavar="N", help="run only the N-th [[bake]] entry (1-based)")
+    p.add_argument("--verbose", "-v", action="store_true", help="also a line when a task starts")
+    p.add_argument("--quiet", "-q", action="store_true", help="only failures and the table")
+    farm = p.add_argument_group("farms")
+    farm.add_argument("--manager", metavar="URL", help="flamenco: submit to this Manager (http://host:8080)")
+    farm.add_argument("--job-file", type=Path, metavar="PATH", help="flamenco: write the job (JSON) here")
+    farm.add_argument("--job-name", help="flamenco: the job's name (default: mc_ao bake <manifest>)")
+    farm.add_argument("--farm-root", metavar="PATH",
+                      help="flamenco, openjd: this mc_ao checkout as the farm's machines see it (default: here)")
+    farm.add_argument("--job-params", type=Path, metavar="PATH", help="openjd: write the job parameters here")
+    return p
+
+
+def _blender_option(value):
+    return None if value in (None, "", "auto") else value
+
+
+def _fail(message, code=2):
+    print(f"bake_batch: error: {message}", file=sys.stderr)
+    return code
+
+
+def main(argv=None):
+    args = make_parser().parse_args(argv)
+    if args.workers is not None and args.workers < 1:
+        return _fail("--workers must be at least 1")
+    if args.scheduler and args.runner != "dask":
+        return _fail("--scheduler is for --runner dask")
+    workers = args.workers or default_workers()
+    threads = 0
+    if args.runner == "local" or (args.runner == "dask" and not args.scheduler):
+        threads = max(1, (os.cpu_count() or 1) // workers)
+    try:
+        tasks = plan(args.manifest, args.output, threads=threads)
+    except ManifestError as exc:
+        return _fail(str(exc))
+    if args.entry is not None:
+        if not 1 <= args.entry <= len(tasks):
+            return _fail(f"--entry {args.entry}: the manifest has entries 1 to {len(tasks)}")
+        tasks = [tasks[args.entry - 1]]
+
+    if args.runner == "flamenco":
+        return _flamenco(args, tasks)
+    if args.runner == "openjd":
+        return _openjd(args, tasks)
+
+    blender = _blender_option(args.blender)
+    if args.runner == "local" or not args.scheduler:
+        from .task import NoBakerError, find_baker
+
+        try:
+            kind, exe = find_baker(blender)
+        except NoBakerError as exc:
+            return _fail(str(exc))
+        if not args.quiet:
+            how = f"Blender {exe}" if kind == "blender" else f"the bpy module of {exe}"
+            print(f"bake_batch: {len(tasks)} tasks, {workers} at a time ({args.runner}), baked by {how}",
+                  flush=True)
+
+    progress = Progress(len(tasks), verbose=args.verbose, quiet=args.quiet)
+    start = time.monotonic()
+    records, code = [], 0
+    try:
+        if args.runner == "local":
+            from .runners import run_local
+
+            records = run_local(tasks, workers=workers, progress=progress, force=args.force, blender=blender)
+        else:
+            from .runners import run_dask
+
+            try:
+                records = run_dask(tasks, workers=workers, progress=progress, scheduler=args.scheduler,
+                                   force=args.force, blender=blender)
+            except (RuntimeError, OSError) as exc:
+                progress.close()
+                return _fail(str(exc))
+    except KeyboardInterrupt:
+        code = 130
+    finally:
+        progress.close()
+    if code == 0:
+        code = 1 if any(r["status"] == "failed" for r in records) else 0
+    seconds = time.monotonic() - start
+
+    summary_path = args.summary
+    if summary_path is None and args.entry is None:
+        summary_path = args.output / BATCH_SUMMARY
+    if summary_path is not None:
+        write_json_atomic(summary_path, {
+            "mc_ao": __version__, "manifest": str(args.manifest.resolve()), "output": str(args.output.resolve()),
+            "runner": args.runner, "workers": workers, "exit_code": code, "seconds": seconds,
+            "counts": counts(records), "tasks": sorted(records, key=lambda r: r["index"]),
+        })
+    if records:
+        print(table(records))
+    c = counts(records)
+    line = f"bake_batch: {c['ok']} baked, {c['skipped']} already done, {c['failed']} failed of {len(tasks)} in {seconds:.1f} s"
+    if code == 130:
+        line += "; interrupted"
+    if summary_path is not None:
+        line += f"; summary: {summary_path}"
+    print(line, flush=True)
+    return code
+
+
+def _flamenco(args, tasks):
+    from .farm import flamenco_job, submit_flamenco
+
+    if not args.manager and not args.job_file:
+        return _fail("--runner flamenco needs --manager URL (submit) or --job-file PATH (write)")
+    name = args.job_name or f"mc_ao bake {args.manifest.stem}"
+    job, skipped = flamenco_job(tasks, output=args.output.resolve(), name=name, mc_ao_root=args.farm_root,
+                                force=args.force)
+    todo = len(tasks) - len(skipped)
+    print(f"bake_batch: {todo} tasks to bake, {len(skipped)} already done")
+    if args.job_file:
+        write_json_atomic(args.job_file, job)
+        print(f"bake_batch: Flamenco job written to {args.job_file}")
+    if args.manager:
+        if not todo:
+            print("bake_batch: nothing to submit")
+            return 0
+        try:
+            answer = submit_flamenco(job, args.manager)
+        except RuntimeError as exc:
+            return _fail(str(exc), 1)
+        print(f"bake_batch: submitted job {answer.get('id', '?')} ({name}) to {args.manager}")
+    return 0
+
+
+def _openjd(args, tasks):
+    from .farm import OPENJD_TEMPLATE, openjd_parameters
+
+    if not args.job_params:
+        return _fail("--runner openjd needs --job-params PATH")
+    if args.entry is not None:
+        return _fail("--entry is what each Open Job Description task runs; leave it out here")
+    params = openjd_parameters(args.manifest, args.output, len(tasks), blender=args.blender,
+                               mc_ao_root=args.farm_root)
+    write_json_atomic(args.job_params, params)
+    print(f"bake_batch: job parameters written to {args.job_params}; run the {len(tasks)} tasks with\n"
+          f"  openjd run {OPENJD_TEMPLATE} -p file://{args.job_params.resolve()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,303 @@
+"""The batch manifest (TOML): reading it, checking every setting, and planning one task per .blend file.
+
+A manifest::
+
+    [defaults]              # any setting of scripts/bake_ao.py, as its option name with '_' for '-'
+    resolution = 1024
+    samples = 128
+    format = ["exr"]
+
+    [[bake]]
+    blend = "props/chair.blend"   # relative to the manifest's folder
+    objects = ["Chair"]           # optional: default, as bake_ao.py (every mesh with a UV map ...)
+    samples = 256                 # overrides [defaults] for this file
+
+Every setting is checked against ``scripts/bake_ao.py``'s own argument parser before anything runs,
+so an unknown name or a bad value stops the whole batch with exit status 2 and a message naming the
+entry; what only the bake can tell (an object missing from its file, a broken file) fails that task
+alone.
+
+Each task writes into ``OUTPUT/<folder>/``, ``<folder>`` being the .blend file's stem made safe by
+:func:`core.filenames.safe_file_stem`. Files whose stems clash (``a/chair.blend`` and
+``b/chair.blend``, or ``Chair`` and ``chair`` on a case-insensitive disk) all get a hash of their path
+relative to the manifest appended, so no task writes into another's folder and the folder a file gets
+does not depend on the order of the entries.
+"""
+
+import argparse
+import hashlib
+import importlib.util
+import json
+import os
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from core._version import __version__
+from core.filenames import safe_file_stem
+
+from . import BAKE_SCRIPT
+
+#: The batch summary's file name in the output folder; no task folder may take it.
+BATCH_SUMMARY = "mc_ao_batch.json"
+# bake_ao.py options the batch sets itself, per task; a manifest may not.
+_RUNNER_OPTIONS = {"output", "summary_json", "quiet", "blend"}
+# bake_ao.py options that do not change a single output byte (the bake is bit-identical for any
+# thread count): left out of a task's fingerprint.
+_NO_EFFECT = {"threads", "quiet", "output", "summary_json", "blend"}
+_ENTRY_KEYS = {"blend"}
+
+
+class ManifestError(Exception):
+    """A manifest that cannot be run: exit status 2, nothing baked."""
+
+
+@dataclass
+class Task:
+    """One .blend file to bake: everything a process anywhere needs to run it (JSON-able)."""
+
+    index: int               # 1-based position in the manifest's [[bake]] list
+    name: str                # the task's folder under the output folder
+    blend: str               # absolute path of the .blend file
+    blend_given: str         # the path as the manifest gives it
+    output: str              # absolute path of OUTPUT/<name>
+    args: list               # bake_ao.py settings (no --output, --summary-json, --quiet, --threads)
+    threads: int = 0         # --threads for the bake; 0 = all cores of the machine that runs it
+    fingerprint: str = ""    # hash of everything that decides the output's bytes
+    objects: list = field(default_factory=list)  # the objects the entry names ([] = bake_ao's default)
+
+    @property
+    def summary(self):
+        """Where bake_ao.py writes this task's --summary-json: its name carries the fingerprint."""
+        return os.path.join(self.output, f"mc_ao-{self.fingerprint[:16]}.json")
+
+    @property
+    def log(self):
+        return os.path.join(self.output, f"mc_ao-{self.fingerprint[:16]}.log")
+
+    def to_dict(self):
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data):
+        return cls(**data)
+
+
+class _Parser(argparse.ArgumentParser):
+    """bake_ao.py's parser, raising instead of printing usage and exiting."""
+
+    def error(self, message):
+        raise ManifestError(message)
+
+
+_BAKE_MODULE = None
+
+
+def bake_script_module():
+    """scripts/bake_ao.py as a module (it imports no bpy at load time), for its argument parser."""
+    global _BAKE_MODULE
+    if _BAKE_MODULE is None:
+        spec = importlib.util.spec_from_file_location("mc_ao_bake_ao_script", BAKE_SCRIPT)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        _BAKE_MODULE = module
+    return _BAKE_MODULE
+
+
+def bake_parser():
+    """bake_ao.py's parser for a plain Python (with the .blend file as its first argument)."""
+    parser = bake_script_module().make_parser(with_blend=True)
+    parser.__class__ = _Parser
+    # argparse reports type errors through parser.error too; "exit_on_error" keeps it from exiting
+    parser.exit_on_error = False
+    return parser
+
+
+def settings_spec():
+    """bake_ao.py's settings a manifest may set: ``name -> argparse action``."""
+    spec = {}
+    for action in bake_parser()._actions:
+        if not action.option_strings or action.dest in _RUNNER_OPTIONS or action.dest == "help":
+            continue
+        spec[action.dest] = action
+    return spec
+
+
+def _option(action):
+    return next(s for s in action.option_strings if s.startswith("--"))
+
+
+def _value_args(where, key, value, action):
+    """The command-line words for one manifest setting."""
+    flag = _option(action)
+    if isinstance(action, argparse._StoreTrueAction):
+        if not isinstance(value, bool):
+            raise ManifestError(f"{where}: {key} must be true or false, not {value!r}")
+        return [flag] if value else []
+    if isinstance(value, dict):
+        raise ManifestError(f"{where}: {key} must be a value or a list, not a table")
+    if action.nargs in ("+", "*"):
+        values = value if isinstance(value, list) else [value]
+        if not values and action.nargs == "+":
+            raise ManifestError(f"{where}: {key} must not be empty")
+    else:
+        if isinstance(value, list):
+            if key == "resolution" and len(value) == 2 and all(isinstance(v, int) for v in value):
+                value = f"{value[0]}x{value[1]}"
+            else:
+                raise ManifestError(f"{where}: {key} takes one value, not a list")
+        if isinstance(value, bool):
+            raise ManifestError(f"{where}: {key} takes a value, not {str(value).lower()}")
+        values = [value]
+    for v in values:
+        if isinstance(v, (dict, list)) or isinstance(v, bool):
+            raise ManifestError(f"{where}: {key}: {v!r} is not a plain value")
+    return [flag] + [_word(v) for v in values]
+
+
+def _word(value):
+    if isinstance(value, float):
+        return repr(value)  # 'inf', '0.01': what float() reads back exactly
+    return str(value)
+
+
+def _check_keys(where, table, spec, allowed_extra):
+    for key in table:
+        if key in spec or key in allowed_extra:
+            continue
+        hint = ""
+        if key.replace("-", "_") in spec:
+            hint = f" (write it {key.replace('-', '_')!r})"
+        elif key in _RUNNER_OPTIONS:
+            hint = " (the batch sets it for each task)"
+        raise ManifestError(
+            f"{where}: unknown setting {key!r}{hint}; settings: {', '.join(sorted(spec))}"
+        )
+
+
+def load(path):
+    """Read a manifest file: ``(defaults, entries)`` as plain dicts, checked for shape only."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise ManifestError(f"no such manifest: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ManifestError(f"{path}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ManifestError(f"cannot read the manifest {path}: {exc.strerror or exc}") from None
+    unknown = set(data) - {"defaults", "bake"}
+    if unknown:
+        raise ManifestError(
+            f"{path}: unknown table {', '.join(sorted(unknown))!s}; a manifest has [defaults] and [[bake]] entries"
+        )
+    defaults = data.get("defaults", {})
+    entries = data.get("bake", [])
+    if not isinstance(defaults, dict):
+        raise ManifestError(f"{path}: defaults must be a table ([defaults])")
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ManifestError(f"{path}: bake must be an array of tables ([[bake]])")
+    if not entries:
+        raise ManifestError(f"{path}: no [[bake]] entries")
+    return defaults, entries
+
+
+def _blend_identity(path):
+    """Size and modification time of the .blend file (None when it is missing: the task will say so)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def _fingerprint(blend_given, identity, namespace):
+    settings = {k: v for k, v in vars(namespace).items() if k not in _NO_EFFECT}
+    record = {"mc_ao": __version__, "blend": blend_given, "file": identity, "settings": settings}
+    text = json.dumps(record, sort_keys=True, default=lambda v: list(v) if isinstance(v, tuple) else str(v))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _folder_names(entries):
+    """``blend_given -> folder name``: safe stems, and a path hash on every stem that clashes."""
+    stems = {e: safe_file_stem(Path(e).stem or "blend") for e in entries}
+    groups = {}
+    for e, s in stems.items():
+        groups.setdefault(s.casefold(), []).append(e)
+    names = {}
+    for key, members in groups.items():
+        clash = len(members) > 1 or key == BATCH_SUMMARY.casefold()
+        for e in members:
+            if clash:
+                tag = hashlib.sha256(Path(e).as_posix().encode()).hexdigest()[:8]
+                names[e] = safe_file_stem(f"{stems[e]}-{tag}")
+            else:
+                names[e] = stems[e]
+    return names
+
+
+def plan(manifest_path, output, *, threads=0):
+    """The tasks of a manifest, every setting checked: a list of :class:`Task`.
+
+    ``threads``: --threads for tasks whose entry does not set it (0 = all cores).
+    Raises :class:`ManifestError` for anything that stops the whole batch.
+    """
+    manifest_path = Path(manifest_path)
+    defaults, entries = load(manifest_path)
+    spec = settings_spec()
+    base = manifest_path.resolve().parent
+    output = Path(output).resolve()
+
+    where = f"{manifest_path}: [defaults]"
+    _check_keys(where, defaults, spec, set())
+    if "objects" in defaults:
+        raise ManifestError(f"{where}: objects belong to a [[bake]] entry, not to [defaults]")
+
+    given, seen = [], {}
+    for n, entry in enumerate(entries, 1):
+        where = f"{manifest_path}: [[bake]] entry {n}"
+        blend = entry.get("blend")
+        if not isinstance(blend, str) or not blend.strip():
+            raise ManifestError(f"{where}: blend = \"path/to/file.blend\" is required")
+        where += f" ({blend})"
+        _check_keys(where, entry, spec, _ENTRY_KEYS)
+        resolved = os.path.normpath(base / os.path.expanduser(blend))
+        if resolved in seen:
+            raise ManifestError(
+                f"{where}: the same file as entry {seen[resolved]}; one entry per .blend file "
+                "(list all its objects in one entry)"
+            )
+        seen[resolved] = n
+        given.append(blend)
+    names = _folder_names(given)
+
+    parser = bake_parser()
+    tasks = []
+    for n, entry in enumerate(entries, 1):
+        blend = entry["blend"]
+        where = f"{manifest_path}: [[bake]] entry {n} ({blend})"
+        settings = dict(defaults)
+        settings.update({k: v for k, v in entry.items() if k not in _ENTRY_KEYS})
+        args = []
+        for key in sorted(settings):
+            args += _value_args(where, key, settings[key], spec[key])
+        blend_path = os.path.normpath(base / os.path.expanduser(blend))
+        try:
+            namespace = parser.parse_args([blend_path] + args)
+        except (ManifestError, argparse.ArgumentError) as exc:
+            raise ManifestError(f"{where}: {exc}") from None
+        task_threads = threads
+        if "threads" in settings:
+            # the runner passes --threads itself, for every task
+            task_threads = namespace.threads
+            i = args.index("--threads")
+            del args[i:i + 2]
+        objects = list(namespace.objects or [])
+        task = Task(
+            index=n, name=names[blend], blend=blend_path, blend_given=blend,
+            output=str(output / names[blend]), args=args, threads=task_threads, objects=objects,
+        )
+        task.fingerprint = _fingerprint(Path(blend).as_posix(), _blend_identity(blend_path), namespace)
+        tasks.append(task)
+    return tasks

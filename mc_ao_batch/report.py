@@ -1,0 +1,133 @@
+"""What a batch shows and keeps: a progress bar (or a line per task in a log), the table, the JSON summary."""
+
+import json
+import os
+import sys
+import tempfile
+import time
+
+STATUS_WORDS = {"ok": "ok", "skipped": "skipped (done)", "failed": "FAILED"}
+
+
+class Progress:
+    """Redrawn on the runner's events (a task started or ended), never on a clock.
+
+    On a terminal: one bar line on stderr, with finished lines printed above it. Elsewhere (a log,
+    a farm's task output): a line per finished task on stdout, which is the progress there.
+    """
+
+    def __init__(self, total, stream=None, out=None, verbose=False, quiet=False):
+        self.total = total
+        self.stream = stream or sys.stderr
+        self.out = out or sys.stdout
+        self.tty = self.stream.isatty() and not quiet
+        self.verbose = verbose
+        self.quiet = quiet
+        self.done = self.failed = self.skipped = self.running = 0
+        self.start = time.monotonic()
+        self._drawn = False
+
+    def _clear(self):
+        if self._drawn:
+            self.stream.write("\r\x1b[2K")
+            self._drawn = False
+
+    def _draw(self):
+        if not self.tty:
+            return
+        width = 30
+        filled = int(width * self.done / max(self.total, 1))
+        text = (f"[{'#' * filled}{'-' * (width - filled)}] {self.done}/{self.total} tasks"
+                f", {self.running} running")
+        if self.skipped:
+            text += f", {self.skipped} skipped"
+        if self.failed:
+            text += f", {self.failed} failed"
+        text += f"  {time.monotonic() - self.start:.0f} s"
+        self.stream.write("\r\x1b[2K" + text)
+        self.stream.flush()
+        self._drawn = True
+
+    def line(self, text):
+        self._clear()
+        print(text, file=self.out, flush=True)
+        self._draw()
+
+    def started(self, info):
+        self.running += 1
+        if self.verbose:
+            self.line(f"bake_batch: started {info['task']} on {info.get('host')} "
+                      f"(worker pid {info.get('pid')}, bake pid {info.get('bake_pid')})")
+        else:
+            self._draw()
+
+    def finished(self, record):
+        self.done += 1
+        if record["status"] != "skipped":
+            self.running = max(0, self.running - 1)
+        self.failed += record["status"] == "failed"
+        self.skipped += record["status"] == "skipped"
+        if not self.quiet or record["status"] == "failed":
+            text = f"[{self.done}/{self.total}] {record['task']}: {STATUS_WORDS[record['status']]}"
+            if record["status"] != "skipped":
+                text += f", {len(record['objects'])} objects, {record['seconds']:.1f} s"
+            if record["error"]:
+                text += ": " + record["error"].splitlines()[0]
+            self.line(text)
+        else:
+            self._draw()
+
+    def close(self):
+        self._clear()
+        self.stream.flush()
+
+
+def _mrays(record):
+    return record["rays"] / record["bake_seconds"] / 1e6 if record["bake_seconds"] > 0 else 0.0
+
+
+def table(records):
+    """The end-of-run table: one row per task, then the errors in full."""
+    header = ("#", "asset", "status", "objects", "seconds", "Mrays/s", "files")
+    rows = []
+    for r in sorted(records, key=lambda r: r["index"]):
+        rows.append((str(r["index"]), r["task"], STATUS_WORDS[r["status"]], str(len(r["objects"])),
+                     f"{r['seconds']:.1f}", f"{_mrays(r):.2f}" if r["status"] == "ok" else "-",
+                     str(len(r["files"]))))
+    widths = [max(len(row[i]) for row in rows + [header]) for i in range(len(header))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip() for row in [header] + rows]
+    failed = [r for r in sorted(records, key=lambda r: r["index"]) if r["status"] == "failed"]
+    if failed:
+        lines.append("")
+        for r in failed:
+            lines.append(f"{r['task']} ({r['blend']}) failed: {r['error']}")
+            lines.append(f"  log: {r['log']}")
+    return "\n".join(lines)
+
+
+def counts(records):
+    out = {"ok": 0, "skipped": 0, "failed": 0}
+    for r in records:
+        out[r["status"]] += 1
+    return out
+
+
+def write_json_atomic(path, data):
+    """Write JSON to ``path`` through a temporary file in the same folder and a rename."""
+    path = os.path.abspath(path)
+    folder = os.path.dirname(path)
+    os.makedirs(folder, exist_ok=True)
+    fd, temp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(data, f, indent=1, sort_keys=False)
+            f.write("\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(temp, path)
+    except BaseException:
+        try:
+            os.remove(temp)
+        except OSError:
+            pass
+        raise

@@ -1,0 +1,168 @@
+"""The engines that run batch tasks: a pool of local processes, and Dask. Neither schedules anything itself.
+
+Both call :func:`mc_ao_batch.task.run_task` once per task and feed the caller's progress from the
+tasks' own events (started, finished), in the main thread.
+
+- local: ``concurrent.futures`` threads, each waiting on one task's process; N at a time.
+- dask: ``distributed``; a ``LocalCluster`` of N single-threaded worker processes on 127.0.0.1, or a
+  running scheduler. A task whose worker dies is run again on another worker by Dask's scheduler (up
+  to :data:`ALLOWED_FAILURES` times for a local cluster; a scheduler of your own has its own
+  ``distributed.scheduler.allowed-failures``); the record says how many tries it took.
+"""
+
+import logging
+import os
+import queue
+import threading
+import traceback
+from concurrent.futures import ThreadPoolExecutor
+
+from .task import _record, run_task
+
+#: Worker deaths one task may see before Dask gives up on it (``allowed-failures``).
+ALLOWED_FAILURES = 3
+TOPIC = "mc_ao-batch"
+
+
+def _bug_record(task, exc):
+    text = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)).rstrip()
+    return _record(task, "failed", error=f"internal error in the batch runner:\n{text}")
+
+
+def run_local(tasks, *, workers, progress, force=False, blender=None):
+    """Run ``tasks`` N at a time, each in its own process; return their records."""
+    events = queue.Queue()
+    running = {}
+    lock = threading.Lock()
+    stopping = threading.Event()
+
+    def one(task):
+        if stopping.is_set():
+            events.put(("done", _record(task, "failed", error="cancelled before it started")))
+            return
+
+        def on_process(proc):
+            with lock:
+                running[task.index] = proc
+            if stopping.is_set():
+                proc.stdin.close()
+
+        try:
+            record = run_task(task, force=force, blender=blender, on_process=on_process,
+                              on_start=lambda info: events.put(("started", info)))
+        except BaseException as exc:  # a bug here must not hang the batch
+            record = _bug_record(task, exc)
+        with lock:
+            running.pop(task.index, None)
+        events.put(("done", record))
+
+    records = []
+    pool = ThreadPoolExecutor(max_workers=max(1, workers), thread_name_prefix="mc_ao-batch")
+    try:
+        for task in tasks:
+            pool.submit(one, task)
+        while len(records) < len(tasks):
+            kind, payload = events.get()
+            if kind == "started":
+                progress.started(payload)
+            else:
+                records.append(payload)
+                progress.finished(payload)
+    except KeyboardInterrupt:
+        stopping.set()
+        with lock:
+            for proc in running.values():
+                try:
+                    proc.stdin.close()  # the guard ends the bake
+                except OSError:
+                    pass
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+    return records
+
+
+def _dask_task(task, force, blender):
+    """Runs on a Dask worker: the task, reporting its start on the batch's event topic."""
+    from distributed import get_worker
+
+    worker = get_worker()
+
+    def on_start(info):
+        info = dict(info, worker=worker.address)
+        worker.log_event(TOPIC, info)
+
+    return run_task(task, force=force, blender=blender, on_start=on_start)
+
+
+def _suspicious_counts(dask_scheduler, keys):
+    out = {}
+    for key in keys:
+        ts = dask_scheduler.tasks.get(key)
+        out[key] = ts.suspicious if ts is not None else 0
+    return out
+
+
+def start_local_cluster(workers):
+    """A ``LocalCluster`` of ``workers`` single-threaded worker processes, listening on 127.0.0.1 only."""
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
+        return LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+            dashboard_address=None, silence_logs=logging.ERROR,
+        )
+
+
+def run_dask(tasks, *, workers, progress, scheduler=None, force=False, blender=None):
+    """Run ``tasks`` on Dask: a local cluster of ``workers`` processes, or the scheduler at ``scheduler``."""
+    try:
+        from distributed import Client
+        from distributed.client import FutureCancelledError
+        from distributed.scheduler import KilledWorker
+    except ImportError:
+        raise RuntimeError(
+            "--runner dask needs the distributed package: pip install -r requirements-batch.txt"
+        ) from None
+
+    cluster = None if scheduler else start_local_cluster(workers)
+    client = Client(scheduler or cluster, timeout="60s")
+    events = queue.Queue()
+    try:
+        client.subscribe_topic(TOPIC, lambda event: events.put(("started", event[1])))
+        futures = {}
+        for task in tasks:
+            future = client.submit(_dask_task, task.to_dict(), force, blender, pure=False,
+                                   key=f"mc_ao-bake-{task.index}-{os.urandom(4).hex()}")
+            futures[future.key] = (future, task)
+            future.add_done_callback(lambda f: events.put(("done", f.key)))
+
+        records = {}
+        while len(records) < len(tasks):
+            kind, payload = events.get()
+            if kind == "started":
+                progress.started(payload)
+                continue
+            future, task = futures[payload]
+            if payload in records:
+                continue
+            try:
+                record = future.result()
+            except KilledWorker as exc:
+                record = _record(task, "failed", error=(
+                    f"the worker running it died {ALLOWED_FAILURES} times (Dask gave up on it): {exc}"))
+            except FutureCancelledError:
+                record = _record(task, "failed", error="cancelled")
+            except Exception as exc:
+                record = _bug_record(task, exc)
+            records[payload] = record
+            progress.finished(record)
+        counts = client.run_on_scheduler(_suspicious_counts, keys=list(futures))
+        for key, record in records.items():
+            record["attempts"] = (counts.get(key, 0) + 1) if record["status"] != "skipped" else 0
+        return [records[k] for k in futures]
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
