@@ -207,6 +207,9 @@ def _make_spec(oiio, ext, shape, oiio_type, metadata):
         spec.attribute("oiio:UnassociatedAlpha", 1)
     spec.attribute("oiio:ColorSpace", COLOR_SPACE)
     spec.attribute("Software", f"mc_ao {__version__}")
+    # No write time: OpenImageIO stamps EXR and TIFF files with one unless DateTime is set (to ""
+    # here, which writes none), and a rebake must give the same bytes (farm retries compare them).
+    spec.attribute("DateTime", "")
     if ext in (".exr", ".tif", ".tiff"):
         spec.attribute("compression", "zip")  # lossless, whatever OIIO's default becomes
     for key, value in metadata.items():
