@@ -112,7 +112,10 @@ def why_not_done(task):
         files = obj.get("files") or []
         if not files:
             return f"{obj.get('object')}: no files recorded"
-        for path in files:
+        for recorded in files:
+            # bake_ao.py writes flat into the task's folder: look there, so that an output folder
+            # that was moved or mounted elsewhere still counts as done
+            path = os.path.join(task.output, os.path.basename(recorded))
             if not os.path.isfile(path):
                 return f"{path} is missing"
             try:
@@ -138,10 +141,12 @@ def _record(task, status, **fields):
     return record
 
 
-def _from_summary(record, summary):
+def _from_summary(record, summary, task):
     objects = summary.get("objects") or []
+    for o in objects:
+        o["files"] = [os.path.join(task.output, os.path.basename(f)) for f in (o.get("files") or [])]
     record["objects"] = objects
-    record["files"] = [f for o in objects for f in (o.get("files") or [])]
+    record["files"] = [f for o in objects for f in o["files"]]
     record["rays"] = int(sum(o.get("rays") or 0 for o in objects))
     record["bake_seconds"] = float(sum(o.get("seconds") or 0.0 for o in objects))
     return record
@@ -209,7 +214,7 @@ def run_task(task, *, force=False, blender=None, on_start=None, on_process=None)
         reason = why_not_done(task)
         if reason is None:
             record = _record(task, "skipped", exit_code=0, attempts=0)
-            _from_summary(record, read_summary(task.summary))
+            _from_summary(record, read_summary(task.summary), task)
             record["seconds"] = time.perf_counter() - t0
             return record
     try:
@@ -254,7 +259,7 @@ def run_task(task, *, force=False, blender=None, on_start=None, on_process=None)
         and bool(summary.get("objects")) and all(o.get("status") == "ok" for o in summary["objects"])
     record = _record(task, "ok" if ok else "failed", exit_code=code)
     if summary is not None:
-        _from_summary(record, summary)
+        _from_summary(record, summary, task)
     if not ok:
         record["error"] = _failure_text(code, summary, task.log)
     else:
