@@ -196,12 +196,30 @@ def test_force_bakes_again_and_gives_the_same_bytes(library, local_run, tmp_path
         max(p.stat().st_mtime_ns for p in (out / "chair").glob("*_AO.*"))
 
 
-def _stopped(pid):
+def _state(pid):
     try:
         with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] == "T"
+            return f.read().rsplit(")", 1)[1].split()[0]
     except OSError:
+        return None
+
+
+def _freeze(group):
+    """SIGSTOP a task's process group; True once its leader (the guard) is stopped, False when the
+    task had ended already. Signals arrive asynchronously: wait for the state to show it."""
+    try:
+        os.killpg(group, signal.SIGSTOP)
+    except ProcessLookupError:
         return False
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        state = _state(group)
+        if state in (None, "Z", "X"):
+            return False
+        if state in ("T", "t"):
+            return True
+        time.sleep(0.001)
+    raise AssertionError(f"process group {group} did not stop")
 
 
 def _group_alive(pgid):
@@ -246,13 +264,8 @@ def test_killing_a_dask_worker_mid_run_still_completes_the_batch(library, local_
             m = STARTED.match(line.rstrip("\n"))
             if killed is None and m and m.group("task") != "broken":
                 group, worker = int(m.group("bake")), int(m.group("pid"))
-                try:
-                    os.killpg(group, signal.SIGSTOP)
-                except ProcessLookupError:
+                if not _freeze(group):
                     continue  # it finished already: wait for the next task
-                if not _stopped(group):
-                    os.killpg(group, signal.SIGCONT)
-                    continue
                 os.kill(worker, signal.SIGKILL)
                 os.killpg(group, signal.SIGCONT)
                 killed = (m.group("task"), worker, group)
@@ -302,18 +315,24 @@ def test_blender_command_line_bakes_the_same_files(library, local_run, tmp_path)
 
 
 def test_interrupt_stops_the_running_bakes(library, tmp_path):
+    """Ctrl-C while a bake runs: the batch exits 130 and that bake never finishes.
+
+    The bake is frozen when its task says it started, so it cannot finish before the runner has
+    been interrupted; once thawed, its guard sees the runner's pipe closed and ends it.
+    """
     proc = subprocess.Popen(
-        [sys.executable, str(BATCH), str(library), "--output", str(tmp_path), "--workers", "2",
+        [sys.executable, str(BATCH), str(library), "--output", str(tmp_path), "--workers", "1",
          "--blender", "bpy", "--verbose"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     watchdog = threading.Timer(300, proc.kill)
     watchdog.start()
     try:
-        groups = []
         for line in proc.stdout:
             m = STARTED.match(line.rstrip("\n"))
             if m:
-                groups.append(int(m.group("bake")))
+                task, group = m.group("task"), int(m.group("bake"))
+                assert _freeze(group)
                 proc.send_signal(signal.SIGINT)
+                os.killpg(group, signal.SIGCONT)
                 break
         out, err = proc.communicate()
     finally:
@@ -321,11 +340,12 @@ def test_interrupt_stops_the_running_bakes(library, tmp_path):
     assert proc.returncode == 130, out + err
     assert "interrupted" in out
     data, _ = summary(tmp_path)
-    assert data["exit_code"] == 130
+    assert data["exit_code"] == 130 and data["tasks"] == []
     deadline = time.monotonic() + 60
-    while any(map(_group_alive, groups)) and time.monotonic() < deadline:
+    while _group_alive(group) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not any(map(_group_alive, groups))
+    assert not _group_alive(group)
+    assert not list((tmp_path / task).glob("mc_ao-*.json")), "the interrupted bake ran to its end"
 
 
 @pytest.mark.parametrize("text, message", [
