@@ -5,7 +5,6 @@ manifest or bad arguments (nothing baked), 130 when interrupted.
 """
 
 import argparse
-import json
 import os
 import sys
 import time

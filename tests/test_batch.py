@@ -24,46 +24,11 @@ from mc_ao_batch import cli
 from mc_ao_batch.manifest import plan
 from mc_ao_batch.task import why_not_done
 
-pytest.importorskip("bpy")
+from batch_helpers import (  # noqa: F401 (library, local_run: fixtures)
+    BATCH, IMAGE_SUFFIXES, ROOT, STARTED, batch, images, library, local_run, sub_manifest, summary,
+)
+
 pytestmark = pytest.mark.blender
-
-ROOT = Path(__file__).resolve().parent.parent
-BATCH = ROOT / "scripts" / "bake_batch.py"
-GOOD = ["chair", "lamp-*", "lamp-*", "crate v2_-*", "torus"]
-IMAGE_SUFFIXES = (".png", ".exr", ".tif")
-STARTED = re.compile(r"^bake_batch: started (?P<task>.+) on \S+ \(worker pid (?P<pid>\d+), bake pid (?P<bake>\d+)\)$")
-
-
-def batch(*args, timeout=600):
-    return subprocess.run([sys.executable, str(BATCH), *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
-
-
-def images(folder):
-    """Every image file under ``folder``: relative path -> bytes."""
-    folder = Path(folder)
-    return {p.relative_to(folder).as_posix(): p.read_bytes()
-            for p in sorted(folder.rglob("*")) if p.suffix in IMAGE_SUFFIXES}
-
-
-def summary(folder):
-    data = json.loads((Path(folder) / "mc_ao_batch.json").read_text())
-    return data, {t["blend"]: t for t in data["tasks"]}
-
-
-@pytest.fixture(scope="module")
-def library(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("library")
-    subprocess.run([sys.executable, str(ROOT / "tests" / "batch_assets.py"), str(folder)], check=True,
-                   capture_output=True, timeout=300)
-    return folder / "manifest.toml"
-
-
-@pytest.fixture(scope="module")
-def local_run(library, tmp_path_factory):
-    out = tmp_path_factory.mktemp("local") / "out"
-    proc = batch(library, "--output", out, "--runner", "local", "--workers", 2, "--blender", "bpy")
-    return out, proc
 
 
 def test_local_runner_bakes_every_asset_and_the_broken_one_fails_alone(local_run):
@@ -298,10 +263,7 @@ def test_blender_command_line_bakes_the_same_files(library, local_run, tmp_path)
     blender = tmp_path / "blender"
     blender.write_text(f'#!/bin/sh\nexec "{sys.executable}" "{ROOT / "tests" / "batch_blender_cli.py"}" "$@"\n')
     blender.chmod(0o755)
-    manifest = library.parent / "three.toml"
-    text = library.read_text()
-    keep = [e for e in text.split("[[bake]]")[1:] if any(n in e for n in ("chair", "torus", "broken"))]
-    manifest.write_text(text.split("[[bake]]")[0] + "".join("[[bake]]" + e for e in keep))
+    manifest = sub_manifest(library, {"chair.blend", "torus.blend", "broken.blend"}, "three.toml")
     proc = batch(manifest, "--output", tmp_path / "out", "--workers", 2, "--blender", blender)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     assert f"baked by Blender {blender}" in proc.stdout
