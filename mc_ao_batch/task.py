@@ -21,6 +21,7 @@ import glob
 import json
 import math
 import os
+import re
 import shutil
 import signal
 import socket
@@ -73,7 +74,9 @@ def bake_command(task, baker):
         "--output", task.output, "--summary-json", task.summary, "--threads", str(task.threads), "--quiet",
     ]
     if kind == "blender":
-        return [exe, "--background", "--factory-startup", task.blend, "--python-exit-code", "1",
+        # no --factory-startup: it would leave the user's preferences unread, and with them the mc_ao
+        # extension whose bundled embreex the bake needs
+        return [exe, "--background", task.blend, "--python-exit-code", "1",
                 "--python", str(BAKE_SCRIPT), "--"] + tail
     return [exe, str(BAKE_SCRIPT), task.blend] + tail
 
@@ -183,9 +186,15 @@ def _failure_text(code, summary, log):
         if code != 0:
             return f"the bake exited with status {code}"
         return "the bake finished without baking any object"
+    # No summary: the process died, or Blender stopped before the script ran (a file it cannot
+    # read). Lead with the last line that says what went wrong; the log's end follows.
     tail = _log_tail(log)
-    text = f"the bake process exited with status {code}{_signal_name(code)} and wrote no summary"
-    return text + (f"; its last output:\n{tail}" if tail else f"; see {log}")
+    lines = [line for line in tail.splitlines() if not line.startswith("$ ")]
+    reason = next((line.strip() for line in reversed(lines) if re.search(r"error|exception|fatal", line, re.I)), "")
+    text = f"the bake process exited with status {code}{_signal_name(code)} before writing its summary"
+    if reason:
+        text += f": {reason}"
+    return text + (f"\nits last output:\n" + "\n".join(lines) if lines else f"; see {log}")
 
 
 def _remove_stale(task):

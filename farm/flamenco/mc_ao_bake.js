@@ -12,7 +12,7 @@
 // scripts/bake_ao.py on that file, the same entry point and arguments as bake_batch.py's local
 // runner:
 //
-//   {blender} {blenderArgs} --background --factory-startup FILE --python-exit-code 1
+//   {blender} {blenderArgs} --background FILE --python-exit-code 1
 //       --python MC_AO_ROOT/scripts/bake_ao.py -- SETTINGS --output OUTPUT_ROOT/NAME
 //       --summary-json OUTPUT_ROOT/NAME/mc_ao-FINGERPRINT.json --threads N --quiet
 //
@@ -64,7 +64,7 @@ function authorBakeTask(entry, script, outputRoot) {
     task.addCommand(author.Command("blender-render", {
         exe: "{blender}",
         exeArgs: "{blenderArgs}",
-        argsBefore: ["--background", "--factory-startup"],
+        argsBefore: ["--background"],
         blendfile: entry.blend,
         args: args,
     }));

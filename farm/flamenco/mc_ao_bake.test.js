@@ -51,7 +51,7 @@ test("one blender-render task per .blend file, running bake_ao.py on it", functi
     assert.deepStrictEqual(chair.commands[0].parameters, {
         exe: "{blender}",
         exeArgs: "{blenderArgs}",
-        argsBefore: ["--background", "--factory-startup"],
+        argsBefore: ["--background"],
         blendfile: "/library/props/chair.blend",
         args: [
             "--python-exit-code", "1", "--python", "/farm/mc_ao/scripts/bake_ao.py", "--",
