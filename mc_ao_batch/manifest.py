@@ -83,13 +83,6 @@ class Task:
         return cls(**data)
 
 
-class _Parser(argparse.ArgumentParser):
-    """bake_ao.py's parser, raising instead of printing usage and exiting."""
-
-    def error(self, message):
-        raise ManifestError(message)
-
-
 _BAKE_MODULE = None
 
 
@@ -105,12 +98,28 @@ def bake_script_module():
 
 
 def bake_parser():
-    """bake_ao.py's parser for a plain Python (with the .blend file as its first argument)."""
+    """bake_ao.py's parser for a plain Python (the .blend file first), raising ManifestError on a bad argument."""
     parser = bake_script_module().make_parser(with_blend=True)
-    parser.__class__ = _Parser
-    # argparse reports type errors through parser.error too; "exit_on_error" keeps it from exiting
-    parser.exit_on_error = False
+
+    class Parser(type(parser)):
+        def error(self, message):
+            raise ManifestError(message)
+
+    parser.__class__ = Parser
+    parser.exit_on_error = False  # a value argparse cannot convert raises instead of exiting
     return parser
+
+
+def check_settings(namespace):
+    """bake_ao.py's own check of every setting's value (ranges, formats and bit depths), where it has one."""
+    module = bake_script_module()
+    check = getattr(module, "settings_from", None)
+    if check is None:
+        return
+    try:
+        check(namespace)
+    except getattr(module, "UsageError", ManifestError) as exc:
+        raise ManifestError(str(exc).replace("\n", "; ")) from None
 
 
 def settings_spec():
@@ -285,6 +294,7 @@ def plan(manifest_path, output, *, threads=0):
         blend_path = os.path.normpath(base / os.path.expanduser(blend))
         try:
             namespace = parser.parse_args([blend_path] + args)
+            check_settings(namespace)
         except (ManifestError, argparse.ArgumentError) as exc:
             raise ManifestError(f"{where}: {exc}") from None
         task_threads = threads

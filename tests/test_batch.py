@@ -349,3 +349,58 @@ def test_folder_names_do_not_depend_on_order_and_avoid_the_summary(tmp_path):
     assert names["a/Chair.blend"].startswith("Chair-") and names["b/chair.blend"].startswith("chair-")
     assert names["a/Chair.blend"].casefold() != names["b/chair.blend"].casefold()
     assert names["mc_ao_batch.json.blend"].startswith("mc_ao_batch.json-")
+
+
+def test_dask_runner_uses_a_running_scheduler(library, local_run, tmp_path):
+    """--scheduler: the tasks go to a cluster someone else started (here one on 127.0.0.1)."""
+    from distributed import Client, LocalCluster
+
+    out, _ = local_run
+    manifest = sub_manifest(library, {"chair.blend", "broken.blend"}, "scheduler.toml")
+    with LocalCluster(n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None) as cluster:
+        proc = batch(manifest, "--output", tmp_path, "--runner", "dask", "--scheduler", cluster.scheduler_address,
+                     "--blender", "bpy")
+        with Client(cluster) as client:
+            worker_pids = set(client.run(os.getpid).values())
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    data, tasks = summary(tmp_path)
+    assert data["runner"] == "dask" and data["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
+    assert "cannot open" in tasks["broken.blend"]["error"]
+    assert {t["pid"] for t in data["tasks"]} <= worker_pids  # run by that cluster's worker
+    assert images(tmp_path / "chair") == images(out / "chair")
+
+
+class _Terminal:
+    """A stream that says it is a terminal, keeping what is written."""
+
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+
+def test_progress_bar_on_a_terminal_follows_the_tasks_events():
+    from mc_ao_batch.report import Progress
+
+    bar, out = _Terminal(), _Terminal()
+    progress = Progress(4, stream=bar, out=out)
+    progress.started({"task": "a", "host": "h", "pid": 1, "bake_pid": 2})
+    assert bar.text.endswith("[------------------------------] 0/4 tasks, 1 running" + bar.text[bar.text.rindex("  "):])
+    record = {"task": "a", "status": "ok", "objects": [{}, {}], "seconds": 1.25, "error": None}
+    progress.finished(record)
+    assert "[1/4] a: ok, 2 objects, 1.2 s\n" in out.text
+    assert "[#######-----------------------] 1/4 tasks, 0 running" in bar.text
+    progress.finished(dict(record, task="b", status="failed", error="cannot open b.blend\nmore"))
+    assert "[2/4] b: FAILED, 2 objects, 1.2 s: cannot open b.blend\n" in out.text
+    assert "2/4 tasks, 0 running, 1 failed" in bar.text
+    progress.finished(dict(record, task="c", status="skipped"))
+    assert "[3/4] c: skipped (done)\n" in out.text and "3/4 tasks, 0 running, 1 skipped, 1 failed" in bar.text
+    progress.close()
+    assert bar.text.endswith("\r\x1b[2K")
