@@ -26,7 +26,10 @@ engines:
 
 
 def default_workers():
-    return max(1, (os.cpu_count() or 1) // 2)
+    """As many as cores, at most 4: a bake's start (a process, importing Blender, opening the file)
+    is serial, so two tasks overlap it with each other's baking (bench.batch: 2 workers bake 1.4
+    times the assets per minute of 1 on 2 cores); past a few, each one's memory counts for more."""
+    return max(1, min(os.cpu_count() or 1, 4))
 
 
 def make_parser():
@@ -39,7 +42,7 @@ def make_parser():
                    help="output folder; each .blend file bakes into OUTPUT/<file stem>/")
     p.add_argument("--runner", choices=("local", "dask", "flamenco", "openjd"), default="local")
     p.add_argument("--workers", "-j", type=int, default=None,
-                   help=f"tasks at a time (local, dask); default: half the cores, here {default_workers()}")
+                   help=f"tasks at a time (local, dask); default: the cores, at most 4 (here {default_workers()})")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="dask: connect to this scheduler (tcp://host:8786) instead of starting a local cluster")
     p.add_argument("--force", action="store_true", help="bake every task, also those already done")

@@ -208,13 +208,13 @@ def _remove_stale(task):
                 pass
 
 
-def run_task(task, *, force=False, blender=None, on_start=None, on_process=None):
+def run_task(task, *, force=False, blender=None, on_start=None, on_process=None, env=None):
     """Bake one task unless it is done; return its record (a dict). Never raises for a failed bake.
 
     ``task``: a :class:`Task` or its dict. ``blender``: see :func:`find_baker`. ``on_start(info)``
     is called once the bake process runs, with the task's name, this process's pid and the bake's
     process group; ``on_process(proc)`` gets the :class:`subprocess.Popen` of the guard (close its
-    stdin to stop the bake).
+    stdin to stop the bake). ``env``: the bake's environment (default: this process's).
     """
     if isinstance(task, dict):
         task = Task.from_dict(task)
@@ -244,7 +244,7 @@ def run_task(task, *, force=False, blender=None, on_start=None, on_process=None)
         log.flush()
         try:
             proc = subprocess.Popen([sys.executable, GUARD, "--"] + command, stdin=subprocess.PIPE,
-                                    stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+                                    stdout=log, stderr=subprocess.STDOUT, start_new_session=True, env=env)
         except OSError as exc:
             return _record(task, "failed", error=f"cannot start the bake: {exc.strerror or exc}",
                            seconds=time.perf_counter() - t0)

@@ -404,3 +404,15 @@ def test_progress_bar_on_a_terminal_follows_the_tasks_events():
     assert "[3/4] c: skipped (done)\n" in out.text and "3/4 tasks, 0 running, 1 skipped, 1 failed" in bar.text
     progress.close()
     assert bar.text.endswith("\r\x1b[2K")
+
+
+def test_bakes_under_dask_do_not_inherit_the_nannys_worker_settings(monkeypatch):
+    """MALLOC_TRIM_THRESHOLD_=65536, which Dask's nanny gives its workers, halves a bake's speed."""
+    from mc_ao_batch.runners import bake_environment
+
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")  # as the nanny sets it
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")  # set by the user: not the nanny's value
+    monkeypatch.setenv("MC_AO_SOMETHING", "kept")
+    env = bake_environment()
+    assert "MALLOC_TRIM_THRESHOLD_" not in env
+    assert env["OMP_NUM_THREADS"] == "3" and env["MC_AO_SOMETHING"] == "kept"
