@@ -1,6 +1,6 @@
 """Batch throughput: assets per minute with 1 and 2 workers here, and what that means for a farm.
 
-    .venv/bin/python -m bench.batch              # 12 assets, 512 x 512, 64 samples: about 3 minutes on 2 cores
+    .venv/bin/python -m bench.batch              # 12 assets, 256 x 256, 64 samples, and one at 1024 x 1024: about 5 minutes on 2 cores
     .venv/bin/python -m bench.batch --quick      # 6 assets, 128 x 128, 16 samples
 
 Builds a library of copies of one asset (tests/batch_assets.py: a ground plane and a block, two
@@ -141,7 +141,7 @@ def main(argv=None):
     p.add_argument("--keep", type=Path, help="build the library here and keep it (default: a temporary folder)")
     args = p.parse_args(argv)
     count = args.assets or (6 if args.quick else 12)
-    resolution, samples = (128, 16) if args.quick else (512, 64)
+    resolution, samples = (128, 16) if args.quick else (256, 64)
     info = machine()
     print(f"batch benchmark: {count} assets, {resolution}x{resolution}, {samples} samples", flush=True)
     with tempfile.TemporaryDirectory(prefix="mc_ao_bench_batch_") as tmp:

@@ -416,3 +416,21 @@ def test_bakes_under_dask_do_not_inherit_the_nannys_worker_settings(monkeypatch)
     env = bake_environment()
     assert "MALLOC_TRIM_THRESHOLD_" not in env
     assert env["OMP_NUM_THREADS"] == "3" and env["MC_AO_SOMETHING"] == "kept"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[defaults]\nsamples = 0\n[[bake]]\nblend = 'a.blend'\n", "entry 1 (a.blend): --samples must be from 1 to"),
+    ("[[bake]]\nblend = 'a.blend'\n[[bake]]\nblend = 'b.blend'\nformat = ['exr']\nbits = '8'\nmargin = -1\n",
+     "entry 2 (b.blend): --margin must be from 0 to 65536, not -1; --bits 8 cannot be written as exr"),
+])
+def test_values_out_of_range_stop_the_batch_before_anything_runs(tmp_path, capsys, text, message):
+    """bake_ao.py's own checks of every value run for every entry at planning (not once per task)."""
+    from mc_ao_batch.manifest import bake_script_module
+
+    if not hasattr(bake_script_module(), "settings_from"):
+        pytest.skip("this scripts/bake_ao.py has no settings_from (its value checks came with issue 11)")
+    manifest = tmp_path / "m.toml"
+    manifest.write_text(text)
+    assert cli.main([str(manifest), "--output", str(tmp_path / "out"), "--blender", "bpy"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and not (tmp_path / "out").exists()
