@@ -44,8 +44,9 @@ def main(argv):
             pass
         stop()  # end of file: the runner is gone, or asks us to stop
 
-    for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
-        signal.signal(sig, stop)
+    for name in ("SIGTERM", "SIGINT", "SIGHUP"):  # no SIGHUP on Windows
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), stop)
     threading.Thread(target=watch_parent, name="guard", daemon=True).start()
     code = child.wait()
     return code if code >= 0 else 128 - code
