@@ -127,6 +127,8 @@ def why_not_done(task):
                 return f"{path} cannot be read: {exc}"
             if not metadata:
                 return f"{path} has no mc_ao metadata to check"
+            if metadata.get("object", obj.get("object")) != obj.get("object"):
+                return f"{path} holds the bake of {metadata['object']!r}, not of {obj.get('object')!r}"
             for key, value in settings.items():
                 if key not in metadata or not _same(metadata[key], value):
                     return f"{path}: {key} is {metadata.get(key)!r}, the bake recorded {value!r}"

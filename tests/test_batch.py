@@ -134,13 +134,16 @@ def test_a_task_bakes_again_when_its_asset_settings_or_files_change(library, loc
     lamp = next(p for p in work.iterdir() if p.name.startswith("lamp-") and (p / "Shade_AO.png").exists())
     (lamp / "Shade_AO.png").unlink()
     assert reasons()["props/lamp.blend"].endswith("Shade_AO.png is missing")
-    # a file replaced by one of other settings (the same object baked at 24x16)
+    # a file swapped for another object's bake
     crate = next(p for p in work.iterdir() if p.name.startswith("crate"))
-    shutil.copyfile(work / "torus" / "Ground_AO.png", crate / "Crate_AO.png")
-    why = reasons()["crate v2?.blend"]
-    assert "Crate_AO.png" in why and "resolution is '24x16'" in why
-    # the version that baked it
+    shutil.copyfile(crate / "Lid_AO.png", crate / "Crate_AO.png")
+    assert reasons()["crate v2?.blend"] == f"{crate / 'Crate_AO.png'} holds the bake of 'Lid', not of 'Crate'"
+    # a file replaced by the same object's bake with other settings (torus.blend's Ground: 24x16, 8 samples)
     bulb = next(p for p in work.iterdir() if (p / "Bulb_AO.png").exists())
+    shutil.copyfile(work / "torus" / "Ground_AO.exr", bulb / "Ground_AO.exr")
+    why = reasons()["more/lamp.blend"]
+    assert why.startswith(f"{bulb / 'Ground_AO.exr'}: ") and why.endswith(", the bake recorded 16")
+    # the version that baked it
     record = next(bulb.glob("mc_ao-*.json"))
     data = json.loads(record.read_text())
     data["mc_ao"] = "0.0.1"
