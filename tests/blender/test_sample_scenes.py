@@ -156,7 +156,7 @@ def test_readme_first_command_prints_no_warning(tmp_path):
 
 def test_suzanne_islands_do_not_overlap_at_2048(fresh):
     """The bake's own report at 2048 x 2048 (the add-on's geometry, core's rasteriser): Smart UV Project
-    alone folded Suzanne's brows and ears onto themselves, which shows at every resolution."""
+    alone folded faces by a brow, an ear and the chin onto others, which shows at every resolution."""
     from mc_ao import baking
     from mc_ao.settings import BakeSettings
 
