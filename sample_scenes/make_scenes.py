@@ -14,7 +14,7 @@ ones 4.2 cannot open.
 
 Every mesh has a UV map inside [0, 1] whose islands do not overlap, after the modifiers too (what a
 bake reads), so each is a valid bake target that bakes without a warning (tests/blender/
-test_sample_scenes.py checks that at several resolutions). Scenes:
+test_sample_scenes.py checks that). Scenes:
 
   suzanne.blend   Suzanne on a ground plane: the README's default.
   room.blend      a box interior with furniture-like blocks: contact shadows, corners, occlusion
