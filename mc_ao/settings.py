@@ -50,13 +50,27 @@ class BakeSettings:
         """(width, height) of the image in pixels."""
         return self.resolution, self.height or self.resolution
 
-    def image_name_for(self, object_name):
-        if not self.image_name:
-            return f"{object_name}_AO"
-        return self.image_name.replace("{object}", object_name)
+    def image_name_for(self, object_name, max_bytes=None):
+        """The name of the image that ``object_name`` bakes into: "<object>_AO" or the Image setting.
 
-    def file_name_for(self, object_name):
-        return self.image_name_for(object_name) + FILE_FORMATS[self.file_format][0]
+        max_bytes: the longest name the image can have, in bytes of UTF-8 (Blender's ID names:
+        63 up to 4.4, 255 from 5.0). A longer name is shortened as Blender would cut it, but from
+        the object's part, so that "_AO" (the rest of the template) stays; Blender then keeps the
+        name as it is, and finds the image under it again. This is not a file name: files get
+        theirs from mc_ao.jobs.output_files().
+        """
+        template = self.image_name or "{object}_AO"
+        name = template.replace("{object}", object_name)
+        if max_bytes is None or len(name.encode("utf-8")) <= max_bytes:
+            return name
+        count = template.count("{object}")
+        fixed = len(template.replace("{object}", "").encode("utf-8"))
+        if count:
+            room = (max_bytes - fixed) // count
+            part = object_name.encode("utf-8")[:max(room, 0)].decode("utf-8", "ignore")
+            name = template.replace("{object}", part)
+        # The template's own text too long (or no {object} in it): cut the end, as Blender does.
+        return name.encode("utf-8")[:max_bytes].decode("utf-8", "ignore")
 
     @property
     def file_bits(self):
