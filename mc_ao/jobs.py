@@ -297,30 +297,42 @@ def make_output_folder(folder):
         raise core.ImageWriteError(f"could not create the output folder {folder!r}: {exc.strerror or exc}") from exc
 
 
-def write_outputs(result, files, metadata=None, written=None):
-    """Write a bake result to each of ``files`` (OutputFile); return the paths written.
+def write_outputs(result, files, metadata=None):
+    """Write a bake result to each of ``files`` (OutputFile); return ``(written, failures)``.
 
-    Every file is complete and checked before it replaces anything (see the module docstring).
-    ``written``, a list, collects the paths as they are written, so that a caller learns which
-    were when a later one fails. Raises core.McAoError subclasses (core.ImageWriteError for a
-    failed write, naming the file) or OSError.
+    ``written`` lists the paths written, ``failures`` ``(path, exception)`` for each file that was
+    not (core.McAoError subclasses such as core.ImageWriteError naming the file, or OSError): a
+    file that fails does not stop the others. Every file is complete and checked before it
+    replaces anything, and a failed one leaves the file at its path as it was (see the module
+    docstring).
     """
-    written = [] if written is None else written
+    written, failures = [], []
     if not files:
-        return written
-    make_output_folder(os.path.dirname(files[0].path))
+        return written, failures
+    core = corelink.load()
+    try:
+        make_output_folder(os.path.dirname(files[0].path))
+    except OSError as exc:
+        return written, [(f.path, exc) for f in files]
     if oiio_available():
         imageio = corelink.load("imageio")
-        for f in files:
-            out = imageio.write_ao(f.path, result, bits=f.bits, stderr_path=f.stderr_path, metadata=metadata)
-            written.extend([f.path, f.stderr_path] if f.stderr_path else [f.path])
-        return written
-    from . import images  # Blender's writer: needs bpy, only here
+
+        def write(f):
+            imageio.write_ao(f.path, result, bits=f.bits, stderr_path=f.stderr_path, metadata=metadata)
+            return [f.path, f.stderr_path] if f.stderr_path else [f.path]
+    else:
+        from . import images  # Blender's writer: needs bpy, only here
+
+        def write(f):
+            images.save_pixels_with_blender(images.rgba(result.ao), f.path, f.file_format, f.bits)
+            if not f.stderr_path:
+                return [f.path]
+            images.save_pixels_with_blender(images.rgba(result.stderr), f.stderr_path, "OPEN_EXR", "float")
+            return [f.path, f.stderr_path]
 
     for f in files:
-        images.save_pixels_with_blender(images.rgba(result.ao), f.path, f.file_format, f.bits)
-        written.append(f.path)
-        if f.stderr_path:
-            images.save_pixels_with_blender(images.rgba(result.stderr), f.stderr_path, "OPEN_EXR", "float")
-            written.append(f.stderr_path)
-    return written
+        try:
+            written.extend(write(f))
+        except (core.McAoError, OSError, RuntimeError) as exc:
+            failures.append((f.path, exc))
+    return written, failures

@@ -300,13 +300,14 @@ class BakeSession:
 
     def _save(self, job, result):
         """Write the finished job's file into the output folder; report where, or why not."""
-        files = self._output_files().get(job.image_name, [])
         metadata = dict(jobs.settings_record(self.settings), object=job.object_name,
                         blend=bpy.path.basename(bpy.data.filepath))
-        path = files[0].path if files else self.output_dir
         try:
-            written = jobs.write_outputs(result, files, metadata)
-        except (corelink.load().McAoError, OSError, RuntimeError) as exc:
+            files = self._output_files()[job.image_name]
+            written, failures = jobs.write_outputs(result, files, metadata)
+        except corelink.load().McAoError as exc:  # a path that would leave the output folder
+            written, failures = [], [(self.output_dir, exc)]
+        for path, exc in failures:
             self.errors += 1
             why = str(exc) if path in str(exc) else f"{path}: {exc}"
             self.report(
@@ -314,7 +315,7 @@ class BakeSession:
                 f"{job.object_name}: the bake is in image {job.image_name!r}, but its file was not saved "
                 f"(any file already there is unchanged): {why}",
             )
-        else:
+        if written:
             self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
 
     def _output_files(self):

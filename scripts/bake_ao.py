@@ -447,15 +447,16 @@ def bake(plan, files, settings, record, args, summary):
         print(f"bake_ao: [{i + 1}/{len(plan)}] baking {plan[i].object_name}", flush=True)
         progress.begin(f"[{i + 1}/{len(plan)}] {plan[i].object_name}")
 
-    def failed(i, error, seconds=None, files=()):
+    def failed(i, errors, seconds=None, files=(), rays=0, per_texel=0.0):
         nonlocal failures
         progress.end()
         failures += 1
         done.add(i)
-        print(f"bake_ao: {plan[i].object_name}: {error}", file=sys.stderr)
+        for error in errors:
+            print(f"bake_ao: {plan[i].object_name}: {error}", file=sys.stderr)
         if seconds is None:
             seconds = time.monotonic() - run.started.get(i, time.monotonic())
-        summary.add(plan[i].object_name, "failed", seconds=seconds, files=files, error=error)
+        summary.add(plan[i].object_name, "failed", seconds, rays, per_texel, files, "; ".join(map(str, errors)))
 
     begin(0)
     run.start()
@@ -471,26 +472,24 @@ def bake(plan, files, settings, record, args, summary):
                 result = rest[1]
                 progress.end()
                 job = plan[i]
-                written = []
-                try:
-                    jobs.write_outputs(result, files[job.image_name], dict(record, object=job.object_name),
-                                       written)
-                except (OSError, RuntimeError, run.core.McAoError) as exc:
-                    failed(i, exc, seconds=result.seconds, files=written)
+                written, errors = jobs.write_outputs(result, files[job.image_name],
+                                                     dict(record, object=job.object_name))
+                for note in baking.input_notes(result):
+                    print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
+                per_texel, rate = baking.throughput(result)
+                if errors:
+                    failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel)
                 else:
                     done.add(i)
-                    for note in baking.input_notes(result):
-                        print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
-                    per_texel, rate = baking.throughput(result)
                     summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written)
                     rows.append((job.object_name, f"{width}x{height}", f"{result.seconds:.2f}",
                                  f"{per_texel:.0f}", f"{rate:.2f}", ", ".join(written)))
             elif kind == "error":
-                failed(i, rest[1])
+                failed(i, [rest[1]])
             elif kind == "crash":
                 exc, trace = rest[1], rest[2]
                 print(trace, file=sys.stderr, end="")
-                failed(i, f"bake failed ({type(exc).__name__}: {exc}); the traceback is above")
+                failed(i, [f"bake failed ({type(exc).__name__}: {exc}); the traceback is above"])
             if kind in ("done", "error", "crash") and i + 1 < len(plan):
                 begin(i + 1)
     except BaseException as exc:
