@@ -60,7 +60,7 @@ BITS = {"8": 8, "16": 16, "half": "half", "float": "float"}
 # BakeSettings field -> the option that sets it, for messages
 OPTIONS = {
     "samples": "--samples", "min_samples": "--min-samples", "target_error": "--target-error",
-    "resolution": "--resolution", "height": "--resolution", "max_distance": "--max-distance",
+    "max_distance": "--max-distance",
     "source": "--source", "distribution": "--distribution", "occluders": "--occluders",
     "uv_map": "--uv-map", "margin": "--margin", "image_name": "--image-name", "seed": "--seed",
     "threads": "--threads",
@@ -68,14 +68,18 @@ OPTIONS = {
 
 
 class UsageError(Exception):
-    """Bad arguments or input: exit status 2."""
+    """Bad arguments or input: exit status 2. ``usage``: the usage text to show after the message."""
+
+    def __init__(self, message, usage=""):
+        super().__init__(message)
+        self.usage = usage
 
 
 class Parser(argparse.ArgumentParser):
     """argparse, but a bad argument raises UsageError (exit 2 with the summary written) instead of exiting."""
 
     def error(self, message):
-        raise UsageError(f"{message}\n{self.format_usage().rstrip()}")
+        raise UsageError(message, self.format_usage())
 
 
 def run_by_blender():
@@ -291,7 +295,7 @@ def pick_objects(bpy, names, baking):
 def settings_from(args):
     """The BakeSettings of the arguments, after checking every value (UsageError lists what is wrong)."""
     from core import imageio
-    from mc_ao import jobs
+    from mc_ao import corelink, jobs
     from mc_ao.settings import BakeSettings
 
     width, height = args.resolution
@@ -305,10 +309,11 @@ def settings_from(args):
     )
     problems = []
     for field, message in jobs.check_settings(settings):
-        if field == "height":
-            if height == width:
-                continue  # one number for both sides: said once, for --resolution
-            message = message.replace(" (0 = as wide as high)", "")
+        if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
+            message = f"--resolution must be at most {corelink.load('bake').MAX_RESOLUTION} a side, not {width}x{height}"
+            if message not in problems:
+                problems.append(message)
+            continue
         problems.append(f"{OPTIONS.get(field, field)} {message}")
     if args.bits is not None:
         bits = BITS[args.bits]
@@ -326,7 +331,7 @@ def settings_from(args):
     return settings
 
 
-def check_paths(args):
+def check_paths(args, summary):
     """The output folder and the summary's file can be written (before anything is baked)."""
     from core import atomicfile
     from mc_ao import jobs
@@ -340,6 +345,7 @@ def check_paths(args):
         if problem is None and atomicfile.read_only(path):
             problem = "it is read-only"
         if problem is not None:
+            summary.path = None  # nowhere to write it
             raise UsageError(f"cannot write the summary '{path}': {problem}; nothing was baked")
 
 
@@ -352,7 +358,8 @@ def main(argv=None):
         code = run(argv, in_blender, summary)
     except UsageError as exc:
         for line in str(exc).splitlines():
-            print(line if line.startswith("usage:") else f"bake_ao: error: {line}", file=sys.stderr)
+            print(f"bake_ao: error: {line}", file=sys.stderr)
+        print(exc.usage, file=sys.stderr, end="")
         summary.error = str(exc)
         summary.settings, summary.objects = {}, []
         code = 2
@@ -375,13 +382,13 @@ def main(argv=None):
 def early_summary_args(argv, in_blender):
     """(summary path, .blend path) from the raw arguments, so that the summary is written even
     when the arguments are refused."""
-    pre = argparse.ArgumentParser(add_help=False)
+    pre = Parser(add_help=False)
     pre.add_argument("--summary-json", type=Path)
     if not in_blender:
         pre.add_argument("blend", nargs="?")
     try:
         known, _ = pre.parse_known_args(argv)
-    except SystemExit:  # a --summary-json without its path: argparse said so already
+    except UsageError:  # a --summary-json without its path: the full parse says so
         return None, None
     if in_blender:
         import bpy
@@ -394,7 +401,7 @@ def run(argv, in_blender, summary):
     args = make_parser(with_blend=not in_blender).parse_args(argv)
     args.format = list(dict.fromkeys(args.format))
     settings = settings_from(args)
-    check_paths(args)
+    check_paths(args, summary)
     try:
         import bpy
     except ImportError:
