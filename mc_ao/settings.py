@@ -89,7 +89,8 @@ class BakeSettings:
             samples=self.samples,
             min_samples=min(self.min_samples, self.samples),
             target_error=self.target_error,
-            max_distance=self.max_distance if self.max_distance > 0 else float("inf"),
+            # 0 means unlimited; anything else goes to the core as it is (which refuses < 0 and NaN).
+            max_distance=float("inf") if self.max_distance == 0 else self.max_distance,
             distribution=DISTRIBUTIONS[self.distribution],
             source=SOURCES[self.source],
             margin=self.margin,
