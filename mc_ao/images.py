@@ -142,7 +142,8 @@ def save_pixels_with_blender(pixels, path, file_format, bits):
 
     Used where this Python has no OpenImageIO module (mc_ao.jobs.write_outputs chooses). ``bits``
     8 writes an 8-bit file; any other value a float image, which Blender writes as a 16-bit PNG or
-    TIFF, or an EXR of half (``bits == "half"``) or full float. RGBA, no metadata.
+    TIFF, or a float EXR (Image.save() writes float EXR also for "half": checked with bpy 5.0.1).
+    RGBA, no metadata.
 
     The pixels go into a temporary image (saving an image to a path turns that image into a file
     image) and from it into a temporary file beside ``path`` (core.atomicfile). Blender's PNG writer
@@ -161,7 +162,6 @@ def save_pixels_with_blender(pixels, path, file_format, bits):
             image.pixels.foreach_set(pixels.ravel())
             image.filepath_raw = os.fspath(temp)
             image.file_format = file_format
-            image.use_half_precision = bits == "half"
             try:
                 image.save()
             except RuntimeError as exc:

@@ -14,9 +14,12 @@ and prints a summary. Every setting is checked before anything is baked. File na
 the image names ("<object>_AO"), made safe: a name never chooses where a file goes (no folders,
 no "..", no names Windows refuses; a name that had to change gets a short hash of the original,
 and two objects never share a file, also on filesystems that ignore case). Every file lands in
-the output folder, the only folder the script creates. A file is written to a temporary file,
-checked (read back) and only then moved over any file already at its path: a write that fails
-(a full disk) leaves that file as it was; a read-only file is not replaced.
+the output folder; it (and the --summary-json file's folder) are the only folders the script
+creates. A file is written to a temporary file, checked (read back) and only then moved over any
+file already at its path: a write that fails (a full disk) leaves that file as it was, a read-only
+file is not replaced, and a replaced file keeps its permission bits. Progress goes to stderr: a
+bar on a terminal, else a line per tenth of each object ("bake_ao: [1/2] Ground: 30%"), the first
+once the bake has traced its first rays; --quiet turns it off.
 
 Exit status: 0 when every object baked and every file was written; 1 when a bake or a file
 failed (the other objects are still baked); 2 for bad arguments or input found before baking (a
