@@ -1,5 +1,6 @@
 """Bake settings as plain values (no bpy), shared by the operator (from scene.mc_ao) and scripts/bake_ao.py."""
 
+import hashlib
 from dataclasses import dataclass, fields
 
 # RNA enum identifier -> core argument; the enum items in properties.py use these keys.
@@ -53,24 +54,24 @@ class BakeSettings:
     def image_name_for(self, object_name, max_bytes=None):
         """The name of the image that ``object_name`` bakes into: "<object>_AO" or the Image setting.
 
-        max_bytes: the longest name the image can have, in bytes of UTF-8 (Blender's ID names:
-        63 up to 4.4, 255 from 5.0). A longer name is shortened as Blender would cut it, but from
-        the object's part, so that "_AO" (the rest of the template) stays; Blender then keeps the
-        name as it is, and finds the image under it again. This is not a file name: files get
-        theirs from mc_ao.jobs.output_files().
+        max_bytes: the longest name the image can have, in bytes of UTF-8 (Blender's ID names: 63
+        up to 4.4, 255 from 5.0; mc_ao.baking.id_name_max_bytes()). Blender would cut a longer name
+        at its end: the image would lose "_AO", and two long object names that differ only near
+        their end would bake into one image. So the object's part is shortened instead and gets 8
+        hex digits of a hash of the whole object name ("<start of name>-1a2b3c4d_AO"): the same
+        object always gets the same image, different objects different ones. This is not a file
+        name: files get theirs from mc_ao.jobs.output_files().
         """
         template = self.image_name or "{object}_AO"
         name = template.replace("{object}", object_name)
-        if max_bytes is None or len(name.encode("utf-8")) <= max_bytes:
+        if max_bytes is None or len(name.encode("utf-8", "surrogatepass")) <= max_bytes:
             return name
+        tag = "-" + hashlib.sha256(object_name.encode("utf-8", "surrogatepass")).hexdigest()[:8]
         count = template.count("{object}")
-        fixed = len(template.replace("{object}", "").encode("utf-8"))
-        if count:
-            room = (max_bytes - fixed) // count
-            part = object_name.encode("utf-8")[:max(room, 0)].decode("utf-8", "ignore")
-            name = template.replace("{object}", part)
-        # The template's own text too long (or no {object} in it): cut the end, as Blender does.
-        return name.encode("utf-8")[:max_bytes].decode("utf-8", "ignore")
+        room = (max_bytes - len(template.replace("{object}", "").encode("utf-8"))) // max(count, 1) - len(tag)
+        if count and room > 0:
+            return template.replace("{object}", _clip_utf8(object_name, room) + tag)
+        return _clip_utf8(name, max_bytes - len(tag)) + tag  # the template's own text is too long
 
     @property
     def file_bits(self):
@@ -98,3 +99,8 @@ class BakeSettings:
             threads=threads,
             ignore_backfaces=self.ignore_backfaces,
         )
+
+
+def _clip_utf8(text, limit):
+    """The longest start of ``text`` that is at most ``limit`` bytes of UTF-8 (whole characters)."""
+    return text.encode("utf-8", "surrogatepass")[:max(limit, 0)].decode("utf-8", "ignore")

@@ -137,3 +137,19 @@ def test_a_run_reports_progress_results_and_errors_then_ends():
     assert kinds[0] == "error" and "UV coordinates beyond" in str(got[0][2])
     assert kinds[-2:] == ["done", "end"] and "progress" in kinds and "tile" in kinds
     assert sorted(run.started) == [0, 1] and not jobs.RUNS
+
+
+@pytest.mark.parametrize("limit", [63, 255])  # Blender 4.2-4.4, 5.0 and later
+def test_image_names_fit_blenders_limit_and_stay_apart(limit):
+    settings = BakeSettings()
+    assert settings.image_name_for("Cube", limit) == "Cube_AO"
+    assert settings.image_name_for("x" * (limit - 3), limit) == "x" * (limit - 3) + "_AO"  # just fits
+    names = ["n" * 300 + "1", "n" * 300 + "2", "é" * 200, "x" * (limit - 2)]
+    got = [settings.image_name_for(n, limit) for n in names]
+    assert len(set(got)) == len(got)
+    for name, image in zip(names, got):
+        assert len(image.encode()) <= limit and image.endswith("_AO")
+        assert name.startswith(image[:-len("-12345678_AO")]) and image == settings.image_name_for(name, limit)
+    long_template = BakeSettings(image_name="{object}_" + "t" * 300)
+    assert len(long_template.image_name_for("Cube", limit).encode()) <= limit
+    assert BakeSettings(image_name="{object}&{object}").image_name_for("é" * 100, limit).count("&") == 1
