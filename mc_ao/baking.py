@@ -157,8 +157,8 @@ def _selected_geometry(depsgraph, objects):
 def id_name_max_bytes():
     """The longest datablock name this Blender keeps, in bytes of UTF-8 (63 up to 4.4, 255 from 5.0).
 
-    Blender cuts a longer name when it creates the datablock, and an image looked up under the
-    uncut name would not be found: image names are cut to this first (BakeSettings.image_name_for).
+    Blender cuts a longer name at its end when it creates the datablock: image names are made to
+    fit first (BakeSettings.image_name_for), so that each object keeps an image of its own.
     """
     import bpy
 
