@@ -31,5 +31,9 @@ class BakeCancelled(McAoError):
     """The bake was cancelled through its ``cancel`` argument; no partial result is returned."""
 
 
-class ImageWriteError(McAoError, OSError):
+class FileWriteError(McAoError, OSError):
+    """A file could not be written; any existing file at the path is left as it was."""
+
+
+class ImageWriteError(FileWriteError):
     """An image file could not be written; any existing file at the path is left as it was."""

@@ -44,11 +44,10 @@ import json
 import os
 import pathlib
 import re
-import secrets
-
 import numpy as np
 
 from ._version import __version__
+from .atomicfile import PendingFile, fsync_dir, io_error, remove_quietly, short_name
 from .errors import McAoError, SettingsError, ImageWriteError
 
 __all__ = [
@@ -104,15 +103,7 @@ def _import_oiio(error_class):
     return OpenImageIO
 
 
-def _io_error(error_class, message, err=None):
-    """An ``error_class`` (an OSError) with ``message`` as its text and ``errno`` set.
-
-    ``filename`` stays unset: setting it would make OSError.__str__ print
-    "[Errno n] strerror: filename" instead of the message, which names the path itself.
-    """
-    exc = error_class(message)
-    exc.errno = err
-    return exc
+_io_error = io_error
 
 
 def _format_of(path):
@@ -218,84 +209,11 @@ def _make_spec(oiio, ext, shape, oiio_type, metadata):
     return spec
 
 
-def _fsync_dir(directory):
-    """Make a rename in ``directory`` durable (POSIX); best effort, some filesystems refuse."""
-    if os.name == "nt":
-        return
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def _remove_quietly(path):
-    try:
-        os.unlink(path)
-    except OSError:
-        pass
-
-
-class _Pending:
-    """A fully written and fsynced temporary file waiting to be moved onto its target."""
-
-    def __init__(self, target, temp, overwrite):
-        self.target = target
-        self.temp = temp
-        self.overwrite = overwrite
-
-    def discard(self):
-        _remove_quietly(self.temp)
-
-    def commit(self):
-        """Move the temp file onto the target; atomic (the target is old or new, never partial)."""
-        try:
-            if self.overwrite:
-                os.replace(self.temp, self.target)
-            else:
-                self._commit_no_clobber()
-        except ImageWriteError:
-            raise
-        except OSError as exc:
-            raise _io_error(
-                ImageWriteError,
-                f"could not move the finished image onto {os.fspath(self.target)!r}: {exc}",
-                exc.errno,
-            ) from exc
-        _fsync_dir(self.target.parent)
-
-    def _commit_no_clobber(self):
-        # link() fails if the target exists, atomically: no window between a check and the rename.
-        try:
-            os.link(self.temp, self.target)
-        except FileExistsError:
-            raise _exists_error(self.target) from None
-        except OSError:
-            # No hard links here (FAT, some network shares): check, then rename.
-            if os.path.lexists(self.target):
-                raise _exists_error(self.target) from None
-            os.replace(self.temp, self.target)
-        else:
-            os.unlink(self.temp)
-
-
-def _exists_error(path):
-    return _io_error(
-        ImageWriteError,
-        f"{os.fspath(path)!r} already exists and overwrite=False",
-        _errno.EEXIST,
-    )
-
-
 def _prepare(path, pixels, bits, metadata, overwrite, make_dirs):
-    """Validate everything, then write and fsync a temporary file beside ``path``.
+    """Validate everything, then write, check and fsync a temporary file beside ``path``.
 
-    Returns a :class:`_Pending`; on any failure nothing is left behind and the target is untouched.
+    Returns a :class:`core.atomicfile.PendingFile` to commit; on any failure nothing is left
+    behind and the target is untouched.
     """
     target = pathlib.Path(path)
     ext = _format_of(target)
@@ -322,82 +240,65 @@ def _prepare(path, pixels, bits, metadata, overwrite, make_dirs):
             + ("" if make_dirs or directory.exists() else " (pass make_dirs=True to create it)"),
             _errno.ENOTDIR if directory.exists() else _errno.ENOENT,
         )
-    if target.is_dir():
-        raise _io_error(
-            ImageWriteError, f"cannot write {os.fspath(target)!r}: it is a directory", _errno.EISDIR
-        )
-    if not overwrite and os.path.lexists(target):
-        raise _exists_error(target)
-
-    # Reserve a hidden temp name in the same directory (so the final rename stays on one
-    # filesystem), ending in the real extension so that OIIO picks the format from it. O_EXCL
-    # with mode 0o666 lets the umask decide the permissions, as for any newly created file.
-    temp = None
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    # A hidden temporary file of a short fixed-length name in the same directory (so that the
+    # final rename stays on one filesystem), ending in the real extension so that OIIO picks the
+    # format from it.
+    pending = PendingFile(target, overwrite=overwrite, error=ImageWriteError)
     try:
-        for _ in range(100):
-            candidate = directory / f".{target.stem}.tmp{secrets.token_hex(4)}{ext}"
-            try:
-                fd = os.open(candidate, flags, 0o666)
-            except FileExistsError:
-                continue
-            os.close(fd)
-            temp = candidate
-            break
-        else:
-            raise OSError(_errno.EEXIST, "no free temporary file name")
-    except OSError as exc:
-        raise _io_error(
-            ImageWriteError,
-            f"cannot write {os.fspath(target)!r}: cannot create a file in {os.fspath(directory)!r}: "
-            f"{exc.strerror or exc}",
-            exc.errno,
-        ) from exc
-
-    try:
-        _write_temp(oiio, temp, target, ext, data, oiio_type, meta)
-        fd = os.open(temp, os.O_RDWR | getattr(os, "O_BINARY", 0))  # Windows fsync needs write access
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        _write_temp(oiio, pending.temp, target, ext, data, oiio_type, meta)
     except BaseException as exc:  # KeyboardInterrupt included: never leave a temp file behind
-        _remove_quietly(temp)
-        if isinstance(exc, ImageWriteError) or not isinstance(exc, Exception):
+        if not isinstance(exc, Exception):
+            pending.discard()
             raise
-        raise _io_error(
-            ImageWriteError,
-            f"could not write {os.fspath(target)!r}: {exc}",
-            getattr(exc, "errno", None),
-        ) from exc
-    return _Pending(target, temp, overwrite)
+        raise pending.fail(exc) from exc
+    # OpenImageIO's PNG and 8-bit TIFF writers report a file cut short by a full disk as written:
+    # every file is read back and compared with what was written before it may replace the target.
+    pending.finish(verify=lambda temp: _verify(oiio, temp, data, oiio_type))
+    return pending
+
+
+def _verify(oiio, temp, data, oiio_type):
+    """Raise ValueError unless ``temp`` decodes completely to ``data`` (as stored: quantised, half)."""
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(os.fspath(temp), config)
+    if inp is None:
+        raise ValueError(f"it cannot be opened: {oiio.geterror() or 'unknown error'}")
+    try:
+        spec = inp.spec()
+        h, w, c = data.shape
+        if (spec.height, spec.width, spec.nchannels) != (h, w, c):
+            raise ValueError(
+                f"it is {spec.width}x{spec.height} with {spec.nchannels} channels, not {w}x{h} with {c}"
+            )
+        got = inp.read_image(oiio_type)
+        if got is None:
+            raise ValueError(inp.geterror() or "it cannot be decoded")
+    finally:
+        inp.close()
+    expected = data.astype(np.float16) if oiio_type == "half" else data
+    got = np.asarray(got).reshape(expected.shape)
+    if got.dtype != expected.dtype or not np.array_equal(got, expected, equal_nan=got.dtype.kind == "f"):
+        raise ValueError("its pixels differ from those written")
 
 
 def _write_temp(oiio, temp, target, ext, data, oiio_type, meta):
+    """Write the image to ``temp``; raise RuntimeError with OpenImageIO's message when it says it failed."""
     spec = _make_spec(oiio, ext, data.shape, oiio_type, meta)
     out = oiio.ImageOutput.create(os.fspath(temp))
     if out is None:
-        raise _io_error(
-            ImageWriteError, f"could not write {os.fspath(target)!r}: {oiio.geterror()}"
-        )
+        raise RuntimeError(oiio.geterror() or "OpenImageIO has no writer for it")
     opened = False
     try:
         opened = out.open(os.fspath(temp), spec)
         if not opened or not out.write_image(data):
-            raise _io_error(
-                ImageWriteError,
-                f"could not write {os.fspath(target)!r}: "
-                f"{out.geterror() or oiio.geterror() or 'unknown OpenImageIO error'}",
-            )
+            raise RuntimeError(out.geterror() or oiio.geterror() or "unknown OpenImageIO error")
     except BaseException:
         if opened:
             out.close()  # the original error is the one worth reporting
         raise
     if not out.close():
-        raise _io_error(
-            ImageWriteError,
-            f"could not write {os.fspath(target)!r}: {out.geterror() or 'closing the file failed'}",
-        )
+        raise RuntimeError(out.geterror() or "closing the file failed")
 
 
 def write_image(path, pixels, *, bits=None, metadata=None, overwrite=True, make_dirs=False):
@@ -438,15 +339,19 @@ def write_image(path, pixels, *, bits=None, metadata=None, overwrite=True, make_
         Unsupported extension, ``bits`` not valid for the format, bad pixel array or metadata.
         Raised before anything touches the filesystem.
     ImageWriteError
-        OpenImageIO missing or failing, directory missing or not writable, target exists with
-        ``overwrite=False``. The message names the path and the reason; no temporary file remains
+        OpenImageIO missing or failing (a full disk included), directory missing or not writable,
+        target read-only or existing with ``overwrite=False``. The message names the path and the reason; no temporary file remains
         and an existing target keeps its old bytes.
 
     Notes
     -----
-    The image goes to a hidden temporary file in the target's directory (``.<stem>.tmpXXXXXXXX<ext>``),
-    is fsynced, and is then renamed over the target with ``os.replace`` (the directory is fsynced
-    after). A symbolic link at ``path`` is replaced by the file, not followed.
+    The image goes to a hidden temporary file in the target's directory (``.mc_ao-XXXXXXXX.tmp<ext>``,
+    a fixed length whatever the target's name), is read back and compared with the pixels written
+    (OpenImageIO's PNG and TIFF writers report a file cut short by a full disk as written), gets
+    the permission bits of the file it replaces, is fsynced, and is then renamed over the target
+    with ``os.replace`` (the directory is fsynced after); see :mod:`core.atomicfile`. A target
+    whose write permission is off is not replaced (ImageWriteError, errno EACCES). A symbolic
+    link at ``path`` is replaced by the file, not followed.
     """
     pending = _prepare(path, pixels, bits, metadata, overwrite, make_dirs)
     try:
@@ -589,7 +494,7 @@ def write_ao(path, result, *, bits=None, stderr_path=None, stderr_bits=None, met
         first.discard()
         second.discard()
         if backup:
-            _remove_quietly(backup)
+            remove_quietly(backup)
         raise
     try:
         second.commit()
@@ -601,7 +506,7 @@ def write_ao(path, result, *, bits=None, stderr_path=None, stderr_bits=None, met
                         "previous version could not be restored",)
         raise
     if backup:
-        _remove_quietly(backup)
+        remove_quietly(backup)
     return first.target, second.target
 
 
@@ -610,7 +515,7 @@ def _backup(target):
     if not os.path.lexists(target):
         return None
     for _ in range(100):
-        candidate = target.parent / f".{target.stem}.bak{secrets.token_hex(4)}{target.suffix}"
+        candidate = target.parent / short_name("bak", target.suffix)
         try:
             os.link(target, candidate)
         except FileExistsError:
@@ -632,5 +537,5 @@ def _roll_back(target, backup):
             os.replace(backup, target)
     except OSError:
         return False
-    _fsync_dir(target.parent)
+    fsync_dir(target.parent)
     return True

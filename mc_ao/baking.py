@@ -154,6 +154,17 @@ def _selected_geometry(depsgraph, objects):
                 yield obj.name, arrays
 
 
+def id_name_max_bytes():
+    """The longest datablock name this Blender keeps, in bytes of UTF-8 (63 up to 4.4, 255 from 5.0).
+
+    Blender cuts a longer name at its end when it creates the datablock: image names are made to
+    fit first (BakeSettings.image_name_for), so that each object keeps an image of its own.
+    """
+    import bpy
+
+    return bpy.types.ID.bl_rna.properties["name"].length_max - 1
+
+
 def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     """One Job per target object, with geometry evaluated by ``depsgraph`` (modifiers applied).
 
@@ -174,9 +185,10 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     ExtractError
         A target has no faces or no such UV map, or two targets would bake into one image.
     """
+    max_bytes = id_name_max_bytes()
     image_names = {}
     for obj in targets:
-        name = settings.image_name_for(obj.name)
+        name = settings.image_name_for(obj.name, max_bytes)
         if name in image_names:
             raise ExtractError(
                 f"{image_names[name]} and {obj.name} would both bake into image {name!r}; "
@@ -199,5 +211,5 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
         if target is None:
             raise ExtractError(f"{obj.name} has no faces to bake")
         occluders = [arrays for key, arrays in pool if key != obj.name]
-        jobs.append(Job(obj.name, settings.image_name_for(obj.name), target, occluders))
+        jobs.append(Job(obj.name, settings.image_name_for(obj.name, max_bytes), target, occluders))
     return jobs

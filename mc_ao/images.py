@@ -1,13 +1,12 @@
 """Blender images for bake results: create or reuse "<object>_AO", fill it, restore it, save it."""
 
-import importlib.util
 import os
-import tempfile
 
 import bpy
 import numpy as np
 
 from . import corelink
+from .jobs import folder_problem as output_dir_problem  # noqa: F401 (the operator checks its folder)
 
 
 class ImageError(ValueError):
@@ -138,75 +137,69 @@ def prepare_image(name, width, height, float_buffer):
     return image, snapshot
 
 
-def output_dir_problem(folder):
-    """Why image files cannot be written into ``folder``, or None when they can.
+def save_pixels_with_blender(pixels, path, file_format, bits):
+    """Write (H, W, 4) pixels to ``path`` in ``file_format`` (PNG, OPEN_EXR, TIFF) with Blender's writer.
 
-    A folder that does not exist yet is fine where it can be created (the writers create it): what
-    counts is its nearest existing ancestor, which must be a folder that this process may write.
-    Checked before a bake, so that a typo in the folder does not cost the bake; a write can still
-    fail later (a full disk), and then the existing file is left as it was.
+    Used where this Python has no OpenImageIO module (mc_ao.jobs.write_outputs chooses). ``bits``
+    8 writes an 8-bit file; any other value a float image, which Blender writes as a 16-bit PNG or
+    TIFF, or a float EXR (Image.save() writes float EXR also for "half": checked with bpy 5.0.1).
+    RGBA, no metadata.
+
+    The pixels go into a temporary image (saving an image to a path turns that image into a file
+    image) and from it into a temporary file beside ``path`` (core.atomicfile). Blender's PNG writer
+    reports a file cut short by a full disk as saved, so the file is loaded back and compared with
+    the pixels before it replaces anything at ``path``; a failure raises core.ImageWriteError and
+    leaves ``path`` as it was.
     """
-    path = os.path.abspath(folder)
-    existing = path
-    while not os.path.exists(existing):
-        parent = os.path.dirname(existing)
-        if parent == existing:
-            break
-        existing = parent
-    if not os.path.isdir(existing):
-        return "it is a file, not a folder" if existing == path else f"{existing!r} is a file, not a folder"
-    if not os.access(existing, os.W_OK | os.X_OK):
-        return "it is not writable" if existing == path else f"{existing!r} is not writable"
-    return None
-
-
-def oiio_available():
-    """Whether core.imageio can write files here (it needs the OpenImageIO Python module)."""
-    return importlib.util.find_spec("OpenImageIO") is not None
-
-
-def save(result, path, settings, metadata=None):
-    """Write a bake result to ``path`` in ``settings.file_format``; return how it was written.
-
-    The core's OpenImageIO writer is used where OpenImageIO is importable (Blender's official builds
-    ship it): an atomic write, one grey channel, the bake's metadata. Where it is missing (Debian's
-    Blender, for one), the pixels go through Blender's own writer instead: RGBA, the format's
-    default depth for the image's depth (8 or 16-bit PNG, half or float EXR), no metadata.
-
-    Returns
-    -------
-    str
-        "OpenImageIO" or "Blender".
-    """
-    if oiio_available():
-        imageio = corelink.load("imageio")
-        imageio.write_ao(path, result, bits=settings.file_bits, metadata=metadata, make_dirs=True)
-        return "OpenImageIO"
-    save_pixels_with_blender(rgba(result.ao), path, settings.file_format, settings.float_buffer)
-    return "Blender"
-
-
-def save_pixels_with_blender(pixels, path, file_format, float_buffer):
-    """Write (H, W, 4) pixels to ``path`` in ``file_format`` (PNG, OPEN_EXR, TIFF) through a temporary image.
-
-    A temporary image, because saving an image to a path turns that image into a file image. The
-    file is written beside ``path`` under a temporary name and then renamed over it, so that a failed
-    write leaves an existing file at ``path`` as it was.
-    """
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    stem, ext = os.path.splitext(os.path.basename(path))
-    fd, temp_path = tempfile.mkstemp(prefix=f".{stem}.tmp", suffix=ext, dir=directory)
-    os.close(fd)
+    core = corelink.load()
+    atomicfile = corelink.load("atomicfile")
+    pixels = np.ascontiguousarray(pixels, dtype=np.float32)
     h, w = pixels.shape[:2]
-    temp = bpy.data.images.new(".mc_ao_save", w, h, alpha=True, float_buffer=float_buffer, is_data=True)
+
+    def write(temp):
+        image = bpy.data.images.new(".mc_ao_save", w, h, alpha=True, float_buffer=bits != 8, is_data=True)
+        try:
+            image.pixels.foreach_set(pixels.ravel())
+            image.filepath_raw = os.fspath(temp)
+            image.file_format = file_format
+            try:
+                image.save()
+            except RuntimeError as exc:
+                # "Error: Could not write image: No space left on device\nError: Image ... could not be saved"
+                raise RuntimeError(str(exc).strip().splitlines()[0].removeprefix("Error: ")) from None
+        finally:
+            bpy.data.images.remove(image)
+
+    atomicfile.write_file(
+        path, write, verify=lambda temp: _reads_back(temp, pixels, file_format, bits),
+        error=core.ImageWriteError,
+    )
+
+
+def _reads_back(temp, pixels, file_format, bits):
+    """Raise ValueError unless Blender loads ``temp`` as ``pixels`` (within the file's precision)."""
+    h, w, channels = pixels.shape
+    image = bpy.data.images.load(os.fspath(temp), check_existing=False)
     try:
-        temp.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
-        temp.filepath_raw = temp_path
-        temp.file_format = file_format
-        temp.save()
-        os.replace(temp_path, path)
+        image.colorspace_settings.name = "Non-Color"  # the values as stored, no colour transform
+        if tuple(image.size) != (w, h):
+            raise ValueError(f"it loads as {image.size[0]}x{image.size[1]}, not {w}x{h}")
+        got = pixels_of(image)
     finally:
-        bpy.data.images.remove(temp)
-        if os.path.exists(temp_path):
-            os.remove(temp_path)
+        bpy.data.images.remove(image)
+    c = min(channels, got.shape[2])
+    want = pixels[..., :c]
+    if bits == 8:
+        tolerance = 0.5 / 255
+    elif file_format != "OPEN_EXR":
+        tolerance = 0.5 / 65535
+    elif bits == "half":
+        tolerance = np.maximum(np.abs(want) * 2.0 ** -11, 2.0 ** -25)
+    else:
+        tolerance = 0.0
+    if file_format != "OPEN_EXR":
+        want = np.clip(want, 0.0, 1.0)
+    off = np.abs(got[..., :c] - want) > tolerance + 1e-6
+    off &= ~(np.isnan(got[..., :c]) & np.isnan(want))
+    if off.any():
+        raise ValueError(f"{int(off.sum())} of its values differ from those written")

@@ -29,13 +29,14 @@ import traceback
 import bpy
 import numpy as np
 
-from . import baking, corelink, images
+from . import baking, corelink, images, jobs
 from .extract import ExtractError
+from .jobs import BakeRun
 from .properties import resolve_threads
 from .settings import BakeSettings
 
-# Bakes in flight, so that unregister() can stop their threads.
-_RUNS = set()
+# Bakes in flight, so that unregister() can stop their threads (BakeRun adds and removes itself).
+_RUNS = jobs.RUNS
 # Sessions in flight, so that an undo can end them before it replaces the data they write to.
 _SESSIONS = set()
 # Seconds between two live updates of an image: writing a large image's pixels takes milliseconds.
@@ -44,74 +45,6 @@ TIMER_INTERVAL = 0.1
 # Live updates keep an RGBA float copy of the image (16 bytes a texel): beyond 4096 x 4096 (256 MiB)
 # the image is written once, at the end.
 LIVE_MAX_TEXELS = 4096 * 4096
-
-
-class BakeRun:
-    """Runs the jobs one after another on a worker thread and reports through ``messages``.
-
-    Messages are tuples: ("progress", job, fraction), ("tile", job, rows, cols, block),
-    ("done", job, result), ("cancelled", job), ("error", job, exception),
-    ("crash", job, exception, traceback text), and ("end",) last. A job that fails does not stop
-    the ones after it; a cancel does.
-    """
-
-    def __init__(self, jobs, settings, threads, live):
-        self.jobs = jobs
-        self.settings = settings
-        self.threads = threads
-        self.live = live
-        self.cancel = threading.Event()
-        self.messages = queue.SimpleQueue()
-        # Imported here, in the main thread, so that the worker finds it loaded.
-        self.core = corelink.load()
-        self.thread = threading.Thread(target=self._work, name="mc_ao bake", daemon=True)
-
-    def start(self):
-        _RUNS.add(self)
-        self.thread.start()
-
-    def stop(self):
-        """Cancel the bake and wait for the worker to finish (it checks the cancel event often)."""
-        self.cancel.set()
-        if self.thread.is_alive():
-            self.thread.join()
-        _RUNS.discard(self)
-
-    def _work(self):
-        try:
-            self._work_jobs()
-        finally:
-            # Always last, whatever happened above: the main thread waits for it.
-            self.messages.put(("end",))
-
-    def _work_jobs(self):
-        put = self.messages.put
-        for i, job in enumerate(self.jobs):
-            if self.cancel.is_set():
-                put(("cancelled", i))
-                break
-
-            def progress(fraction, i=i):
-                put(("progress", i, fraction))
-
-            def on_tile(rows, cols, block, i=i):
-                put(("tile", i, rows, cols, np.array(block, dtype=np.float32)))
-
-            try:
-                result = job.run(
-                    self.settings, self.threads, progress=progress, cancel=self.cancel,
-                    on_tile=on_tile if self.live else None,
-                )
-            except self.core.BakeCancelled:
-                put(("cancelled", i))
-                break
-            except self.core.McAoError as exc:  # this object's input: the others may still bake
-                put(("error", i, exc))
-                continue
-            except Exception as exc:  # a bug, or the machine out of memory: report it, keep the trace
-                put(("crash", i, exc, traceback.format_exc()))
-                continue
-            put(("done", i, result))
 
 
 class OutputError(ValueError):
@@ -366,11 +299,15 @@ class BakeSession:
             self._save(job, result)
 
     def _save(self, job, result):
-        path = os.path.join(self.output_dir, self.settings.file_name_for(job.object_name))
-        metadata = {"object": job.object_name, "blend": bpy.path.basename(bpy.data.filepath)}
+        """Write the finished job's file into the output folder; report where, or why not."""
+        metadata = dict(jobs.settings_record(self.settings), object=job.object_name,
+                        blend=bpy.path.basename(bpy.data.filepath))
         try:
-            how = images.save(result, path, self.settings, metadata)
-        except (corelink.load().McAoError, OSError, RuntimeError) as exc:
+            files = self._output_files()[job.image_name]
+            written, failures = jobs.write_outputs(result, files, metadata)
+        except corelink.load().McAoError as exc:  # a path that would leave the output folder
+            written, failures = [], [(self.output_dir, exc)]
+        for path, exc in failures:
             self.errors += 1
             why = str(exc) if path in str(exc) else f"{path}: {exc}"
             self.report(
@@ -378,8 +315,17 @@ class BakeSession:
                 f"{job.object_name}: the bake is in image {job.image_name!r}, but its file was not saved "
                 f"(any file already there is unchanged): {why}",
             )
-        else:
-            self.report({"INFO"}, f"{job.object_name}: saved {path} ({how})")
+        if written:
+            self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
+
+    def _output_files(self):
+        """image name -> its OutputFile list, over all of this bake's jobs (distinct, safe names)."""
+        if getattr(self, "_files", None) is None:
+            self._files = jobs.output_files(
+                self.output_dir, [j.image_name for j in self.run.jobs],
+                [(self.settings.file_format, self.settings.file_bits)],
+            )
+        return self._files
 
     def _flush_live(self, context):
         now = time.monotonic()

@@ -1,5 +1,6 @@
 """Bake settings as plain values (no bpy), shared by the operator (from scene.mc_ao) and scripts/bake_ao.py."""
 
+import hashlib
 from dataclasses import dataclass, fields
 
 # RNA enum identifier -> core argument; the enum items in properties.py use these keys.
@@ -50,13 +51,27 @@ class BakeSettings:
         """(width, height) of the image in pixels."""
         return self.resolution, self.height or self.resolution
 
-    def image_name_for(self, object_name):
-        if not self.image_name:
-            return f"{object_name}_AO"
-        return self.image_name.replace("{object}", object_name)
+    def image_name_for(self, object_name, max_bytes=None):
+        """The name of the image that ``object_name`` bakes into: "<object>_AO" or the Image setting.
 
-    def file_name_for(self, object_name):
-        return self.image_name_for(object_name) + FILE_FORMATS[self.file_format][0]
+        max_bytes: the longest name the image can have, in bytes of UTF-8 (Blender's ID names: 63
+        up to 4.4, 255 from 5.0; mc_ao.baking.id_name_max_bytes()). Blender would cut a longer name
+        at its end: the image would lose "_AO", and two long object names that differ only near
+        their end would bake into one image. So the object's part is shortened instead and gets 8
+        hex digits of a hash of the whole object name ("<start of name>-1a2b3c4d_AO"): the same
+        object always gets the same image, different objects different ones. This is not a file
+        name: files get theirs from mc_ao.jobs.output_files().
+        """
+        template = self.image_name or "{object}_AO"
+        name = template.replace("{object}", object_name)
+        if max_bytes is None or len(name.encode("utf-8", "surrogatepass")) <= max_bytes:
+            return name
+        tag = "-" + hashlib.sha256(object_name.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+        count = template.count("{object}")
+        room = (max_bytes - len(template.replace("{object}", "").encode("utf-8"))) // max(count, 1) - len(tag)
+        if count and room > 0:
+            return template.replace("{object}", _clip_utf8(object_name, room) + tag)
+        return _clip_utf8(name, max_bytes - len(tag)) + tag  # the template's own text is too long
 
     @property
     def file_bits(self):
@@ -75,7 +90,8 @@ class BakeSettings:
             samples=self.samples,
             min_samples=min(self.min_samples, self.samples),
             target_error=self.target_error,
-            max_distance=self.max_distance if self.max_distance > 0 else float("inf"),
+            # 0 means unlimited; anything else goes to the core as it is (which refuses < 0 and NaN).
+            max_distance=float("inf") if self.max_distance == 0 else self.max_distance,
             distribution=DISTRIBUTIONS[self.distribution],
             source=SOURCES[self.source],
             margin=self.margin,
@@ -83,3 +99,8 @@ class BakeSettings:
             threads=threads,
             ignore_backfaces=self.ignore_backfaces,
         )
+
+
+def _clip_utf8(text, limit):
+    """The longest start of ``text`` that is at most ``limit`` bytes of UTF-8 (whole characters)."""
+    return text.encode("utf-8", "surrogatepass")[:max(limit, 0)].decode("utf-8", "ignore")

@@ -1,26 +1,37 @@
 #!/usr/bin/env python3
 """Build the sample scenes with bpy and save them as small .blend files beside this script.
 
-    .venv/bin/python sample_scenes/make_scenes.py            # all scenes
-    blender -b --python sample_scenes/make_scenes.py         # the same, run by Blender
+The shipped files are made by the oldest Blender the extension supports, 4.2 LTS: a file saved by a
+newer Blender does not open in older ones (Blender 4.2 to 4.4 cannot read 5.0's files at all).
 
-Every mesh has a UV map without overlaps (Smart UV Project, or a planar map for planes), so each is
-a valid bake target. Scenes:
+    .venv-bpy42/bin/python sample_scenes/make_scenes.py        # all scenes, with the bpy 4.2 module
+    blender -b --python sample_scenes/make_scenes.py           # the same, run by Blender 4.2
+    .venv/bin/python sample_scenes/make_scenes.py --output DIR suzanne   # any Blender, elsewhere
+
+(``bash scripts/test_bpy42.sh --collect-only -q`` makes .venv-bpy42.) Another Blender than 4.2 writes
+only with ``--output``, into another folder, so that it cannot replace the shipped files by
+ones 4.2 cannot open.
+
+Every mesh has a UV map inside [0, 1] whose islands do not overlap, after the modifiers too (what a
+bake reads), so each is a valid bake target that bakes without a warning (tests/blender/
+test_sample_scenes.py checks that). Scenes:
 
   suzanne.blend   Suzanne on a ground plane: the README's default.
   room.blend      a box interior with furniture-like blocks: contact shadows, corners, occlusion
                   between separate objects.
   analytic.blend  a plane under a hovering disk (a 64-gon) whose exact AO is known: AO = 1 - F,
                   F Lambert's form factor of the polygon (see tests/scenes.py).
-  dense.blend     a grid subdivided and displaced by modifiers into 260k triangles (the file stays
+  dense.blend     a grid subdivided and displaced by modifiers into 524k triangles (the file stays
                   small; the add-on bakes the evaluated mesh), for benchmarks.
 """
 
+import argparse
 import math
 import sys
 from pathlib import Path
 
 import bpy
+import bmesh  # after bpy: the bpy module puts Blender's own modules (bmesh, mathutils) on the path
 
 HERE = Path(__file__).resolve().parent
 
@@ -50,6 +61,48 @@ def smart_uv(obj, margin=0.02):
     bpy.ops.object.mode_set(mode="OBJECT")
 
 
+def seams_from_uv_islands(obj):
+    """Mark exactly the edges where the active UV map is cut (the islands' borders) as seams.
+
+    bmesh rather than ``bpy.ops.uv.seams_from_islands``: that operator works on the selected UVs.
+    Blender 5.0 starts with UV sync selection on, so every UV of the selected faces counts; 4.2 starts
+    with it off and no UV selected after Smart UV Project, so there the operator cancels, marks
+    nothing, and the unwrap that follows makes one distorted island of the whole head.
+    """
+    bm = bmesh.from_edit_mesh(obj.data)
+    uv = bm.loops.layers.uv.active
+    for edge in bm.edges:
+        loops = list(edge.link_loops)
+        seam = False
+        if len(loops) == 2:
+            a, b = loops  # opposite directions: a runs v0 -> v1, b runs v1 -> v0
+            seam = ((a[uv].uv - b.link_loop_next[uv].uv).length > 1e-6
+                    or (a.link_loop_next[uv].uv - b[uv].uv).length > 1e-6)
+        edge.seam = seam
+    bmesh.update_edit_mesh(obj.data)
+
+
+def unwrap_without_overlaps(obj, margin=0.01):
+    """Islands cut by Smart UV Project, each flattened by the angle-based unwrap of the subdivided mesh.
+
+    Smart UV Project alone projects each island onto a plane, and where a curved island folds back
+    over itself in that projection (on Suzanne by a brow, an ear and the chin) its faces overlap: 147
+    texels of a 512 x 512 bake, 163 once the subdivision modifier has smoothed the UVs. Unwrapping
+    the same islands by angle-based flattening of the control mesh still folds two faces over each
+    other (61 texels at 512); of the mesh the subdivision modifier makes (``use_subsurf_data``), no
+    face overlaps another (measured by the baker's rasteriser on the evaluated mesh, from 64 x 64 to
+    4096 x 4096; tests/blender/test_sample_scenes.py keeps it so). ``margin`` spaces the packed
+    islands: at 0.01 at least 12 texels apart at 1024 x 1024.
+    """
+    active(obj)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="SELECT")
+    bpy.ops.uv.smart_project(island_margin=0.02)
+    seams_from_uv_islands(obj)
+    bpy.ops.uv.unwrap(method="ANGLE_BASED", margin=margin, use_subsurf_data=True)
+    bpy.ops.object.mode_set(mode="OBJECT")
+
+
 def shade(obj, smooth):
     for p in obj.data.polygons:
         p.use_smooth = smooth
@@ -72,7 +125,7 @@ def cube(name, location, scale):
 
 
 def save(name):
-    path = HERE / name
+    path = OUTPUT / name
     bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True)
     print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")
 
@@ -86,7 +139,7 @@ def suzanne():
     mod = monkey.modifiers.new("Subdivision", "SUBSURF")
     mod.levels = mod.render_levels = 1
     shade(monkey, True)
-    smart_uv(monkey)
+    unwrap_without_overlaps(monkey)
     save("suzanne.blend")
 
 
@@ -136,6 +189,10 @@ def dense():
     sub = grid.modifiers.new("Subdivision", "SUBSURF")
     sub.subdivision_type = "SIMPLE"
     sub.levels = sub.render_levels = 3  # 64 x 64 x 2 x 4^3 = 524k triangles
+    # Linear UVs, as the simple subdivision's positions: with OpenSubdiv's smoothing (the default,
+    # "Keep Boundaries") the UVs of the border land one float32 step above 1.0 (1.0000001), and the
+    # bake reports those 1662 triangles as reaching outside the image.
+    sub.uv_smooth = "NONE"
     disp = grid.modifiers.new("Displace", "DISPLACE")
     disp.texture = tex
     disp.strength = 0.6
@@ -147,9 +204,32 @@ def dense():
 SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense}
 
 
+#: Where save() writes; main() sets it.
+OUTPUT = HERE
+#: The Blender (major, minor) that makes the shipped files.
+SHIPPED_BY = (4, 2)
+
+
 def main(argv):
-    names = [a for a in argv if a in SCENES] or list(SCENES)
-    for name in names:
+    global OUTPUT
+    parser = argparse.ArgumentParser(prog="make_scenes.py", description="Build the sample scenes.")
+    parser.add_argument("scenes", nargs="*", metavar="SCENE",
+                        help=f"scenes to make (default: all): {', '.join(SCENES)}")
+    parser.add_argument("--output", type=Path, help="folder to write into (default: beside this script)")
+    args = parser.parse_args(argv)
+    unknown = [name for name in args.scenes if name not in SCENES]
+    if unknown:
+        parser.error(f"no scene {', '.join(map(repr, unknown))}; the scenes: {', '.join(SCENES)}")
+    version = tuple(bpy.app.version[:2])
+    if args.output is None and version != SHIPPED_BY:
+        parser.exit(2, (
+            f"make_scenes.py: error: this is Blender {bpy.app.version_string}; the shipped scenes are made by "
+            f"Blender {SHIPPED_BY[0]}.{SHIPPED_BY[1]} so that every supported Blender opens them. Run "
+            f".venv-bpy42/bin/python sample_scenes/make_scenes.py (bash scripts/test_bpy42.sh makes "
+            f".venv-bpy42), or pass --output to write somewhere else.\n"))
+    OUTPUT = (args.output or HERE).resolve()
+    OUTPUT.mkdir(parents=True, exist_ok=True)
+    for name in args.scenes or list(SCENES):
         SCENES[name]()
 
 

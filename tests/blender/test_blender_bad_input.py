@@ -410,8 +410,8 @@ def test_blenders_writer_replaces_a_file_only_when_complete(bpy, scene, tmp_path
         real_replace(src, dst)
 
     monkeypatch.setattr(images.os, "replace", replace)
-    images.save_pixels_with_blender(np.full((4, 4, 4), 0.5, np.float32), str(path), "PNG", False)
-    assert len(replaced) == 1 and replaced[0][1] == str(path)
+    images.save_pixels_with_blender(np.full((4, 4, 4), 0.5, np.float32), str(path), "PNG", 8)
+    assert len(replaced) == 1 and str(replaced[0][1]) == str(path)
     assert path.read_bytes()[:4] == b"\x89PNG"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["Ground_AO.png"]
     assert ".mc_ao_save" not in bpy.data.images

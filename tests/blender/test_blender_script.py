@@ -64,12 +64,3 @@ def test_missing_blend_file(tmp_path):
     proc = run_script(tmp_path / "missing.blend")
     assert proc.returncode == 2
     assert "no such .blend file" in proc.stderr
-
-
-def test_failed_bake_exits_1(blend_file, tmp_path):
-    # 8-bit is not a bit depth EXR has: core refuses it, the script says so and fails.
-    proc = run_script(blend_file, "--objects", "Ground", "--samples", "4", "--resolution", "8",
-                      "--output", tmp_path, "--format", "exr", "--bits", "8")
-    assert proc.returncode == 1
-    assert "bake_ao: Ground: bits=8 is not valid for .exr files" in proc.stderr
-    assert "baked 0 of 1 objects, 1 failed" in proc.stdout

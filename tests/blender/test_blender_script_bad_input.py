@@ -1,5 +1,8 @@
 """Issue 8 for scripts/bake_ao.py: what a script user reads (stderr) and the exit status, files kept."""
 
+import json
+import math
+import re
 import signal
 import subprocess
 import sys
@@ -46,6 +49,11 @@ def blends(bpy, tmp_path_factory):
     bad = add_plane(bpy, "Bad", size=4, location=(6, 0, 0))
     bad.data.vertices[0].co = (float("nan"), 0.0, 0.0)
     paths["nan"] = save(bpy, folder / "nan.blend")
+    bpy.data.objects.remove(bad)
+    awry = add_plane(bpy, "Awry", size=4, location=(6, 0, 0))  # baked first: names sort before Ground
+    for loop_uv in awry.data.uv_layers[0].data:
+        loop_uv.uv = (loop_uv.uv[0] * 1e17, loop_uv.uv[1])
+    paths["uvs"] = save(bpy, folder / "uvs.blend")
     assert ground.name == "Ground"
     clean_scene(bpy)
     return paths
@@ -105,24 +113,178 @@ def test_a_core_error_fails_that_object_only(blends, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["Bad_AO.png", "Ground_AO.png"]
 
 
+# A fresh Python that puts SIGINT back to its default before it runs the script: a process started
+# in the background by a non-interactive shell inherits SIGINT *ignored*, and the script, like any
+# Unix program, keeps it so (that, not the machine's speed, made this test fail under a
+# backgrounded `pytest &`).
+WITH_SIGINT = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+               "os.execv(sys.executable, [sys.executable] + sys.argv[1:])")
+
+
 def test_ctrl_c_during_a_bake_exits_130_and_writes_nothing(blends, tmp_path):
-    (tmp_path / "Ground_AO.png").write_bytes(b"the previous bake")
+    """Ctrl-C once the bake traces rays (its first progress line, printed on the bake's first chunk)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "Ground_AO.png").write_bytes(b"the previous bake")
+    summary = tmp_path / "summary.json"
+    # 65536 samples a texel at 256 x 256: hours of rays, cancelled within a chunk (one texel's rays).
     proc = subprocess.Popen(
-        [sys.executable, SCRIPT, str(blends["mixed"]), "--objects", "Ground", "--output", str(tmp_path),
-         "--samples", "4096", "--resolution", "256", "--threads", "1"],
+        [sys.executable, "-c", WITH_SIGINT, SCRIPT, str(blends["mixed"]), "--objects", "Ground", "--output", str(out),
+         "--samples", "65536", "--resolution", "256", "--threads", "1", "--summary-json", str(summary)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     try:
-        for line in proc.stdout:  # wait until the bake is under way
-            if "baking Ground" in line:
+        seen = []
+        for line in proc.stderr:  # the bake has traced its first chunk of rays
+            seen.append(line)
+            if re.fullmatch(r"bake_ao: \[1/1\] Ground: \d+%\n", line):
                 break
+        else:
+            pytest.fail(f"no progress line: {''.join(seen)}")
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
+        _, err = proc.communicate(timeout=120)  # a hang guard only: the cancel takes a chunk
     finally:
         proc.kill()
     assert proc.returncode == 130
     assert err.endswith(
         "bake_ao: cancelled; the files of finished objects are written, nothing of the cancelled one was\n"
     )
-    assert (tmp_path / "Ground_AO.png").read_bytes() == b"the previous bake"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["Ground_AO.png"]
+    assert (out / "Ground_AO.png").read_bytes() == b"the previous bake"
+    assert sorted(p.name for p in out.iterdir()) == ["Ground_AO.png"]
+    record = json.loads(summary.read_text())
+    assert record["exit_code"] == 130 and record["error"] == "cancelled (Ctrl-C)"
+    assert record["objects"] == [{"object": "Ground", "status": "failed", "seconds": 0.0, "rays": 0,
+                                  "samples_per_texel": 0.0, "files": [], "error": "not baked: cancelled (Ctrl-C)"}]
+
+
+# -- every setting is checked before anything is baked: exit 2, once ------------------------------
+
+INFINITY_MESSAGE = "must be a distance >= 0 (0 or inf = unlimited)"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--samples", "0"], "--samples must be from 1 to 1048576, not 0"),
+    (["--samples", "-5"], "--samples must be from 1 to 1048576, not -5"),
+    (["--samples", "1048577"], "--samples must be from 1 to 1048576, not 1048577"),
+    (["--min-samples", "0"], "--min-samples must be from 1 to 1048576, not 0"),
+    (["--max-distance", "-1"], f"--max-distance {INFINITY_MESSAGE}, not -1.0"),
+    (["--max-distance", "nan"], f"--max-distance {INFINITY_MESSAGE}, not nan"),
+    (["--max-distance=-inf"], f"--max-distance {INFINITY_MESSAGE}, not -inf"),
+    (["--resolution", "65537"], "--resolution must be at most 65536 a side, not 65537x65537"),
+    (["--resolution", "16x70000"], "--resolution must be at most 65536 a side, not 16x70000"),
+    (["--margin", "-1"], "--margin must be from 0 to 65536, not -1"),
+    (["--seed", "-1"], "--seed must be at least 0, not -1"),
+    (["--threads", "-1"], "--threads must be at least 0 (0 = every core), not -1"),
+    (["--target-error", "nan"], "--target-error must be a finite number >= 0 (0 = adaptive sampling off), not nan"),
+    (["--target-error", "-0.1"], "--target-error must be a finite number >= 0 (0 = adaptive sampling off), not -0.1"),
+    (["--target-error", "inf"], "--target-error must be a finite number >= 0 (0 = adaptive sampling off), not inf"),
+    (["--bits", "8", "--format", "exr"], "--bits 8 cannot be written as exr: exr files take --bits half or float"),
+    (["--bits", "float", "--format", "tif", "png"], "--bits float cannot be written as png: png files take --bits 8 or 16"),
+    (["--image-name", "../{object}"], "--image-name '../{object}' is a path: give a name; files go into --output"),
+    (["--objects", "Ground", "Nope"], "no object 'Nope' in the view layer; its meshes: Block, Flat, Ground"),
+])
+def test_a_bad_setting_exits_2_once_before_anything_is_baked(blends, tmp_path, args, message):
+    summary = tmp_path / "summary.json"
+    proc = run_script(blends["mixed"], "--objects", "Ground", "Block", "--output", tmp_path / "out",
+                      "--summary-json", summary, *FAST, *args)
+    assert proc.returncode == 2
+    assert proc.stderr == f"bake_ao: error: {message}\n"  # said once, not once per object
+    assert "baking" not in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]  # no output folder made
+    record = json.loads(summary.read_text())
+    assert record["exit_code"] == 2 and record["error"] == message
+    assert record["settings"] == {} and record["objects"] == []
+    assert record["blend"] == str(blends["mixed"])
+
+
+def test_a_bad_argument_says_so_with_the_usage(blends, tmp_path):
+    summary = tmp_path / "summary.json"
+    proc = run_script(blends["mixed"], "--samples", "many", "--summary-json", summary)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("bake_ao: error: argument --samples: invalid int value: 'many'\nusage: bake_ao.py")
+    assert json.loads(summary.read_text())["error"].startswith("argument --samples: invalid int value: 'many'")
+
+
+def test_an_unwritable_summary_path_exits_2_before_baking(blends, tmp_path):
+    proc = run_script(blends["mixed"], "--objects", "Ground", "--output", tmp_path / "out",
+                      "--summary-json", tmp_path, *FAST)
+    assert proc.returncode == 2
+    assert proc.stderr == f"bake_ao: error: cannot write the summary '{tmp_path}': it is a folder; nothing was baked\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("distance", ["0", "inf"])
+def test_zero_and_inf_max_distance_are_unlimited(blends, tmp_path, distance):
+    from core import imageio
+
+    proc = run_script(blends["mixed"], "--objects", "Ground", "--output", tmp_path, "--max-distance", distance,
+                      "--summary-json", tmp_path / "s.json", *FAST)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / "s.json").read_text())["settings"]["max_distance"] == math.inf
+    assert imageio.read_image(tmp_path / "Ground_AO.png")[1]["max_distance"] == math.inf
+
+
+def test_a_too_long_image_name_becomes_a_shorter_file_name(blends, tmp_path):
+    """Before issue 11 this failed with "File name too long" after the bake; now the name is shortened."""
+    long_name = "L" * 300 + "{object}"
+    proc = run_script(blends["mixed"], "--objects", "Ground", "--output", tmp_path / "out",
+                      "--image-name", long_name, *FAST)
+    assert proc.returncode == 0, proc.stderr
+    (path,) = (tmp_path / "out").iterdir()
+    assert path.name.startswith("L" * 150) and path.suffix == ".png" and len(path.name.encode()) <= 255
+    assert list(tmp_path.iterdir()) == [tmp_path / "out"]
+
+
+def test_a_bad_uv_map_fails_that_object_and_the_others_are_baked(blends, tmp_path):
+    summary = tmp_path / "summary.json"
+    proc = run_script(blends["uvs"], "--objects", "Awry", "Ground", "--output", tmp_path / "out",
+                      "--summary-json", summary, *FAST)
+    assert proc.returncode == 1
+    # The core's words (core.mesh), named by the object: "mesh 'Awry': 2 triangles have UV coordinates
+    # beyond +-65536 (largest 1e+17, first at triangle 0); a UV map lies in [0, 1]: ..."
+    assert re.search(r"^bake_ao: Awry: mesh 'Awry': .*UV coordinates.*1e\+17.*$", proc.stderr, re.M), proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert "bake_ao: baked 1 of 2 objects, 1 failed" in proc.stdout
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["Ground_AO.png"]
+    record = json.loads(summary.read_text())
+    assert record["exit_code"] == 1 and record["error"] == "1 of 2 objects failed"
+    awry, ground = record["objects"]
+    assert awry["status"] == "failed" and awry["error"].startswith("mesh 'Awry': ")
+    assert awry["files"] == [] and awry["rays"] == 0 and awry["seconds"] >= 0
+    assert ground["status"] == "ok" and ground["error"] is None
+    assert ground["files"] == [str(tmp_path / "out" / "Ground_AO.png")]
+
+
+# -- the summary of a run that went well --------------------------------------------------------------
+
+def test_the_summary_records_the_settings_every_file_carries(blends, tmp_path):
+    from core import imageio
+    from core._version import __version__
+
+    summary = tmp_path / "summary.json"
+    out = tmp_path / "out"
+    proc = run_script(blends["unselected"], "--output", out, "--format", "png", "exr", "tif", "--stderr",
+                      "--summary-json", summary, "--max-distance", "2.5", "--seed", "7", "--target-error", "0.05",
+                      "--uv-map", "UVMap", *FAST)
+    assert proc.returncode == 0, proc.stderr
+    record = json.loads(summary.read_text())
+    assert list(record) == ["mc_ao", "blend", "exit_code", "error", "settings", "objects"]
+    assert record["mc_ao"] == __version__ and record["exit_code"] == 0 and record["error"] is None
+    assert record["blend"] == str(blends["unselected"])
+    assert record["settings"] == {
+        "samples": 4, "min_samples": 4, "target_error": 0.05, "sample_source": "sobol", "distribution": "cosine",
+        "seed": 7, "max_distance": 2.5, "margin": 16, "ignore_backfaces": False, "resolution": "16x16",
+        "occluders": "visible", "uv_map": "UVMap",
+    }
+    assert [o["object"] for o in record["objects"]] == ["Block", "Ground"]
+    for obj in record["objects"]:
+        assert list(obj) == ["object", "status", "seconds", "rays", "samples_per_texel", "files", "error"]
+        assert obj["status"] == "ok" and obj["error"] is None and obj["seconds"] > 0
+        assert obj["rays"] > 0 and 1 <= obj["samples_per_texel"] <= 4
+        stem = out / f"{obj['object']}_AO"
+        assert obj["files"] == [f"{stem}.png", f"{stem}_stderr.exr", f"{stem}.exr", f"{stem}.tif"]
+        for path in obj["files"]:
+            metadata = imageio.read_image(path)[1]
+            assert {k: metadata[k] for k in record["settings"]} == record["settings"], path
+            assert metadata["object"] == obj["object"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "summary.json"]

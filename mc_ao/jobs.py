@@ -1,0 +1,338 @@
+"""What the Bake AO operator and scripts/bake_ao.py both do, in one place: needs no bpy to import.
+
+- :class:`BakeRun`: the bake's jobs, one after another, on a worker thread that reports through a
+  queue of messages (the operator's modal and the script's loop read the same messages).
+- :func:`check_settings`: every bake setting against the core's limits, before any work.
+- :func:`output_files`: where each job's files go. File names come from the jobs' image names (which
+  come from object names, chosen by whoever made the .blend file) through
+  :func:`core.filenames.unique_file_stems` (one safe, distinct stem per image, also where names
+  differ only in case) and :func:`core.filenames.path_inside` (the final path lies in the output
+  folder). Nothing else turns a name into a path.
+- :func:`write_outputs`: one writer for both. OpenImageIO through core.imageio where its Python
+  module exists (Blender's official builds), else Blender's own image writer (Debian's Blender has
+  no OpenImageIO module). Both write a temporary file, check it and only then replace the target
+  (:mod:`core.atomicfile`); the only folder ever created is the chosen output folder itself.
+- :func:`settings_record`: the bake's settings as written into every file's metadata (and into the
+  script's ``--summary-json``).
+"""
+
+import importlib.util
+import math
+import os
+import queue
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import corelink
+from .settings import DISTRIBUTIONS, FILE_FORMATS, OCCLUDERS, SOURCES
+
+# Bakes in flight (operators.is_running() and unregister() read it).
+RUNS = set()
+
+
+class BakeRun:
+    """Runs the jobs one after another on a worker thread and reports through ``messages``.
+
+    Messages are tuples: ("progress", job, fraction), ("tile", job, rows, cols, block),
+    ("done", job, result), ("cancelled", job), ("error", job, exception),
+    ("crash", job, exception, traceback text), and ("end",) last. A job that fails does not stop
+    the ones after it; a cancel does. ``started[job]`` is the time.monotonic() at which the worker
+    began that job.
+    """
+
+    def __init__(self, jobs, settings, threads, live):
+        self.jobs = jobs
+        self.settings = settings
+        self.threads = threads
+        self.live = live
+        self.cancel = threading.Event()
+        self.messages = queue.SimpleQueue()
+        self.started = {}
+        # Imported here, in the main thread, so that the worker finds it loaded.
+        self.core = corelink.load()
+        self.thread = threading.Thread(target=self._work, name="mc_ao bake", daemon=True)
+
+    def start(self):
+        RUNS.add(self)
+        self.thread.start()
+
+    def stop(self):
+        """Cancel the bake and wait for the worker to finish (it checks the cancel event often)."""
+        self.cancel.set()
+        if self.thread.is_alive():
+            self.thread.join()
+        RUNS.discard(self)
+
+    def next_message(self, poll=0.25):
+        """The next message, waiting as long as it takes; Ctrl-C (KeyboardInterrupt) gets through."""
+        while True:
+            try:
+                return self.messages.get(timeout=poll)
+            except queue.Empty:
+                pass
+
+    def _work(self):
+        try:
+            self._work_jobs()
+        finally:
+            # Always last, whatever happened above: the main thread waits for it.
+            self.messages.put(("end",))
+
+    def _work_jobs(self):
+        put = self.messages.put
+        for i, job in enumerate(self.jobs):
+            if self.cancel.is_set():
+                put(("cancelled", i))
+                break
+            self.started[i] = time.monotonic()
+
+            def progress(fraction, i=i):
+                put(("progress", i, fraction))
+
+            def on_tile(rows, cols, block, i=i):
+                put(("tile", i, rows, cols, np.array(block, dtype=np.float32)))
+
+            try:
+                result = job.run(
+                    self.settings, self.threads, progress=progress, cancel=self.cancel,
+                    on_tile=on_tile if self.live else None,
+                )
+            except self.core.BakeCancelled:
+                put(("cancelled", i))
+                break
+            except self.core.McAoError as exc:  # this object's input: the others may still bake
+                put(("error", i, exc))
+                continue
+            except Exception as exc:  # a bug, or the machine out of memory: report it, keep the trace
+                put(("crash", i, exc, traceback.format_exc()))
+                continue
+            put(("done", i, result))
+
+
+# -- settings --------------------------------------------------------------------------------------
+
+def check_settings(settings):
+    """Problems with ``settings`` (a BakeSettings) as ``[(field, message), ...]``; empty when it can bake.
+
+    The limits are the core's (core.bake.MAX_SAMPLES, MAX_RESOLUTION), checked before anything is
+    baked so that a bad value costs nothing. Messages say what is allowed, not the field's name:
+    the caller names the field its own way (``--samples``, the Samples property).
+    """
+    bake = corelink.load("bake")
+    problems = []
+
+    def integer(field, lo, hi=None, what=""):
+        value = getattr(settings, field)
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            problems.append((field, f"must be a whole number, not {value!r}"))
+        elif value < lo or (hi is not None and value > hi):
+            span = f"at least {lo}" if hi is None else f"from {lo} to {hi}"
+            problems.append((field, f"must be {span}{what}, not {value}"))
+
+    integer("samples", 1, bake.MAX_SAMPLES)
+    integer("min_samples", 1, bake.MAX_SAMPLES)
+    integer("resolution", 1, bake.MAX_RESOLUTION)
+    integer("height", 0, bake.MAX_RESOLUTION, " (0 = as wide as high)")
+    integer("margin", 0, bake.MAX_RESOLUTION)
+    integer("seed", 0)
+    integer("threads", 0, what=" (0 = every core)")
+    target_error = _number(settings.target_error)
+    if not (target_error is not None and math.isfinite(target_error) and target_error >= 0):
+        problems.append(("target_error", f"must be a finite number >= 0 (0 = adaptive sampling off), "
+                                         f"not {settings.target_error!r}"))
+    max_distance = _number(settings.max_distance)
+    if not (max_distance is not None and max_distance >= 0):  # NaN fails too; inf means unlimited
+        problems.append(("max_distance", f"must be a distance >= 0 (0 or inf = unlimited), "
+                                         f"not {settings.max_distance!r}"))
+    for field, allowed in (("source", SOURCES), ("distribution", DISTRIBUTIONS), ("occluders", OCCLUDERS),
+                           ("file_format", FILE_FORMATS)):
+        if getattr(settings, field) not in allowed:
+            problems.append((field, f"must be one of {', '.join(allowed)}, not {getattr(settings, field)!r}"))
+    return problems
+
+
+def _number(value):
+    if isinstance(value, bool):
+        return None
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def settings_record(settings):
+    """The bake's settings as written into every file's metadata (core's names for them).
+
+    The same dict goes into ``--summary-json``, so a later run can check a file against the bake
+    that was asked for. Unlimited max_distance is ``inf`` (``Infinity`` in the JSON, as Python's
+    json writes and reads it).
+    """
+    kw = settings.bake_kwargs()
+    w, h = kw["resolution"]
+    return {
+        "samples": int(kw["samples"]),
+        "min_samples": int(kw["min_samples"]),
+        "target_error": float(kw["target_error"]),
+        "sample_source": kw["source"],
+        "distribution": kw["distribution"],
+        "seed": int(kw["seed"]),
+        "max_distance": float(kw["max_distance"]),
+        "margin": int(kw["margin"]),
+        "ignore_backfaces": bool(kw["ignore_backfaces"]),
+        "resolution": f"{w}x{h}",
+        "occluders": settings.occluders.lower(),
+        "uv_map": settings.uv_map,
+    }
+
+
+# -- files -----------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class OutputFile:
+    """One file of a job: where, in which format and depth, and where its standard error goes (or None)."""
+
+    path: str
+    file_format: str  # "PNG", "OPEN_EXR" or "TIFF" (mc_ao.settings.FILE_FORMATS)
+    bits: object  # 8, 16, "half" or "float", as core.imageio takes them
+    stderr_path: str = None
+
+
+#: Suffix of the standard-error file of an image (always a float EXR).
+STDERR_SUFFIX = "_stderr.exr"
+
+
+def output_files(folder, image_names, formats, stderr=False):
+    """Every file each image of a bake goes to: ``{image_name: [OutputFile, ...]}``.
+
+    Parameters
+    ----------
+    folder : str
+        The output folder (absolute or relative to the working directory).
+    image_names : list of str
+        The images of all the bake's jobs: file names are made distinct over all of them at once.
+    formats : list of (file_format, bits)
+        One file per entry, e.g. ``[("PNG", 8), ("OPEN_EXR", "half")]``.
+    stderr : bool
+        Also write each image's standard error, with its first format, to ``<stem>_stderr.exr``.
+
+    Raises
+    ------
+    core.SettingsError
+        Two files would be one (also on a filesystem that ignores case), or a path would leave
+        ``folder`` (core.filenames.UnsafePathError, a subclass).
+    """
+    filenames = corelink.load("filenames")
+    core = corelink.load()
+    stems = filenames.unique_file_stems(image_names)
+    taken = {}  # path, case-folded -> the image whose file it is
+
+    def place(name, file_name):
+        path = filenames.path_inside(folder, file_name)
+        other = taken.get(path.casefold())
+        if other is not None:
+            raise core.SettingsError(
+                f"the images {other!r} and {name!r} would both be saved as {file_name!r}; rename one"
+                if other != name else f"image {name!r} would be saved twice as {file_name!r}"
+            )
+        taken[path.casefold()] = name
+        return path
+
+    plan = {}
+    for name in dict.fromkeys(image_names):
+        stem = stems[name]
+        files = []
+        for k, (file_format, bits) in enumerate(formats):
+            path = place(name, stem + FILE_FORMATS[file_format][0])
+            stderr_path = place(name, stem + STDERR_SUFFIX) if stderr and k == 0 else None
+            files.append(OutputFile(path, file_format, bits, stderr_path))
+        plan[name] = files
+    return plan
+
+
+def folder_problem(folder):
+    """Why files cannot be written into ``folder``, or None when they can.
+
+    A folder that does not exist yet is fine where it can be created (it is created before the
+    first file is written): what counts is its nearest existing ancestor, which must be a folder
+    that this process may write. Checked before a bake, so that a typo in the folder does not
+    cost the bake; a write can still fail later (a full disk), and then the existing file is
+    left as it was.
+    """
+    path = os.path.abspath(folder)
+    existing = path
+    while not os.path.exists(existing):
+        parent = os.path.dirname(existing)
+        if parent == existing:
+            break
+        existing = parent
+    if not os.path.isdir(existing):
+        return "it is a file, not a folder" if existing == path else f"{existing!r} is a file, not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return "it is not writable" if existing == path else f"{existing!r} is not writable"
+    return None
+
+
+def oiio_available():
+    """Whether core.imageio can write files here (it needs the OpenImageIO Python module)."""
+    return importlib.util.find_spec("OpenImageIO") is not None
+
+
+def writer_name():
+    """The writer write_outputs() uses here: "OpenImageIO" or "Blender"."""
+    return "OpenImageIO" if oiio_available() else "Blender"
+
+
+def make_output_folder(folder):
+    """Create the output folder (only it, and its missing parents) if it does not exist yet."""
+    if os.path.isdir(folder):
+        return
+    core = corelink.load()
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as exc:
+        raise core.ImageWriteError(f"could not create the output folder {folder!r}: {exc.strerror or exc}") from exc
+
+
+def write_outputs(result, files, metadata=None):
+    """Write a bake result to each of ``files`` (OutputFile); return ``(written, failures)``.
+
+    ``written`` lists the paths written, ``failures`` ``(path, exception)`` for each file that was
+    not (core.McAoError subclasses such as core.ImageWriteError naming the file, or OSError): a
+    file that fails does not stop the others. Every file is complete and checked before it
+    replaces anything, and a failed one leaves the file at its path as it was (see the module
+    docstring).
+    """
+    written, failures = [], []
+    if not files:
+        return written, failures
+    core = corelink.load()
+    try:
+        make_output_folder(os.path.dirname(files[0].path))
+    except OSError as exc:
+        return written, [(f.path, exc) for f in files]
+    if oiio_available():
+        imageio = corelink.load("imageio")
+
+        def write(f):
+            imageio.write_ao(f.path, result, bits=f.bits, stderr_path=f.stderr_path, metadata=metadata)
+            return [f.path, f.stderr_path] if f.stderr_path else [f.path]
+    else:
+        from . import images  # Blender's writer: needs bpy, only here
+
+        def write(f):
+            images.save_pixels_with_blender(images.rgba(result.ao), f.path, f.file_format, f.bits)
+            if not f.stderr_path:
+                return [f.path]
+            images.save_pixels_with_blender(images.rgba(result.stderr), f.stderr_path, "OPEN_EXR", "float")
+            return [f.path, f.stderr_path]
+
+    for f in files:
+        try:
+            written.extend(write(f))
+        except (core.McAoError, OSError, RuntimeError) as exc:
+            failures.append((f.path, exc))
+    return written, failures

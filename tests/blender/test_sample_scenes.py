@@ -1,0 +1,170 @@
+"""The shipped sample scenes (sample_scenes/*.blend): saved by Blender 4.2 so that every supported
+Blender opens them, what the README and make_scenes.py say they are, and baked without a warning.
+
+These tests run under bpy 5.0 (.venv) and, through scripts/test_bpy42.sh, under bpy 4.2: together
+they show that both open the files, that make_scenes.py runs on both and makes the same scenes, and
+that scripts/bake_ao.py bakes them quietly on both.
+"""
+
+import re
+import shlex
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from blender_helpers import ROOT
+
+pytestmark = pytest.mark.blender
+
+SAMPLES = ROOT / "sample_scenes"
+SCENES = sorted(path.stem for path in SAMPLES.glob("*.blend"))
+SCRIPT = str(ROOT / "scripts" / "bake_ao.py")
+#: The Blender (major, minor) that saves the shipped files: the manifest's blender_version_min.
+SAVED_BY = (4, 2)
+#: Extra arguments a scene needs for a meaningful bake (the README says why: the room is closed).
+EXTRA = {"room": ["--max-distance", "1"]}
+
+
+@pytest.fixture(scope="module")
+def fresh(bpy):
+    """bpy, given back as the other Blender tests expect it (factory settings) after this module's files."""
+    yield bpy
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def open_scene(bpy, path):
+    bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
+    return bpy.context.evaluated_depsgraph_get()
+
+
+def mesh_data(bpy, path):
+    """Object name -> (positions, triangles, UVs) of every mesh object in ``path``, modifiers applied."""
+    from mc_ao.extract import object_arrays
+
+    depsgraph = open_scene(bpy, path)
+    out = {}
+    for obj in bpy.context.view_layer.objects:
+        if obj.type == "MESH":
+            arrays = object_arrays(obj.evaluated_get(depsgraph), with_uvs=True)
+            out[obj.name] = (arrays.positions, arrays.triangles, arrays.uvs)
+    return out
+
+
+def readme_table():
+    """The README's "Sample scenes" table: file stem -> object names (``Leg0-3`` expanded)."""
+    section = re.search(r"^## Sample scenes\n(.*?)^## ", (ROOT / "README.md").read_text(), re.S | re.M).group(1)
+    table = {}
+    for row in re.findall(r"^\| `(\w+)\.blend` \|.*\| ([^|]+) \|$", section, re.M):
+        names = []
+        for name in (n.strip() for n in row[1].split(",")):
+            m = re.fullmatch(r"(\w*?)(\d+)-(\d+)", name)
+            names += [f"{m[1]}{i}" for i in range(int(m[2]), int(m[3]) + 1)] if m else [name]
+        table[row[0]] = sorted(names)
+    return table
+
+
+def bake(blend, out, *args):
+    return subprocess.run([sys.executable, SCRIPT, str(blend), "--output", str(out), "--quiet", *args],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+
+
+def test_there_are_scenes():
+    assert SCENES == ["analytic", "dense", "room", "suzanne"]
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_scene_was_saved_by_blender_4_2_and_opens_here(fresh, name):
+    """A file saved by 5.0 is "not a blend file" to 4.2 - 4.4: the shipped ones must come from 4.2."""
+    bpy = fresh
+    open_scene(bpy, SAMPLES / f"{name}.blend")
+    assert tuple(bpy.data.version[:2]) == SAVED_BY, (
+        f"{name}.blend was saved by Blender {bpy.data.version}; make it with "
+        ".venv-bpy42/bin/python sample_scenes/make_scenes.py")
+    assert any(obj.type == "MESH" for obj in bpy.data.objects)
+
+
+def test_readme_lists_each_scene_with_its_objects(fresh):
+    bpy = fresh
+    table = readme_table()
+    assert sorted(table) == SCENES
+    for name in SCENES:
+        open_scene(bpy, SAMPLES / f"{name}.blend")
+        assert sorted(o.name for o in bpy.context.view_layer.objects if o.type == "MESH") == table[name], name
+
+
+def test_make_scenes_makes_the_shipped_scenes(fresh, tmp_path):
+    """make_scenes.py runs on this bpy and makes exactly the scenes the repository ships (bpy 4.2 and
+    5.0 make the same geometry and UVs, bit for bit, as of 4.2.23 and 5.0.1)."""
+    bpy = fresh
+    proc = subprocess.run([sys.executable, str(SAMPLES / "make_scenes.py"), "--output", str(tmp_path)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert sorted(p.stem for p in tmp_path.glob("*.blend")) == SCENES
+    for name in SCENES:
+        made, shipped = mesh_data(bpy, tmp_path / f"{name}.blend"), mesh_data(bpy, SAMPLES / f"{name}.blend")
+        assert sorted(made) == sorted(shipped), name
+        for obj, (positions, triangles, uvs) in shipped.items():
+            other = made[obj]
+            np.testing.assert_array_equal(other[1], triangles, err_msg=f"{name}: {obj}")
+            np.testing.assert_allclose(other[0], positions, atol=1e-6, err_msg=f"{name}: {obj}")
+            np.testing.assert_allclose(other[2], uvs, atol=1e-6, err_msg=f"{name}: {obj}")
+
+
+def test_make_scenes_leaves_the_shipped_files_to_blender_4_2(fresh, tmp_path):
+    """Another Blender than 4.2 writes only elsewhere: it cannot replace the files by ones 4.2 cannot read."""
+    bpy = fresh
+    if tuple(bpy.app.version[:2]) == SAVED_BY:
+        pytest.skip("this is Blender 4.2, which may write the shipped files")
+    before = {p.name: p.read_bytes() for p in SAMPLES.glob("*.blend")}
+    proc = subprocess.run([sys.executable, str(SAMPLES / "make_scenes.py"), "suzanne"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 2
+    assert "made by Blender 4.2" in proc.stderr and "--output" in proc.stderr
+    assert {p.name: p.read_bytes() for p in SAMPLES.glob("*.blend")} == before
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_scene_bakes_without_a_warning(name, tmp_path):
+    """Every mesh of each scene, through scripts/bake_ao.py at a small size: no overlapping UV islands,
+    no UVs outside the image, no degenerate triangles, so nothing to warn about."""
+    objects = readme_table()[name]
+    proc = bake(SAMPLES / f"{name}.blend", tmp_path, "--objects", *objects, "--resolution", "64", "--samples", "4",
+                *EXTRA.get(name, []))
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" not in proc.stdout + proc.stderr, proc.stderr
+    assert f"baked {len(objects)} of {len(objects)} objects" in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"{obj}_AO.png" for obj in objects)
+
+
+def test_readme_first_command_prints_no_warning(tmp_path):
+    """The README's first command, as written (512 x 512, PNG and EXR) but with 2 samples per texel."""
+    readme = (ROOT / "README.md").read_text()
+    line = next(l for l in readme.splitlines() if "scripts/bake_ao.py sample_scenes/" in l)
+    args = shlex.split(line.split(".venv/bin/python scripts/bake_ao.py", 1)[1])
+    assert args[args.index("--samples") + 1] == "128" and args[args.index("--resolution") + 1] == "512"
+    args[args.index("--samples") + 1] = "2"
+    args[args.index("--output") + 1] = str(tmp_path)
+    proc = subprocess.run([sys.executable, SCRIPT, *args, "--quiet"], capture_output=True, text=True,
+                          timeout=600, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" not in proc.stdout + proc.stderr, proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "Ground_AO.exr", "Ground_AO.png", "Suzanne_AO.exr", "Suzanne_AO.png"]
+
+
+def test_suzanne_islands_do_not_overlap_at_1024(fresh):
+    """The bake's own report at 1024 x 1024 (the add-on's geometry, core's rasteriser): Smart UV Project
+    alone folded faces by a brow, an ear and the chin onto others, which shows at every resolution."""
+    from mc_ao import baking
+    from mc_ao.settings import BakeSettings
+
+    bpy = fresh
+    depsgraph = open_scene(bpy, SAMPLES / "suzanne.blend")
+    settings = BakeSettings(samples=1, min_samples=1, resolution=1024, margin=0, occluders="SELF",
+                            max_distance=1e-3, threads=2)
+    (job,) = baking.plan(depsgraph, [bpy.data.objects["Suzanne"]], settings)
+    report = job.run(settings, threads=2).report
+    assert report["covered_texels"] > 0.3 * 1024 ** 2
+    assert {key: count for key, count in report.items() if key != "covered_texels" and count} == {}
