@@ -27,7 +27,7 @@ engines:
 
 def default_workers():
     """As many as cores, at most 4: a bake's start (a process, importing Blender, opening the file)
-    is serial, so two tasks overlap it with each other's baking (bench.batch: 2 workers bake 1.4
+    is serial, so two tasks overlap it with each other's baking (bench.batch: 2 workers bake 1.5
     times the assets per minute of 1 on 2 cores); past a few, each one's memory counts for more."""
     return max(1, min(os.cpu_count() or 1, 4))
 
