@@ -411,6 +411,7 @@ def test_progress_bar_on_a_terminal_follows_the_tasks_events():
 
 def test_bakes_under_dask_do_not_inherit_the_nannys_worker_settings(monkeypatch):
     """MALLOC_TRIM_THRESHOLD_=65536, which Dask's nanny gives its workers, halves a bake's speed."""
+    pytest.importorskip("distributed")  # requirements-batch.txt; absent from the numpy 2 run of the core
     from mc_ao_batch.runners import bake_environment
 
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")  # as the nanny sets it
