@@ -132,7 +132,7 @@ def _file_stat(image):
 
 
 def _redraw_image(image):
-    image.update()
+    """Let viewers show an image whose buffers were freed or reloaded (the 3D Viewport follows the tag)."""
     image.update_tag()
 
 

@@ -608,14 +608,16 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
     bl_description = (
         "Bake ambient occlusion of the selected meshes into one image each, with the scene's MC AO "
         "settings. An existing image of another size is resized to the bake's size. Objects that are "
-        "not meshes or have no UV map are skipped. Esc cancels; a cancelled or failed bake leaves "
-        "each image as it was"
+        "not meshes or have no UV map are skipped. The baked image is packed into the .blend file "
+        "(or, with Save to File, can load from its file). Esc cancels; a cancelled or failed bake "
+        "leaves each image as it was"
     )
     # UNDO: a finished bake is one undo step, so Ctrl-Z takes back exactly the bake (its new images
     # go, a reused image gets its former size and settings) and not the step before it too, as it
-    # would without one. Blender's undo stores no image pixels, though: pixels come back only where
-    # the image datablock did not change, and a redo brings back a bake's new image blank. Nothing
-    # is pushed for a cancelled or failed bake, which puts its images back itself.
+    # would without one. Blender's undo keeps no pixels of an unpacked image whose datablock changed;
+    # a finished bake's image is packed, so its pixels are in every later undo step and a redo brings
+    # them back. Nothing is pushed for a cancelled or failed bake, which puts its images back itself
+    # and changes no image datablock, so that later undo steps keep those images' pixels.
     bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
