@@ -111,8 +111,8 @@ def scene_setup():
         obj.select_set(obj in (ground, no_uv))  # the UV-less one is skipped with a warning
     bpy.context.view_layer.objects.active = ground
     settings = bpy.context.scene.mc_ao
-    settings.resolution = 512
-    settings.samples = 256
+    settings.resolution = 256
+    settings.samples = 128
     bpy.ops.ed.undo_push(message="scene ready")
 
 
@@ -177,6 +177,9 @@ def touched(name):
 @guarded
 def watch():
     """One step after another, each waiting for trust.sh's file saying that its keys are pressed."""
+    for n in (1, 2):  # trust.sh touches dupN between its Shift-D and its Ctrl-Z: is the duplicate there?
+        if touched(f"dup{n}") and not touched(f"dup{n}.json"):
+            write(f"dup{n}.json", {"objects": sorted(o.name for o in bpy.data.objects)})
     step = state["step"]
     if step == 0 and state["sidebar"].active_panel_category == "MC AO":
         write("tab.json", {"category": "MC AO"})
@@ -197,6 +200,10 @@ def watch():
         state["step"] = 5
     elif step == 5 and not running():
         state["baked"] = image_state()
+        # The timeline becomes an Info editor: done.png shows every report of the bake, in order.
+        timeline = next(a for a in bpy.context.window_manager.windows[0].screen.areas
+                        if a.type == "DOPESHEET_EDITOR")
+        timeline.type = "INFO"
         write("done.json", {"now": state["baked"]})
         state["step"] = 6
     elif step == 6 and touched("undone2"):

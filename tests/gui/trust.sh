@@ -10,7 +10,7 @@
 #   2. Shift-D, Esc (a duplicate: an unrelated undo step), Ctrl-Z.
 #      undo_after_cancel.json: still as before?
 #   3. Bake AO to the end (a UV-less mesh is selected too: a warning before the summary).
-#      done.json; shot: done.png (the status bar: does the summary show?)
+#      done.json; shot: done.png (the panel's last-bake line; the reports in an Info editor; the status bar)
 #   4. Shift-D, Esc, Ctrl-Z. undo_after_bake.json: still the bake?
 #   5. Select only the mesh without UVs. shot: no_uv.png (the panel's reason, at the default width)
 # Output in $OUT (default /tmp/out/mc_ao_trust, the host's $ROOT/tmp/out/mc_ao_trust).
@@ -30,9 +30,10 @@ wait_for() {  # FILE SECONDS
 }
 click() { xdotool mousemove 200 600; sleep 0.3; xdotool mousemove "$X" "$Y"; sleep 0.5; xdotool click 1; }
 # An unrelated undo step and its undo, with the pointer over the 3D Viewport, as a hand does it.
-duplicate_and_undo() {
+duplicate_and_undo() {  # N: dupN.json lists the objects with the duplicate, before the Ctrl-Z
   xdotool mousemove "$VX" "$VY"; sleep 0.5
   xdotool key shift+d; sleep 0.7; xdotool key Escape; sleep 1
+  touch "$OUT/dup$1"; wait_for "$OUT/dup$1.json" 10
   xdotool key ctrl+z; sleep 2
 }
 
@@ -57,16 +58,16 @@ click; sleep 2; shot during_first.png
 xdotool key Escape
 wait_for "$OUT/cancelled.json" 120; sleep 1; shot cancelled.png
 
-duplicate_and_undo; touch "$OUT/undone1"
+duplicate_and_undo 1; touch "$OUT/undone1"
 wait_for "$OUT/undo_after_cancel.json" 30; shot undo_after_cancel.png
 
 click; sleep 1
-wait_for "$OUT/done.json" 900; sleep 1; shot done.png
+wait_for "$OUT/done.json" 900; sleep 3; shot done.png
 
-duplicate_and_undo; touch "$OUT/undone2"
+duplicate_and_undo 2; touch "$OUT/undone2"
 wait_for "$OUT/undo_after_bake.json" 30; shot undo_after_bake.png
 
 touch "$OUT/select_no_uv"; wait_for "$OUT/no_uv.json" 10; sleep 1
 xdotool mousemove "$X" "$((Y + 40))"; sleep 1; shot no_uv.png
-for f in cancelled undo_after_cancel done undo_after_bake; do echo "== $f"; cat "$OUT/$f.json"; echo; done
+for f in cancelled dup1 undo_after_cancel done dup2 undo_after_bake; do echo "== $f"; cat "$OUT/$f.json"; echo; done
 grep -E '^\[check_trust\]|Error|Traceback|Info:|Warning' "$OUT/blender.log" || true
