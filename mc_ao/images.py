@@ -59,9 +59,9 @@ class Snapshot:
     did not change, but drops it (and regenerates a generated image blank, or reloads a file image
     from disk) for one whose settings changed. So a cancelled bake leaves nothing for a later undo
     step to lose. Putting back: an image whose pixels Blender can bring back itself (a clean
-    generated image, a clean packed one, a clean file image whose file has not changed since) is
-    brought back by Blender itself (its buffers freed), which keeps it clean; any other image (painted, baked before and not saved) gets
-    its size and pixels back from the copy kept here.
+    generated image, a clean packed one, a clean file image whose file has not changed since) gets
+    its buffers freed, so that Blender brings it back and it stays clean; any other image (painted,
+    baked before and not saved) gets its size and pixels back from the copy kept here.
     """
 
     def __init__(self, image, created):
@@ -152,7 +152,9 @@ def check_target(name):
 
 
 def prepare_image(name, width, height, float_buffer):
-    """Create the image ``name``, or make an existing one's pixel buffer the bake's size; return (image, Snapshot).
+    """Create the image ``name``, or give an existing one's pixel buffer the bake's size.
+
+    Returns (image, Snapshot).
 
     A new image is Non-Color and float when asked. An existing image of another size is resized,
     not refused (the operator's tooltip says so), through its pixel buffer only (Image.scale): its

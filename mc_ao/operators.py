@@ -208,11 +208,13 @@ def total_summary(results):
     )
 
 
-def with_warnings(text, warnings):
-    """``text`` with how many warnings came before it (the status bar shows only the last report)."""
-    if not warnings:
+def with_warnings(text, warnings, errors=0):
+    """``text`` with how many warnings and errors came before it (the status bar shows only the last)."""
+    counts = [f"{n} {word}{'s' if n > 1 else ''}" for n, word in ((errors, "error"), (warnings, "warning"))
+              if n]
+    if not counts:
         return text
-    return f"{text}; {warnings} warning{'s' if warnings > 1 else ''} before this, in the Info editor"
+    return f"{text}; {' and '.join(counts)} before this, in the Info editor"
 
 
 # The last report of the last bake that ended ("INFO" | "WARNING" | "ERROR", text), or None: the
@@ -280,6 +282,7 @@ class BakeSession:
             return False
         self.warnings = 0  # warnings reported, counted in the summary of the whole bake
         self.unsummarised = 0  # warnings since the last summary line, counted in the next one
+        self.unsummarised_errors = 0  # errors (a file not saved) since the last summary line
         for obj in selected:
             if obj not in targets:
                 self._warn(baking.skip_note(obj, self.settings.occluders))
@@ -396,9 +399,10 @@ class BakeSession:
         self.report({"WARNING"}, message)
 
     def _summarise(self, text):
-        """Report ``text`` last, as a warning that counts the warnings before it when there were any."""
-        warnings, self.unsummarised = self.unsummarised, 0
-        self.report({"WARNING"} if warnings else {"INFO"}, with_warnings(text, warnings))
+        """Report ``text``, a summary, as a warning that counts the warnings and errors before it, if any."""
+        warnings, errors = self.unsummarised, self.unsummarised_errors
+        self.unsummarised = self.unsummarised_errors = 0
+        self.report({"WARNING"} if warnings or errors else {"INFO"}, with_warnings(text, warnings, errors))
 
     def _finish_job(self, context, i, result):
         """A job's result into its image for good, its file saved; its warnings, then its summary."""
@@ -418,7 +422,7 @@ class BakeSession:
         if self.output_dir is not None:
             saved = self._save(job, result)
             if saved is None:  # reported as an error; counted in the summary, which comes after it
-                self.unsummarised += 1
+                self.unsummarised_errors += 1
         self._keep(job, result, saved)
         _redraw(context)
         for note in baking.input_notes(result):
@@ -432,15 +436,19 @@ class BakeSession:
         """
         if saved is not None and self.settings.link_to_file:
             try:
-                images.use_file(bpy.data.images[job.image_name], saved, relative=self.settings.output_dir.startswith("//"))
+                relative = self.settings.output_dir.startswith("//")
+                images.use_file(bpy.data.images[job.image_name], saved, relative=relative)
                 return
-            except images.ImageError as exc:
+            except (images.ImageError, RuntimeError) as exc:
                 self._warn(f"{job.object_name}: {exc}; its pixels are packed into the .blend file instead")
-                images.finish_image(job.image_name, result.ao, self.settings.float_buffer)
         try:
+            if saved is not None and self.settings.link_to_file:  # the pixels, after use_file failed
+                images.finish_image(job.image_name, result.ao, self.settings.float_buffer)
             images.pack(bpy.data.images[job.image_name])
         except images.ImageError as exc:
-            self._warn(f"{job.object_name}: {exc}; save the image (Image > Save As) before closing the .blend file")
+            self._warn(
+                f"{job.object_name}: {exc}; save the image (Image > Save As) before closing the .blend file"
+            )
 
     def _save(self, job, result):
         path = os.path.join(self.output_dir, self.settings.file_name_for(job.object_name))
@@ -562,7 +570,7 @@ class BakeSession:
                     f"AO bake: {len(done)} of {total} objects baked, the failed ones' images are as they were",
                 )
             elif len(done) > 1:
-                self.unsummarised = self.warnings
+                self.unsummarised = self.warnings  # no errors on this branch
                 self._summarise(total_summary(self.results))
             self.ended = {"FINISHED"} if done else {"CANCELLED"}
         # Blender keeps the last registered operators, and with them this session, for its redo

@@ -321,7 +321,10 @@ def test_a_failed_file_write_keeps_the_bake_in_blender_and_the_old_file(bpy, sce
     monkeypatch.setattr(imageio, "_write_temp", disk_full)
     scene.mc_ao.save_to_file = True
     scene.mc_ao.output_dir = str(tmp_path)
-    result, error, _, _ = run_operator(bpy, capfd)
+    result, error, reports, _ = run_operator(bpy, capfd)
+    # The status bar shows the last report: the summary, which says an error came before it.
+    assert reports[-1][0] == "WARNING" and reports[-1][1].startswith("Ground: 24x24 into 'Ground_AO' in ")
+    assert reports[-1][1].endswith("; 1 error before this, in the Info editor")
     assert error == (
         "Error: Ground: the bake is in image 'Ground_AO', but its file was not saved (any file already "
         f"there is unchanged): could not write '{path}': [Errno 28] No space left on device\n"

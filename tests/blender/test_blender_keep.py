@@ -278,3 +278,19 @@ def test_a_saved_file_blender_cannot_read_leaves_the_bake_packed(bpy, scene, tmp
         f"Ground: Blender could not read the saved file '{tmp_path / 'Ground_AO.png'}' into image "
         "'Ground_AO'; its pixels are packed into the .blend file instead",
     ) in reports
+
+
+def test_a_packed_bake_linked_to_its_file_by_the_next_bake_is_unpacked(bpy, scene, tmp_path):
+    """Bake (packed), then bake again with Save to File: the image now loads from the file, unpacked."""
+    ground = add_plane(bpy, "Ground", size=4)
+    select_only(bpy, ground)
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    assert bpy.data.images["Ground_AO"].packed_file is not None
+    scene.mc_ao.save_to_file = True
+    scene.mc_ao.output_dir = str(tmp_path)
+    scene.mc_ao.file_format = "OPEN_EXR"
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    image = bpy.data.images["Ground_AO"]
+    assert image.packed_file is None and image.source == "FILE"
+    assert image.filepath == str(tmp_path / "Ground_AO.exr")  # absolute, as the folder is
+    assert tuple(image.size) == (24, 24) and pixels(bpy, "Ground_AO")[..., 0].max() > 0.5
