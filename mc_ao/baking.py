@@ -107,12 +107,25 @@ class Job:
         )
 
 
-# core's BakeResult.report keys that point at a problem in the input, and what they mean.
+# core's BakeResult.report keys that point at a problem in the input, and the sentence that says
+# so: (one, several), each with {n} for the count.
 _INPUT_NOTES = {
-    "overlapping_texels": "texels under overlapping UV islands average every surface over them",
-    "uv_outside_triangles": "triangles reach outside the UV square [0, 1]; those parts are not baked",
-    "degenerate_uv_triangles": "triangles with no area in the UV map were skipped",
-    "degenerate_triangles": "triangles with no area in space were skipped",
+    "overlapping_texels": (
+        "{n} texel lies under overlapping UV islands; it averages every surface over it",
+        "{n} texels lie under overlapping UV islands; each averages every surface over it",
+    ),
+    "uv_outside_triangles": (
+        "{n} triangle reaches outside the UV square [0, 1]; the part outside is not baked",
+        "{n} triangles reach outside the UV square [0, 1]; the parts outside are not baked",
+    ),
+    "degenerate_uv_triangles": (
+        "{n} triangle has no area in the UV map and was skipped",
+        "{n} triangles have no area in the UV map and were skipped",
+    ),
+    "degenerate_triangles": (
+        "{n} triangle has no area in space and was skipped",
+        "{n} triangles have no area in space and were skipped",
+    ),
 }
 
 
@@ -125,9 +138,18 @@ def throughput(result):
 
 
 def input_notes(result):
-    """Warnings about the input from a bake result's report, e.g. "12 overlapping_texels: ..."."""
+    """Warnings about the input from a bake result's report, as sentences.
+
+    For example "163 texels lie under overlapping UV islands; each averages every surface over it".
+    The operator and scripts/bake_ao.py both print these, after the object's name.
+    """
     report = getattr(result, "report", None) or {}
-    return [f"{report[key]} {key}: {text}" for key, text in _INPUT_NOTES.items() if report.get(key)]
+    notes = []
+    for key, (one, several) in _INPUT_NOTES.items():
+        n = report.get(key)
+        if n:
+            notes.append((one if n == 1 else several).format(n=n))
+    return notes
 
 
 def _visible_geometry(depsgraph, view_layer):

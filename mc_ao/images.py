@@ -50,10 +50,17 @@ def set_pixels(image, pixels):
 
 
 class Snapshot:
-    """What an image was before a bake changed it, to put it back when the bake is cancelled.
+    """What an image was before a bake wrote into it, to put it back when the bake does not finish.
 
-    A bake that creates its image removes it again; one that reuses an image restores its size,
-    depth, colour space and pixels.
+    A bake that creates its image removes it again. One that reuses an image changes only the
+    image's pixel buffer while it runs (its size, through Image.scale, and its pixels), never the
+    datablock's settings: Blender's memfile undo keeps the pixel buffer of an image whose datablock
+    did not change, but drops it (and regenerates a generated image blank, or reloads a file image
+    from disk) for one whose settings changed. So a cancelled bake leaves nothing for a later undo
+    step to lose. Putting back: an image whose pixels Blender can bring back itself (a clean
+    generated image, a clean packed one, a clean file image whose file has not changed since) gets
+    its buffers freed, so that Blender brings it back and it stays clean; any other image (painted,
+    baked before and not saved) gets its size and pixels back from the copy kept here.
     """
 
     def __init__(self, image, created):
@@ -61,12 +68,30 @@ class Snapshot:
         self.created = created
         if created:
             return
-        self.generated = image.source == "GENERATED"
+        self.source = image.source
         self.generated_state = (image.generated_width, image.generated_height, image.use_generated_float)
-        self.size = tuple(image.size)
         self.colorspace = image.colorspace_settings.name
         # image.has_data is False for a file image until its pixels are first read; size loads it.
+        self.size = tuple(image.size)
+        self.dirty = image.is_dirty
+        self.packed = image.packed_file is not None
+        self.file_stat = _file_stat(image)
         self.pixels = pixels_of(image) if all(self.size) else None
+
+    def _comes_back_by_itself(self, image):
+        """Whether freeing the image's buffers brings back exactly the pixels it had.
+
+        True for an image that was clean (no painted or unsaved pixels): Blender then regenerates a
+        generated image, decodes a packed one from its packed data, and reads a file image from its
+        file, which must not have changed since.
+        """
+        if self.dirty or image.source != self.source:
+            return False
+        if self.source == "GENERATED":
+            return True
+        if self.packed:
+            return image.packed_file is not None
+        return self.file_stat is not None and _file_stat(image) == self.file_stat
 
     def restore(self):
         image = bpy.data.images.get(self.name)
@@ -75,13 +100,39 @@ class Snapshot:
         if self.created:
             bpy.data.images.remove(image)
             return
-        if self.generated:
+        # Settings that finish_image() may have changed before it failed; each reloads the image.
+        if image.colorspace_settings.name != self.colorspace:
+            image.colorspace_settings.name = self.colorspace
+        if self.source == "GENERATED" and (
+            image.generated_width, image.generated_height, image.use_generated_float
+        ) != self.generated_state:
             image.generated_width, image.generated_height, image.use_generated_float = self.generated_state
-        elif tuple(image.size) != self.size and all(self.size):
+        if self._comes_back_by_itself(image):
+            # Not Image.reload(): on a packed image it re-packs the file on disk, if there is one.
+            image.buffers_free()
+            _redraw_image(image)
+            if tuple(image.size) == self.size:
+                return
+        if tuple(image.size) != self.size and all(self.size):
             image.scale(*self.size)
-        image.colorspace_settings.name = self.colorspace
         if self.pixels is not None and tuple(image.size) == self.size:
             set_pixels(image, self.pixels)
+
+
+def _file_stat(image):
+    """(size, modification time) of an unpacked file image's file, or None (generated, packed, missing)."""
+    if image.source != "FILE" or image.packed_file is not None or not image.filepath:
+        return None
+    try:
+        st = os.stat(bpy.path.abspath(image.filepath, library=image.library))
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns
+
+
+def _redraw_image(image):
+    """Let viewers show an image whose buffers were freed or reloaded (the 3D Viewport follows the tag)."""
+    image.update_tag()
 
 
 def unusable_reason(image):
@@ -100,13 +151,16 @@ def check_target(name):
 
 
 def prepare_image(name, width, height, float_buffer):
-    """Create the image ``name`` or make an existing one fit the bake; return (image, Snapshot).
+    """Create the image ``name``, or give an existing one's pixel buffer the bake's size.
+
+    Returns (image, Snapshot).
 
     A new image is Non-Color and float when asked. An existing image of another size is resized,
-    not refused (the operator's tooltip says so): a generated image gets the bake's size and depth,
-    an image from a file is scaled to the size (its depth is the file's; the file on disk is not
-    touched). Either way its colour space becomes Non-Color: AO is data, and any other colour space
-    would transform it. The Snapshot puts all of that back if the bake does not finish.
+    not refused (the operator's tooltip says so), through its pixel buffer only (Image.scale): its
+    settings (colour space, a generated image's size and depth) stay as they were until the bake
+    finishes, when finish_image() settles them, so that a bake that does not finish leaves nothing
+    that Blender's undo would later reset (see Snapshot). The Snapshot puts the image back if the
+    bake does not finish.
     """
     image = bpy.data.images.get(name)
     if image is None:
@@ -116,18 +170,7 @@ def prepare_image(name, width, height, float_buffer):
     if reason is not None:
         raise ImageError(reason)
     snapshot = Snapshot(image, created=False)
-    # The colour space first: changing it reloads an image from its file, which would undo a resize.
-    # Only when it differs: setting it, even to the same name, also wipes a generated image's pixels
-    # (Blender regenerates them), and a live bake shows its tiles over the previous pixels.
-    if image.colorspace_settings.name != "Non-Color":
-        image.colorspace_settings.name = "Non-Color"
-    if image.source == "GENERATED":
-        if (image.generated_width, image.generated_height, image.use_generated_float) != (
-            width, height, float_buffer,
-        ):
-            image.generated_width, image.generated_height = width, height
-            image.use_generated_float = float_buffer
-    elif tuple(image.size) != (width, height):
+    if tuple(image.size) != (width, height):
         image.scale(width, height)
     if tuple(image.size) != (width, height):
         snapshot.restore()
@@ -135,6 +178,76 @@ def prepare_image(name, width, height, float_buffer):
             f"image {name!r} could not be resized from {image.size[0]}x{image.size[1]} to {width}x{height}"
         )
     return image, snapshot
+
+
+def finish_image(name, ao, float_buffer):
+    """Give the image ``name`` a finished bake for good: settings, size and pixels; return the image.
+
+    Its colour space becomes Non-Color (AO is data; any other colour space would transform it); a
+    generated image gets the bake's size and depth (a file image keeps its file's depth); then the
+    pixels. The settings first, since changing them reloads or regenerates the pixel buffer.
+    """
+    image = bpy.data.images.get(name)
+    if image is None:
+        raise ImageError(f"image {name!r} is gone")
+    h, w = ao.shape
+    if image.colorspace_settings.name != "Non-Color":
+        image.colorspace_settings.name = "Non-Color"
+    if image.source == "GENERATED" and (
+        image.generated_width, image.generated_height, image.use_generated_float
+    ) != (w, h, float_buffer):
+        image.generated_width, image.generated_height = w, h
+        image.use_generated_float = float_buffer
+    if tuple(image.size) != (w, h):
+        image.scale(w, h)
+    set_pixels(image, rgba(ao, image.channels))
+    return image
+
+
+def pack(image):
+    """Keep a baked image's pixels inside the .blend file: packed, with a fake user.
+
+    Packed pixels are written into the .blend by File > Save, and into every undo step, so the bake
+    survives saving and reopening, and undo and redo, which keep no pixels of an unpacked image
+    whose datablock changed. The fake user keeps an image that no material uses yet from being
+    dropped on save. A float image is packed as a float OpenEXR, an 8-bit one as a PNG (Blender's
+    choice; both exact). An image loaded from a file is packed too: the file on disk is left as it
+    was (Image > Unpack writes the bake there).
+
+    Raises ImageError when Blender cannot pack it.
+    """
+    image.use_fake_user = True
+    try:
+        image.pack()
+    except RuntimeError as exc:
+        raise ImageError(f"image {image.name!r} could not be packed into the .blend file: {exc}") from None
+
+
+def use_file(image, path, relative):
+    """Make ``image`` the image file at ``path`` (as Image > Save As does); its pixels become the file's.
+
+    ``relative``: store the path relative to the .blend file ("//..."), where it is saved. The
+    image gets a fake user (kept on save even when no material uses it); packed pixels from an
+    earlier bake are dropped, since the file now holds the bake.
+
+    Raises ImageError when Blender cannot read the file back; the image is then a generated image
+    again, whose pixels the caller puts back.
+    """
+    size = tuple(image.size)
+    image.use_fake_user = True
+    image.filepath = bpy.path.relpath(path) if relative and bpy.data.filepath else path
+    if image.source != "FILE":
+        image.source = "FILE"
+    if image.packed_file is not None:
+        image.unpack(method="REMOVE")
+    if image.colorspace_settings.name != "Non-Color":
+        image.colorspace_settings.name = "Non-Color"
+    image.reload()  # not packed (any more): reads the file
+    _redraw_image(image)
+    if tuple(image.size) != size:
+        image.filepath = ""
+        image.source = "GENERATED"
+        raise ImageError(f"Blender could not read the saved file {path!r} into image {image.name!r}")
 
 
 def save_pixels_with_blender(pixels, path, file_format, bits):

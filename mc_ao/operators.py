@@ -17,6 +17,12 @@ What goes wrong, and what the user gets (a report naming the object, images kept
   fails to write later: the image in Blender keeps the bake, the file on disk is left as it was
 - Esc, Undo during a bake, or a failure in the core: unfinished images are put back as they were,
   finished ones are kept; a failed object does not stop the others
+
+What a finished bake leaves: its image, with a fake user, packed into the .blend (or, with Save to
+File and Link to File on, loading from the saved file), so that File > Save keeps it and no later
+undo or redo step blanks it; Blender's undo keeps no pixels of an unpacked image whose settings
+changed. The report of each object ends with its summary (size, time, samples, rays/s), after its
+warnings, since the status bar shows only the last report.
 """
 
 import os
@@ -122,21 +128,57 @@ def summary(job, result):
     )
 
 
+def total_summary(results):
+    """One line for a bake of several objects: their number, time, samples per texel, ray throughput."""
+    seconds = sum(r.seconds for r in results)
+    rays = sum(r.rays for r in results)
+    covered = sum(int(r.mask.sum()) for r in results)
+    per_texel = sum(float(r.samples[r.mask].sum()) for r in results) / covered if covered else 0.0
+    rate = rays / seconds / 1e6 if seconds > 0 else float("nan")
+    return (
+        f"AO bake: {len(results)} objects in {seconds:.2f} s, {per_texel:.0f} samples per texel, "
+        f"{rate:.2f} M rays/s"
+    )
+
+
+def with_warnings(text, warnings, errors=0):
+    """``text`` with how many warnings and errors came before it (the status bar shows only the last)."""
+    counts = [f"{n} {word}{'s' if n > 1 else ''}" for n, word in ((errors, "error"), (warnings, "warning"))
+              if n]
+    if not counts:
+        return text
+    return f"{text}; {' and '.join(counts)} before this, in the Info editor"
+
+
+# The last report of the last bake that ended ("INFO" | "WARNING" | "ERROR", text), or None: the
+# panel shows it under the button until the next bake, since the status bar shows a report for a
+# few seconds only (and Blender 4.3 showed none at all after a finished modal bake, see the README).
+last_outcome = None
+
+
 class BakeSession:
     """The main-thread side of one bake: plan it, start the worker, apply its messages, end it.
 
     ``report(type, message)`` is the operator's ``self.report`` (or anything that takes the same).
-    Images are prepared when a job first writes into them (created, or resized when they exist with
-    another size), with an images.Snapshot taken then; every image whose job did not finish is put
-    back from its snapshot at the end, so a cancelled or failed bake leaves no partial image.
+    Images are prepared when a job first writes into them (created, or their pixel buffer resized
+    when they exist with another size), with an images.Snapshot taken then; every image whose job
+    did not finish is put back from its snapshot at the end, so a cancelled or failed bake leaves no
+    partial image. A finished job's image gets its settings, pixels, fake user and packing (or its
+    saved file) at once, in _finish_job.
     """
 
     def __init__(self, report):
-        self.report = report
+        self._report_to = report
+        self.last_report = None  # (type, message) of the last report, for the panel
         self.run = None
         self.area = None  # the area whose header shows the progress (modal only)
         self.ended = None  # the operator's result, once the session has ended
         self.interrupted = False  # an undo stopped the worker; the session ends after it
+
+    def report(self, kind, message):
+        """The operator's report, remembered: the last one of a bake is what the panel shows."""
+        self.last_report = (next(iter(kind)), message)
+        self._report_to(kind, message)
 
     # -- setting up ---------------------------------------------------------------------------
 
@@ -171,13 +213,18 @@ class BakeSession:
         except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
             self.report({"ERROR"}, str(exc))
             return False
+        self.warnings = 0  # warnings reported, counted in the summary of the whole bake
+        self.unsummarised = 0  # warnings since the last summary line, counted in the next one
+        self.unsummarised_errors = 0  # errors (a file not saved) since the last summary line
         for obj in selected:
             if obj not in targets:
-                self.report({"WARNING"}, baking.skip_note(obj, self.settings.occluders))
+                self._warn(baking.skip_note(obj, self.settings.occluders))
         w, h = self.settings.size
         self.live = live and w * h <= LIVE_MAX_TEXELS
-        self.errors = 0
+        self.errors = 0  # objects whose bake failed
+        self.file_errors = 0  # files not saved (their objects are baked)
         self.finished = []
+        self.results = []  # of the finished jobs, for the summary of a bake of several objects
         self.snapshots = {}  # job index -> images.Snapshot of its image before the bake touched it
         self.buffers = {}  # job index -> live pixel buffer (H, W, channels)
         self.pending = set()  # jobs whose live buffer has tiles not yet in the image
@@ -226,8 +273,9 @@ class BakeSession:
         """Put back the images of jobs that did not finish: no partial image is left behind.
 
         After an undo, an image the bake created is already gone (the undo went back to before
-        the bake), and a datablock of that name, if any, is the undo's: only reused images, whose
-        pixels Blender's undo does not keep, are put back then.
+        the bake), and a datablock of that name, if any, is the undo's: only reused images are put
+        back then (the undo kept their datablock, which the bake had not changed, with the bake's
+        partial pixel buffer).
         """
         for i, snapshot in self.snapshots.items():
             if i not in self.finished and not (self.interrupted and snapshot.created):
@@ -279,24 +327,62 @@ class BakeSession:
         if i in self.snapshots:
             self.snapshots[i].restore()
 
+    def _warn(self, message):
+        self.warnings += 1
+        self.unsummarised += 1
+        self.report({"WARNING"}, message)
+
+    def _summarise(self, text):
+        """Report ``text``, a summary, as a warning that counts the warnings and errors before it, if any."""
+        warnings, errors = self.unsummarised, self.unsummarised_errors
+        self.unsummarised = self.unsummarised_errors = 0
+        self.report({"WARNING"} if warnings or errors else {"INFO"}, with_warnings(text, warnings, errors))
+
     def _finish_job(self, context, i, result):
+        """A job's result into its image for good, its file saved; its warnings, then its summary."""
         job = self.run.jobs[i]
         self.pending.discard(i)
         self.buffers.pop(i, None)
         try:
-            image = self._image(i)
-            images.set_pixels(image, images.rgba(result.ao, image.channels))
+            self._image(i)  # prepared and snapshot, where no live tile came first
+            images.finish_image(job.image_name, result.ao, self.settings.float_buffer)
         except images.ImageError as exc:
             self._failed(i)
             self.report({"ERROR"}, f"{job.object_name}: {exc}")
             return
-        _redraw(context)
         self.finished.append(i)
-        self.report({"INFO"}, summary(job, result))
-        for note in baking.input_notes(result):
-            self.report({"WARNING"}, f"{job.object_name}: {note}")
+        self.results.append(result)
+        saved = None
         if self.output_dir is not None:
-            self._save(job, result)
+            saved = self._save(job, result)
+            if saved is None:  # reported as an error; counted in the summary, which comes after it
+                self.unsummarised_errors += 1
+        self._keep(job, result, saved)
+        _redraw(context)
+        for note in baking.input_notes(result):
+            self._warn(f"{job.object_name}: {note}")
+        self._summarise(summary(job, result))
+
+    def _keep(self, job, result, saved):
+        """Make a finished image survive save, reopen and undo: its saved file, else packed pixels.
+
+        ``saved`` is the path of the file the bake was just saved to, or None.
+        """
+        if saved is not None and self.settings.link_to_file:
+            try:
+                relative = self.settings.output_dir.startswith("//")
+                images.use_file(bpy.data.images[job.image_name], saved, relative=relative)
+                return
+            except (images.ImageError, RuntimeError) as exc:
+                self._warn(f"{job.object_name}: {exc}; its pixels are packed into the .blend file instead")
+        try:
+            if saved is not None and self.settings.link_to_file:  # the pixels, after use_file failed
+                images.finish_image(job.image_name, result.ao, self.settings.float_buffer)
+            images.pack(bpy.data.images[job.image_name])
+        except images.ImageError as exc:
+            self._warn(
+                f"{job.object_name}: {exc}; save the image (Image > Save As) before closing the .blend file"
+            )
 
     def _save(self, job, result):
         """Write the finished job's file into the output folder; report where, or why not."""
@@ -308,7 +394,7 @@ class BakeSession:
         except corelink.load().McAoError as exc:  # a path that would leave the output folder
             written, failures = [], [(self.output_dir, exc)]
         for path, exc in failures:
-            self.errors += 1
+            self.file_errors += 1
             why = str(exc) if path in str(exc) else f"{path}: {exc}"
             self.report(
                 {"ERROR"},
@@ -317,6 +403,7 @@ class BakeSession:
             )
         if written:
             self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
+        return written[0] if written and not failures else None
 
     def _output_files(self):
         """image name -> its OutputFile list, over all of this bake's jobs (distinct, safe names)."""
@@ -428,11 +515,18 @@ class BakeSession:
                     {"WARNING"},
                     f"AO bake: {len(done)} of {total} objects baked, the failed ones' images are as they were",
                 )
+            elif len(done) > 1:
+                self.unsummarised = self.warnings
+                self.unsummarised_errors = self.file_errors
+                self._summarise(total_summary(self.results))
             self.ended = {"FINISHED"} if done else {"CANCELLED"}
         # Blender keeps the last registered operators, and with them this session, for its redo
         # and history: keep nothing heavy (the jobs' geometry, the images' old pixels) past the end.
         self.run = None
         self.snapshots = {}
+        self.results = []
+        global last_outcome
+        last_outcome = self.last_report
         return self.ended
 
     def abandon(self):
@@ -469,14 +563,16 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
     bl_description = (
         "Bake ambient occlusion of the selected meshes into one image each, with the scene's MC AO "
         "settings. An existing image of another size is resized to the bake's size. Objects that are "
-        "not meshes or have no UV map are skipped. Esc cancels; a cancelled or failed bake leaves "
-        "each image as it was"
+        "not meshes or have no UV map are skipped. The baked image is packed into the .blend file "
+        "(or, with Save to File, can load from its file). Esc cancels; a cancelled or failed bake "
+        "leaves each image as it was"
     )
     # UNDO: a finished bake is one undo step, so Ctrl-Z takes back exactly the bake (its new images
     # go, a reused image gets its former size and settings) and not the step before it too, as it
-    # would without one. Blender's undo stores no image pixels, though: pixels come back only where
-    # the image datablock did not change, and a redo brings back a bake's new image blank. Nothing
-    # is pushed for a cancelled or failed bake, which puts its images back itself.
+    # would without one. Blender's undo keeps no pixels of an unpacked image whose datablock changed;
+    # a finished bake's image is packed, so its pixels are in every later undo step and a redo brings
+    # them back. Nothing is pushed for a cancelled or failed bake, which puts its images back itself
+    # and changes no image datablock, so that later undo steps keep those images' pixels.
     bl_options = {"REGISTER", "UNDO"}
 
     @classmethod

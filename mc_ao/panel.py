@@ -3,19 +3,67 @@
 import bpy
 
 from . import baking
+from . import operators
 from .operators import OBJECT_OT_mc_ao_bake, is_running
 from .extract import default_uv_map
 from .settings import BakeSettings
 
-# UILayout.prop() takes a placeholder for an empty text field in newer Blender versions (4.3 and
-# 5.0 have it), not in every version this extension supports.
 # Selected objects that will not be baked are listed under the button, up to this many lines.
 MAX_SKIPPED_LINES = 3
+# The icon of the last bake's line in the panel, by the type of its last report.
+_OUTCOME_ICONS = {"INFO": "CHECKMARK", "WARNING": "ERROR", "ERROR": "CANCEL"}
+# UILayout.prop() takes a placeholder for an empty text field in newer Blender versions (4.3 and
+# 5.0 have it), not in every version this extension supports.
 _HAS_PLACEHOLDER = "placeholder" in bpy.types.UILayout.bl_rna.functions["prop"].parameters
 
 
 def _placeholder(text):
     return {"placeholder": text} if _HAS_PLACEHOLDER else {}
+
+
+# Pixels of a sidebar's width that a label's text cannot use, at UI scale 1: the panel's margins,
+# the label's icon, and the strip of tabs at the region's edge. Measured in Blender 4.3 (UI scale
+# 1.04, sidebar 291 pixels with its tabs): texts that blf measures at 208 pixels fit, 215 were cut
+# off; 84 leaves room for 203.
+LABEL_INSET = 84
+
+
+def text_width(text, context):
+    """Width in pixels of ``text`` in the UI's label font and size (Blender's font engine, blf)."""
+    import blf
+
+    prefs = context.preferences
+    scale = prefs.system.ui_scale or prefs.view.ui_scale  # the first is 0 without a window
+    blf.size(0, prefs.ui_styles[0].widget.points * scale)
+    return blf.dimensions(0, text)[0]
+
+
+def wrap_text(text, width, measure):
+    """``text`` cut into lines, at spaces, that each measure at most ``width`` (a single long word
+    stays whole on its own line). ``measure(text)`` is the width of a text."""
+    lines = []
+    for word in text.split():
+        if lines and measure(lines[-1] + " " + word) <= width:
+            lines[-1] += " " + word
+        else:
+            lines.append(word)
+    return lines or [""]
+
+
+def wrapped_label(layout, context, text, icon="NONE"):
+    """A label that continues on more lines where the region is too narrow for it, none of it cut off.
+
+    The first line has the icon; the others are indented as far, so the text lines up.
+    """
+    region = context.region
+    if region is None or region.width <= 0:  # no window (a script): nothing to fit
+        lines = [text]
+    else:
+        scale = context.preferences.system.ui_scale or 1.0
+        lines = wrap_text(text, region.width - LABEL_INSET * scale, lambda t: text_width(t, context))
+    col = layout.column(align=True)
+    for n, line in enumerate(lines):
+        col.label(text=line, icon=icon if n == 0 else ("BLANK1" if icon != "NONE" else "NONE"))
 
 
 class _McAoPanel:
@@ -36,30 +84,38 @@ class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        selected = context.selected_objects
         row = layout.row()
         row.scale_y = 1.5
         row.operator(OBJECT_OT_mc_ao_bake.bl_idname, icon="RENDER_STILL")
         if is_running():
             layout.label(text="Baking, Esc cancels", icon="TIME")
             return
-        # The button greys out when its poll fails; say why under it.
-        reason = baking.why_not_bakeable(selected)
-        if reason is not None:
-            layout.label(text=reason, icon="INFO")
-            return
-        targets = baking.targets_of(selected)
-        if len(targets) == 1:
-            image_name = BakeSettings.from_properties(context.scene.mc_ao).image_name_for(targets[0].name)
-            layout.label(text=f"Into {image_name}", icon="IMAGE_DATA")
-        else:
-            layout.label(text=f"{len(targets)} objects, one image each", icon="IMAGE_DATA")
-        skipped = [obj for obj in selected if obj not in targets]
-        for obj in skipped[:MAX_SKIPPED_LINES]:
-            why = "no UV map" if obj.type == "MESH" else "not a mesh"
-            layout.label(text=f"Skipped: {obj.name} ({why})", icon="ERROR")
-        if len(skipped) > MAX_SKIPPED_LINES:
-            layout.label(text=f"... and {len(skipped) - MAX_SKIPPED_LINES} more skipped", icon="ERROR")
+        draw_targets(layout, context)
+        if operators.last_outcome is not None:
+            kind, text = operators.last_outcome
+            wrapped_label(layout, context, f"Last bake: {text}", icon=_OUTCOME_ICONS.get(kind, "INFO"))
+
+
+def draw_targets(layout, context):
+    """What the button will bake, or why it cannot; the selected objects it will skip."""
+    selected = context.selected_objects
+    # The button greys out when its poll fails; say why under it.
+    reason = baking.why_not_bakeable(selected)
+    if reason is not None:
+        wrapped_label(layout, context, reason, icon="INFO")
+        return
+    targets = baking.targets_of(selected)
+    if len(targets) == 1:
+        image_name = BakeSettings.from_properties(context.scene.mc_ao).image_name_for(targets[0].name)
+        wrapped_label(layout, context, f"Into {image_name}", icon="IMAGE_DATA")
+    else:
+        layout.label(text=f"{len(targets)} objects, one image each", icon="IMAGE_DATA")
+    skipped = [obj for obj in selected if obj not in targets]
+    for obj in skipped[:MAX_SKIPPED_LINES]:
+        why = "no UV map" if obj.type == "MESH" else "not a mesh"
+        wrapped_label(layout, context, f"Skipped: {obj.name} ({why})", icon="ERROR")
+    if len(skipped) > MAX_SKIPPED_LINES:
+        layout.label(text=f"... and {len(skipped) - MAX_SKIPPED_LINES} more skipped", icon="ERROR")
 
 
 class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
@@ -133,3 +189,4 @@ class VIEW3D_PT_mc_ao_output(_McAoPanel, bpy.types.Panel):
         layout.active = settings.save_to_file
         layout.prop(settings, "file_format")
         layout.prop(settings, "output_dir")
+        layout.prop(settings, "link_to_file")

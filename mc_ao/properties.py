@@ -120,6 +120,15 @@ class McAoSettings(bpy.types.PropertyGroup):
         ),
         default=_DEFAULTS.output_dir, subtype="DIR_PATH", options=_BLEND_RELATIVE,
     )
+    link_to_file: BoolProperty(
+        name="Link Image to File",
+        description=(
+            "After the file is saved, the image in Blender loads from it, as after Image > Save As: "
+            "the .blend file stays small and needs the file beside it. Off, or without Save to File, "
+            "the image's pixels are packed into the .blend file"
+        ),
+        default=_DEFAULTS.link_to_file,
+    )
     seed: IntProperty(
         name="Seed", description="Seed of the random scrambling; the same seed gives the same image",
         default=_DEFAULTS.seed, min=0,

@@ -35,6 +35,7 @@ class BakeSettings:
     save_to_file: bool = False
     file_format: str = "PNG"
     output_dir: str = "//"
+    link_to_file: bool = True  # with save_to_file: the image loads from its saved file, not packed
     seed: int = 0
     threads: int = 0  # 0 = the add-on preferences' default (whose 0 = all cores)
     ignore_backfaces: bool = False

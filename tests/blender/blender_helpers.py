@@ -1,5 +1,6 @@
 """Scene builders and image readers for the Blender tests (a module of its own: a name no other test folder uses)."""
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -51,3 +52,45 @@ def image_ao(image):
     image.pixels.foreach_get(px)
     px = px.reshape(h, w, 4)
     return px[..., 0], px[..., 3]
+
+
+# -- images and bake sessions, as the modal operator drives them ---------------------------------
+
+def pattern_image(bpy, name, width, height, float_buffer=False, is_data=False):
+    """An image with recognisable pixels (what a user's previous bake or painting would be)."""
+    from mc_ao import images
+
+    image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=float_buffer, is_data=is_data)
+    pattern = np.random.default_rng(len(name)).random((height, width, 4), dtype=np.float32)
+    pattern = np.round(pattern * 255) / 255  # exact in an 8-bit image too
+    images.set_pixels(image, pattern)
+    return images.pixels_of(image)
+
+
+def assert_unchanged(bpy, name, pixels):
+    from mc_ao import images
+
+    image = bpy.data.images.get(name)
+    assert image is not None, f"image {name} is gone"
+    assert tuple(image.size) == (pixels.shape[1], pixels.shape[0])
+    np.testing.assert_array_equal(images.pixels_of(image), pixels)
+
+
+def new_session():
+    """A BakeSession reporting into a list, as the operator's self.report would."""
+    from mc_ao import operators
+
+    reports = []
+    session = operators.BakeSession(lambda kind, message: reports.append((next(iter(kind)), message)))
+    return session, reports
+
+
+def tick_until(bpy, session, done, timeout=30.0):
+    """Send timer events until done() or the session ends; return the last event's result."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = session.on_event(bpy.context, "TIMER")
+        if done() or result != {"PASS_THROUGH"}:
+            return result
+        assert time.monotonic() < deadline, "the bake did not get there in time"
+        time.sleep(0.005)

@@ -9,6 +9,7 @@ import os
 import shutil
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 import pytest
@@ -56,3 +57,34 @@ def scene(bpy, addon):
     settings.margin = 2
     settings.threads = 2
     return scene
+
+
+@pytest.fixture
+def hold_bake(monkeypatch):
+    """core.bake_ao that, after the first finished tile of the named objects, waits until cancelled.
+
+    A bake caught in the middle, deterministically: the live image already has tiles in it, the bake
+    has not finished, and only Esc (or an undo) lets the worker go on, into core's cancellation.
+    Returns hold(*object_names) -> threading.Event set once the bake is held.
+    """
+    import core
+
+    real = core.bake_ao
+
+    def hold(*names):
+        held = threading.Event()
+
+        def bake_ao(target, *args, on_tile=None, cancel=None, **kwargs):
+            def tile(*tile_args):
+                if on_tile is not None:
+                    on_tile(*tile_args)
+                if target.name in names:
+                    held.set()
+                    cancel.wait(30)
+
+            return real(target, *args, on_tile=tile, cancel=cancel, **kwargs)
+
+        monkeypatch.setattr(core, "bake_ao", bake_ao)
+        return held
+
+    return hold

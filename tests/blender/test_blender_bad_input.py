@@ -8,39 +8,19 @@ cases drive mc_ao.operators.BakeSession, which is all the modal does, with the s
 """
 
 import errno
-import threading
-import time
 import types
 
 import numpy as np
 import pytest
 
-from blender_helpers import add_cube, add_plane, select_only
+from blender_helpers import (
+    add_cube, add_plane, assert_unchanged, new_session, pattern_image, select_only, tick_until,
+)
 
 pytestmark = pytest.mark.blender
 
 
 # -- helpers ----------------------------------------------------------------------------------------
-
-def pattern_image(bpy, name, width, height, float_buffer=False, is_data=False):
-    """An image with recognisable pixels (what a user's previous bake or painting would be)."""
-    from mc_ao import images
-
-    image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=float_buffer, is_data=is_data)
-    pattern = np.random.default_rng(len(name)).random((height, width, 4), dtype=np.float32)
-    pattern = np.round(pattern * 255) / 255  # exact in an 8-bit image too
-    images.set_pixels(image, pattern)
-    return images.pixels_of(image)
-
-
-def assert_unchanged(bpy, name, pixels):
-    from mc_ao import images
-
-    image = bpy.data.images.get(name)
-    assert image is not None, f"image {name} is gone"
-    assert tuple(image.size) == (pixels.shape[1], pixels.shape[0])
-    np.testing.assert_array_equal(images.pixels_of(image), pixels)
-
 
 def strip_uvs(obj):
     while obj.data.uv_layers:
@@ -85,57 +65,6 @@ def run_operator(bpy, capfd, *args):
     return result, error, reports, err
 
 
-def new_session():
-    """A BakeSession reporting into a list, as the operator's self.report would."""
-    from mc_ao import operators
-
-    reports = []
-    session = operators.BakeSession(lambda kind, message: reports.append((next(iter(kind)), message)))
-    return session, reports
-
-
-def tick_until(bpy, session, done, timeout=30.0):
-    """Send timer events until done() or the session ends; return the last event's result."""
-    deadline = time.monotonic() + timeout
-    while True:
-        result = session.on_event(bpy.context, "TIMER")
-        if done() or result != {"PASS_THROUGH"}:
-            return result
-        assert time.monotonic() < deadline, "the bake did not get there in time"
-        time.sleep(0.005)
-
-
-@pytest.fixture
-def hold_bake(monkeypatch):
-    """core.bake_ao that, after the first finished tile of the named objects, waits until cancelled.
-
-    A bake caught in the middle, deterministically: the live image already has tiles in it, the bake
-    has not finished, and only Esc (or an undo) lets the worker go on, into core's cancellation.
-    Returns hold(*object_names) -> threading.Event set once the bake is held.
-    """
-    import core
-
-    real = core.bake_ao
-
-    def hold(*names):
-        held = threading.Event()
-
-        def bake_ao(target, *args, on_tile=None, cancel=None, **kwargs):
-            def tile(*tile_args):
-                if on_tile is not None:
-                    on_tile(*tile_args)
-                if target.name in names:
-                    held.set()
-                    cancel.wait(30)
-
-            return real(target, *args, on_tile=tile, cancel=cancel, **kwargs)
-
-        monkeypatch.setattr(core, "bake_ao", bake_ao)
-        return held
-
-    return hold
-
-
 class FakeLayout:
     """Records what a panel's draw() puts in its layout (a panel cannot be drawn without a window)."""
 
@@ -154,11 +83,16 @@ class FakeLayout:
         self.labels.append(text)
 
 
-def panel_labels(bpy):
-    from mc_ao import panel
+def panel_labels(bpy, last_outcome=None):
+    """The labels of the main panel (no region: nothing is wrapped), with this last bake's outcome."""
+    from mc_ao import operators, panel
 
     layout = FakeLayout()
-    panel.VIEW3D_PT_mc_ao.draw(types.SimpleNamespace(layout=layout), bpy.context)
+    kept, operators.last_outcome = operators.last_outcome, last_outcome
+    try:
+        panel.VIEW3D_PT_mc_ao.draw(types.SimpleNamespace(layout=layout), bpy.context)
+    finally:
+        operators.last_outcome = kept
     return layout.labels
 
 
@@ -215,10 +149,14 @@ def test_non_mesh_objects_beside_a_mesh_are_skipped_with_a_warning(bpy, scene, c
     result, error, reports, _ = run_operator(bpy, capfd)
     assert (result, error) == ({"FINISHED"}, None)
     warnings = [message for kind, message in reports if kind == "WARNING"]
-    assert warnings == [
+    assert warnings[:2] == [
         "Lamp: skipped, it is a light, not a mesh",
         "Rope: skipped, it is a curve, not a mesh; it still occludes the baked objects",
     ]
+    # The summary comes last (the status bar shows only the last report) and counts the warnings.
+    kind, summary = reports[-1]
+    assert kind == "WARNING" and summary.startswith("Ground: 24x24 into 'Ground_AO' in ")
+    assert summary.endswith("; 2 warnings before this, in the Info editor")
     assert sorted(i.name for i in bpy.data.images) == ["Ground_AO"]
 
 
@@ -383,7 +321,10 @@ def test_a_failed_file_write_keeps_the_bake_in_blender_and_the_old_file(bpy, sce
     monkeypatch.setattr(imageio, "_write_temp", disk_full)
     scene.mc_ao.save_to_file = True
     scene.mc_ao.output_dir = str(tmp_path)
-    result, error, _, _ = run_operator(bpy, capfd)
+    result, error, reports, _ = run_operator(bpy, capfd)
+    # The status bar shows the last report: the summary, which says an error came before it.
+    assert reports[-1][0] == "WARNING" and reports[-1][1].startswith("Ground: 24x24 into 'Ground_AO' in ")
+    assert reports[-1][1].endswith("; 1 error before this, in the Info editor")
     assert error == (
         "Error: Ground: the bake is in image 'Ground_AO', but its file was not saved (any file already "
         f"there is unchanged): could not write '{path}': [Errno 28] No space left on device\n"

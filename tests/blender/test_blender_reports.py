@@ -1,0 +1,194 @@
+"""Issue 11, what the user reads: warnings as sentences, the summary last, the panel's lines whole.
+
+The status bar shows only the last report, so each object's warnings come before its summary, which
+comes last and counts them; the panel keeps the last bake's outcome under the button. Notes about
+the input are sentences, the same in the operator and in scripts/bake_ao.py. Labels in the panel
+wrap at the sidebar's width instead of being cut off.
+"""
+
+import re
+import types
+
+import numpy as np
+import pytest
+
+from blender_helpers import add_cube, add_plane, new_session, select_only, tick_until
+
+pytestmark = pytest.mark.blender
+
+
+# -- notes about the input ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("key, count, sentence", [
+    ("overlapping_texels", 163, "163 texels lie under overlapping UV islands; each averages every surface over it"),
+    ("overlapping_texels", 1, "1 texel lies under overlapping UV islands; it averages every surface over it"),
+    ("uv_outside_triangles", 12,
+     "12 triangles reach outside the UV square [0, 1]; the parts outside are not baked"),
+    ("uv_outside_triangles", 1, "1 triangle reaches outside the UV square [0, 1]; the part outside is not baked"),
+    ("degenerate_uv_triangles", 3, "3 triangles have no area in the UV map and were skipped"),
+    ("degenerate_uv_triangles", 1, "1 triangle has no area in the UV map and was skipped"),
+    ("degenerate_triangles", 2, "2 triangles have no area in space and were skipped"),
+    ("degenerate_triangles", 1, "1 triangle has no area in space and was skipped"),
+])
+def test_input_notes_are_sentences(addon, key, count, sentence):
+    from mc_ao import baking
+
+    report = {"covered_texels": 500, "overlapping_texels": 0, "uv_outside_triangles": 0,
+              "degenerate_uv_triangles": 0, "degenerate_triangles": 0}
+    report[key] = count
+    assert baking.input_notes(types.SimpleNamespace(report=report)) == [sentence]
+
+
+def test_each_note_is_about_a_count_the_core_reports(addon):
+    """The notes are keyed by core.BakeResult.report's keys: a key renamed in the core must fail here."""
+    import core
+    from mc_ao import baking
+
+    plane = core.Mesh(
+        positions=np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float),
+        triangles=np.array([[0, 1, 2], [0, 2, 3]]),
+        uvs=np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], float),
+    )
+    result = core.bake_ao(plane, resolution=(8, 8), samples=4, threads=1)
+    assert set(baking._INPUT_NOTES) <= set(result.report)
+    assert baking.input_notes(result) == []  # a clean plane: nothing to say
+
+
+# -- the order of the reports ---------------------------------------------------------------------
+
+def overlapping(bpy, name, location):
+    """A plane with a copy of itself on the same UVs: every texel is under two surfaces."""
+    obj = add_plane(bpy, name, size=2, location=location)
+    array = obj.modifiers.new("Copy", "ARRAY")
+    array.relative_offset_displace = (1.5, 0.0, 0.0)
+    return obj
+
+
+def test_each_objects_warnings_come_before_its_summary_and_the_total_comes_last(bpy, scene):
+    from mc_ao import operators
+
+    a = overlapping(bpy, "A", (0, 0, 0))
+    b = add_plane(bpy, "B", size=2, location=(0, 5, 0))
+    lamp_data = bpy.data.lights.new("Lamp", "POINT")
+    lamp = bpy.data.objects.new("Lamp", lamp_data)
+    bpy.context.collection.objects.link(lamp)
+    select_only(bpy, a, b, lamp)
+    session, reports = new_session()
+    assert session.start(bpy.context, live=False)
+    assert tick_until(bpy, session, lambda: False) == {"FINISHED"}
+
+    kinds = [kind for kind, _ in reports]
+    texts = [text for _, text in reports]
+    assert texts[0] == "Lamp: skipped, it is a light, not a mesh"
+    assert texts[1] == "A: 576 texels lie under overlapping UV islands; each averages every surface over it"
+    # A's summary counts the two warnings before it; B's has none; the whole bake's comes last.
+    number = r"[0-9]+\.[0-9]{2}"
+    assert kinds[2] == "WARNING" and re.fullmatch(
+        rf"A: 24x24 into 'A_AO' in {number} s, 16 samples per texel, {number} M rays/s; "
+        "2 warnings before this, in the Info editor", texts[2])
+    assert kinds[3] == "INFO" and re.fullmatch(
+        rf"B: 24x24 into 'B_AO' in {number} s, 16 samples per texel, {number} M rays/s", texts[3])
+    assert kinds[4] == "WARNING" and re.fullmatch(
+        rf"AO bake: 2 objects in {number} s, 16 samples per texel, {number} M rays/s; "
+        "2 warnings before this, in the Info editor", texts[4])
+    assert len(reports) == 5
+    assert operators.last_outcome == reports[-1]  # what the panel shows
+
+
+def test_a_clean_bake_ends_with_its_summary_as_info(bpy, scene):
+    from mc_ao import operators
+
+    ground = add_plane(bpy, "Ground", size=4)
+    add_cube(bpy, "Block", size=1.0, location=(0, 0, 0.8))
+    select_only(bpy, ground)
+    session, reports = new_session()
+    assert session.start(bpy.context, live=True)
+    assert tick_until(bpy, session, lambda: False) == {"FINISHED"}
+    kind, text = reports[-1]
+    assert kind == "INFO" and text.startswith("Ground: 24x24 into 'Ground_AO' in ") and "warning" not in text
+    assert text.endswith(" M rays/s")
+    assert operators.last_outcome == reports[-1]
+
+
+# -- the panel ------------------------------------------------------------------------------------
+
+class FakeLayout:
+    """Records a panel's labels and their icons (a panel cannot be drawn without a window)."""
+
+    def __init__(self):
+        self.labels = []
+
+    def row(self, **_):
+        return self
+
+    column = row
+
+    def operator(self, *_, **__):
+        return None
+
+    def label(self, text="", icon="NONE"):
+        self.labels.append((text, icon))
+
+
+class SidebarContext:
+    """bpy.context as a panel in a sidebar of ``width`` pixels sees it (bpy has no window here)."""
+
+    def __init__(self, bpy, width):
+        self._context = bpy.context
+        self.region = types.SimpleNamespace(width=width)
+
+    def __getattr__(self, name):
+        return getattr(self._context, name)
+
+
+def draw_main_panel(bpy, width, last_outcome=None):
+    from mc_ao import operators, panel
+
+    layout = FakeLayout()
+    kept, operators.last_outcome = operators.last_outcome, last_outcome
+    try:
+        panel.VIEW3D_PT_mc_ao.draw(types.SimpleNamespace(layout=layout), SidebarContext(bpy, width))
+    finally:
+        operators.last_outcome = kept
+    return layout.labels
+
+
+# Blender's default sidebar: about 280 pixels wide at UI scale 1, its tabs included (4.3: 291 at 1.04).
+SIDEBAR = 280
+
+
+@pytest.mark.parametrize("name", ["Flat", "Suzanne without UVs", "A_very_long_object_name_from_an_importer_001"])
+def test_the_no_uv_reason_wraps_at_the_sidebars_width(bpy, scene, name):
+    from mc_ao import baking, panel
+
+    flat = add_plane(bpy, name, size=2)
+    flat.data.uv_layers.remove(flat.data.uv_layers[0])
+    select_only(bpy, flat)
+    reason = baking.why_not_bakeable([flat])
+    labels = draw_main_panel(bpy, SIDEBAR)
+
+    assert " ".join(text for text, _ in labels) == reason  # all of it, in order
+    assert len(labels) > 1 and labels[0][1] == "INFO" and all(icon == "BLANK1" for _, icon in labels[1:])
+    room = SIDEBAR - panel.LABEL_INSET
+    for text, _ in labels:
+        assert panel.text_width(text, bpy.context) <= room or " " not in text, text
+
+
+def test_the_panel_shows_the_last_bakes_outcome(bpy, scene):
+    ground = add_plane(bpy, "Ground", size=4)
+    select_only(bpy, ground)
+    outcome = ("WARNING", "Ground: 24x24 into 'Ground_AO' in 0.05 s, 16 samples per texel, 1.00 M rays/s; "
+                          "1 warning before this, in the Info editor")
+    labels = draw_main_panel(bpy, SIDEBAR, last_outcome=outcome)
+    assert labels[0] == ("Into Ground_AO", "IMAGE_DATA")
+    assert " ".join(text for text, _ in labels[1:]) == "Last bake: " + outcome[1]
+    assert labels[1][1] == "ERROR"  # the warning icon
+    assert draw_main_panel(bpy, SIDEBAR) == [("Into Ground_AO", "IMAGE_DATA")]  # before any bake
+
+
+def test_wrap_text_cuts_at_spaces_and_keeps_long_words_whole(addon):
+    from mc_ao import panel
+
+    assert panel.wrap_text("aa bb cc dd", 5, len) == ["aa bb", "cc dd"]
+    assert panel.wrap_text("aa bbbbbbbb cc", 5, len) == ["aa", "bbbbbbbb", "cc"]
+    assert panel.wrap_text("", 5, len) == [""]
