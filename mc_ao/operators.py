@@ -192,6 +192,15 @@ class BakeSession:
             self.report({"ERROR"}, f"Cannot bake: {missing}")
             return False
         self.settings = BakeSettings.from_properties(context.scene.mc_ao)
+        problems = jobs.check_settings(self.settings)
+        if problems:
+            # The properties' own limits keep most values in range; what gets past them (a script
+            # setting a value, a limit of the core's) is refused here, before anything is baked.
+            names = context.scene.mc_ao.bl_rna.properties
+            self.report({"ERROR"}, "; ".join(
+                f"{names[field].name if field in names else field} {message}" for field, message in problems
+            ) + "; nothing was baked")
+            return False
         selected = list(context.selected_objects)
         targets = baking.targets_of(selected)
         if not targets:
@@ -201,11 +210,11 @@ class BakeSession:
             return False
         try:
             self.output_dir = _output_dir(self.settings) if self.settings.save_to_file else None
-            jobs = baking.plan(
+            planned = baking.plan(
                 context.evaluated_depsgraph_get(), targets, self.settings,
                 selected=selected, view_layer=context.view_layer,
             )
-            for job in jobs:
+            for job in planned:
                 try:
                     images.check_target(job.image_name)
                 except images.ImageError as exc:
@@ -230,7 +239,7 @@ class BakeSession:
         self.pending = set()  # jobs whose live buffer has tiles not yet in the image
         self.last_flush = 0.0
         self.fraction = 0.0
-        self.run = BakeRun(jobs, self.settings, resolve_threads(context, self.settings), self.live)
+        self.run = BakeRun(planned, self.settings, resolve_threads(context, self.settings), self.live)
         self.run.start()
         _SESSIONS.add(self)
         context.window_manager.progress_begin(0.0, 1.0)

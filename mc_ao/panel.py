@@ -106,7 +106,8 @@ def draw_targets(layout, context):
         return
     targets = baking.targets_of(selected)
     if len(targets) == 1:
-        image_name = BakeSettings.from_properties(context.scene.mc_ao).image_name_for(targets[0].name)
+        image_name = BakeSettings.from_properties(context.scene.mc_ao).image_name_for(
+            targets[0].name, baking.id_name_max_bytes())
         wrapped_label(layout, context, f"Into {image_name}", icon="IMAGE_DATA")
     else:
         layout.label(text=f"{len(targets)} objects, one image each", icon="IMAGE_DATA")

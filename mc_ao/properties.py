@@ -5,6 +5,11 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, St
 
 from .settings import BakeSettings
 
+# core.bake.MAX_SAMPLES and MAX_RESOLUTION (the core is not imported at registration: it needs numpy
+# and embreex); tests/blender check that they agree.
+MAX_SAMPLES = 1 << 20
+MAX_RESOLUTION = 65536
+
 _DEFAULTS = BakeSettings()
 # Blender 4.5 and later warn about "//" in a path property unless it declares that it supports it;
 # older versions do not know the option.
@@ -20,11 +25,11 @@ class McAoSettings(bpy.types.PropertyGroup):
 
     samples: IntProperty(
         name="Samples", description="Rays per texel (the most, when adaptive sampling stops early)",
-        default=_DEFAULTS.samples, min=1, soft_max=4096,
+        default=_DEFAULTS.samples, min=1, max=MAX_SAMPLES, soft_max=4096,
     )
     min_samples: IntProperty(
         name="Min Samples", description="Rays per texel before adaptive sampling may stop a texel",
-        default=_DEFAULTS.min_samples, min=1, soft_max=1024,
+        default=_DEFAULTS.min_samples, min=1, max=MAX_SAMPLES, soft_max=1024,
     )
     target_error: FloatProperty(
         name="Noise Threshold",
@@ -41,11 +46,11 @@ class McAoSettings(bpy.types.PropertyGroup):
             "(and put back as it was if its bake is cancelled or fails)"
         ),
         default=_DEFAULTS.resolution,
-        min=1, soft_min=16, soft_max=8192, subtype="PIXEL",
+        min=1, max=MAX_RESOLUTION, soft_min=16, soft_max=8192, subtype="PIXEL",
     )
     height: IntProperty(
         name="Height", description="Height of the image in pixels; 0 makes it square",
-        default=_DEFAULTS.height, min=0, soft_max=8192, subtype="PIXEL",
+        default=_DEFAULTS.height, min=0, max=MAX_RESOLUTION, soft_max=8192, subtype="PIXEL",
     )
     max_distance: FloatProperty(
         name="Distance", description="Occluders farther than this do not count; 0 = no limit",

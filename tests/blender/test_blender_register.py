@@ -108,3 +108,36 @@ def test_manifest_is_valid_and_lists_wheels_for_every_platform():
     assert builder is not None, "the bpy module carries Blender's extension builder"
     out = subprocess.run([sys.executable, str(builder), "validate", str(ROOT)], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_the_properties_limits_are_the_cores(bpy, addon):
+    """Samples and size stop where the core's refusal starts (the core is not imported at registration)."""
+    import core.bake
+    from mc_ao import properties
+
+    assert (properties.MAX_SAMPLES, properties.MAX_RESOLUTION) == (core.bake.MAX_SAMPLES, core.bake.MAX_RESOLUTION)
+    rna = bpy.types.Scene.bl_rna.properties["mc_ao"].fixed_type.properties
+    assert rna["samples"].hard_max == rna["min_samples"].hard_max == core.bake.MAX_SAMPLES
+    assert rna["resolution"].hard_max == rna["height"].hard_max == core.bake.MAX_RESOLUTION
+
+
+def test_the_panel_names_the_image_a_long_object_name_bakes_into(bpy, addon):
+    from blender_helpers import add_plane, clean_scene, select_only
+    from mc_ao import baking
+    from mc_ao.settings import BakeSettings
+
+    clean_scene(bpy)
+    obj = add_plane(bpy, name="x" * 300)  # Blender keeps what fits its ID names
+    select_only(bpy, obj)
+    name = BakeSettings().image_name_for(obj.name, baking.id_name_max_bytes())
+    assert name.endswith("_AO") and len(name.encode()) <= baking.id_name_max_bytes()
+    texts = []
+
+    class Layout:
+        def __getattr__(self, attr):
+            return lambda *a, **k: (texts.append(k.get("text", "")), self)[1]
+
+    from mc_ao import panel
+
+    panel.draw_targets(Layout(), bpy.context)
+    assert any(name in t for t in texts), texts

@@ -105,8 +105,10 @@ def test_panels_use_only_what_this_blenders_uilayout_has(bpy, scene, addon, stat
     classes = drawn_classes(addon, bpy)
     assert {cls.__name__ for cls in classes} >= {"VIEW3D_PT_mc_ao", "VIEW3D_PT_mc_ao_image", "McAoPreferences"}
     calls = []
+    # A sidebar as narrow as Blender's default, so that the labels that wrap are drawn line by line.
     context = types.SimpleNamespace(scene=scene, selected_objects=bpy.context.selected_objects,
-                                    active_object=bpy.context.view_layer.objects.active)
+                                    active_object=bpy.context.view_layer.objects.active,
+                                    region=types.SimpleNamespace(width=240), preferences=bpy.context.preferences)
     for cls in classes:
         if cls.__name__ == "McAoPreferences":
             fake = types.SimpleNamespace(layout=CheckingLayout(bpy, calls), threads=0)
