@@ -233,13 +233,21 @@ def test_poll_says_why_nothing_can_be_baked(bpy, scene):
         bpy.ops.object.mc_ao_bake()
 
 
+def _far_uvs(ground):
+    for loop_uv in ground.data.uv_layers[0].uv:
+        loop_uv.vector = (1e17, loop_uv.vector[1])
+
+
 @pytest.mark.parametrize("setting, value, message", [
     ("uv_map", "Missing", r"Ground has no UV map 'Missing' \(UV maps: 'UVMap'\)"),
-    ("resolution", 70000, r"Ground: resolution 70000 x 70000 exceeds"),
+    (_far_uvs, None, r"Ground: mesh 'Ground': 2 triangles have UV coordinates beyond"),
 ])
 def test_errors_are_reported_with_the_object_name(bpy, scene, setting, value, message):
     ground = add_plane(bpy, "Ground", size=4)
-    setattr(scene.mc_ao, setting, value)
+    if callable(setting):
+        setting(ground)
+    else:
+        setattr(scene.mc_ao, setting, value)
     select_only(bpy, ground)
     with pytest.raises(RuntimeError, match=message) as info:
         bpy.ops.object.mc_ao_bake()
