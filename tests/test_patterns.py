@@ -82,6 +82,14 @@ def elementary_counts_ok(points, m, t):
     return True
 
 
+def stratified_on_circle(x):
+    """Whether the n values hold one point in each of n equal arcs of the circle [0, 1), for some
+    rotation of the arcs: sorted, x_(j) - j / n spans less than 1 / n."""
+    n = len(x)
+    y = np.sort(np.asarray(x)) - np.arange(n) / n
+    return bool(y.max() - y.min() < 1.0 / n)
+
+
 def t_value(points, m):
     """The smallest t for which the 2^m points are a (t, m, s)-net in base 2."""
     for t in range(m + 1):
@@ -147,13 +155,24 @@ class PatternContract:
         # same points), or randomises two dimensions alike (index 0 of Sobol' on the diagonal),
         # or gives two pairs one stratum order, fails here.
         indices = (0, 1, 7, N - 1)
-        level = sidak(ALPHA, len(indices) * (DIMS + len(PAIRS)))
+        level = sidak(ALPHA, len(indices) * (DIMS + len(PAIRS)) + DIMS + 2 * len(PAIRS))
         for i in indices:
             u = full[:, i]
             for j in range(DIMS):
                 assert chi2_uniform(u[:, j], 16) > level, f"index {i}, dimension {j}"
             for a, b in PAIRS:
                 assert chi2_joint(u[:, a], u[:, b], 8) > level, f"index {i}, dimensions {a}, {b}"
+        # Finer, on 256 cells (16 expected per cell): a dimension that takes only a few dozen values
+        # over the texels (a sequence randomised only by where each texel starts in it) fails here.
+        for j in range(DIMS):
+            assert chi2_uniform(full[:, 0, j], 256) > level, f"index 0, dimension {j}, 256 cells"
+        # Two dimensions that coincide for some of the points (scrambled alike) put excess mass on
+        # the diagonal, too little to show on 8 x 8 cells: for independent uniform coordinates
+        # their difference modulo 1 is uniform (64 cells).
+        for i in (0, 5):
+            for a, b in PAIRS:
+                diff = np.mod(full[:, i, a] - full[:, i, b], 1.0)
+                assert chi2_uniform(np.minimum(diff, np.nextafter(1.0, 0.0)), 64) > level, f"index {i}, u{a} - u{b}"
 
     def test_dimensions_are_independent_within_each_texel(self, full):
         # Each texel's own 64 points, every pair of dimensions on a 4 x 4 grid (4 expected per
@@ -235,15 +254,20 @@ class TestHalton(PatternContract):
 
     def test_first_points_are_stratified_per_texel(self, full):
         # Per texel, the first b^k points of the dimension with base b (2, 3, 5, 7) fall one in
-        # each of b^k equal arcs of the circle [0, 1) (the arcs start at point 0: the per-texel
-        # randomisation is a rotation of the circle, which keeps the strata as arcs).
+        # each of b^k equal arcs of the circle [0, 1), for some rotation of the arcs (a texel's
+        # randomisation may rotate the circle, which keeps strata as arcs): sorted, the points
+        # x_(j) - j / b^k all lie within one arc length.
         for t in TEXELS[::257]:
             for j, b in enumerate((2, 3, 5, 7)):
                 k = 1
                 while b**k <= N:
-                    x = np.mod(full[t, :b**k, j] - full[t, 0, j] + 1e-12, 1.0)
-                    assert np.unique(np.floor(x * b**k).astype(np.int64)).size == b**k, (t, j, b, k)
+                    assert stratified_on_circle(full[t, :b**k, j]), (t, j, b, k)
                     k += 1
+
+    def test_circle_check_can_fail(self):
+        assert stratified_on_circle(np.array([0.05, 0.3, 0.55, 0.8]))
+        assert stratified_on_circle(np.array([0.95, 0.2, 0.45, 0.7]))
+        assert not stratified_on_circle(np.array([0.05, 0.1, 0.15, 0.8]))
 
 
 class TestStratified(PatternContract):
