@@ -247,16 +247,22 @@ def sample_uniform_hemisphere_by_flip(u, n=(0.0, 0.0, 1.0)):
 # --- triangles ---------------------------------------------------------------------------------------
 
 
-def square_to_triangle(a, b):
+def square_to_triangle(a, b, out=None):
     """Heitz's low-distortion map from the square to the triangle, on component arrays of any scale.
 
     Heitz 2019, "A Low-Distortion Map Between Triangle and Square" (pbrt-v4's SampleUniformTriangle):
     if a < b then (a / 2, b - a / 2) else (a - b / 2, b / 2), which is (a - m, b - m) with m half the
     smaller coordinate. Returns the barycentric weights (b0, b1) of corners 0 and 1 (b2 = s - b0 - b1
-    at scale s). Homogeneous of degree 1, so it also works on coordinates scaled by 2^32.
+    at scale s). Homogeneous of degree 1, so it also works on coordinates scaled by 2^32. ``out``:
+    a pair of arrays to write (b0, b1) into (may be a and b themselves).
     """
-    m = np.minimum(a, b) * 0.5
-    return a - m, b - m
+    m = np.minimum(a, b)
+    m *= 0.5
+    if out is None:
+        return a - m, b - m
+    np.subtract(a, m, out=out[0])
+    np.subtract(b, m, out=out[1])
+    return out
 
 
 def sample_uniform_triangle(u):
