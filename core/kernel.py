@@ -157,14 +157,14 @@ class Kernel:
             np.take(feats, idx.reshape(n), axis=0, out=xf)
         xu = x.view(np.uint32)
         shift = keys.shift[tex]
-        moved = ws.u32[:n].reshape(g, k)
         a, b = x[:, :, 0], x[:, :, 1]
         for c, dst in ((0, a), (1, b)):
-            # The texel's position shift on the 32-bit coordinate, then to [0, 1) in float32.
-            np.copyto(moved, xu[:, :, c])
-            self.pattern.shift_positions(moved, _per_piece(shift[:, c], k))
-            np.copyto(dst, moved, casting="unsafe")
+            # The texel's shift of the position coordinate, in place, then to [0, 1) in float32.
+            self.pattern.shift_positions(xu[:, :, c], _per_piece(shift[:, c], k))
+            np.copyto(dst, xu[:, :, c], casting="unsafe")
             dst *= np.float32(2.0 ** -32)
+        # (u, v) -> the triangle's texel space: a translation for squares, Heitz's map and the
+        # piece's corners for pieces of triangles.
         coef = tile.coef[unit]
         sq = slice(0, squares)
         a[sq] += _per_piece(coef[sq, 0], k)
@@ -176,7 +176,8 @@ class Kernel:
             a[tr] = _per_piece(ct[:, 0], k) + _per_piece(ct[:, 1], k) * u + _per_piece(ct[:, 2], k) * v
             b[tr] = _per_piece(ct[:, 3], k) + _per_piece(ct[:, 4], k) * u + _per_piece(ct[:, 5], k) * v
         # The texel's turn about the normal: a rotation of the first two direction features.
-        cos_t, sin_t = _per_piece(keys.cos_turn[tex].astype(np.float32), k), _per_piece(keys.sin_turn[tex].astype(np.float32), k)
+        cos_t = _per_piece(keys.cos_turn[tex].astype(np.float32), k)
+        sin_t = _per_piece(keys.sin_turn[tex].astype(np.float32), k)
         f0, f1 = x[:, :, 3], x[:, :, 4]
         t0 = f0 * cos_t
         t0 -= f1 * sin_t
