@@ -235,8 +235,10 @@ class Kernel:
                 np.less_equal(tmp, 0, out=below)
                 below |= size2 < 1e-20
                 if self.reach < FAR:
+                    # Ray lengths are in units of the direction, which is not unit length here.
                     np.sqrt(size2, out=tfar)
-                    tfar *= np.float32(self.reach)
+                    np.maximum(tfar, np.float32(1e-30), out=tfar)
+                    np.divide(np.float32(self.reach), tfar, out=tfar)
                 else:
                     tfar.fill(FAR)
             tfar[below] = 0.0

@@ -221,3 +221,18 @@ def test_split_texels_share_samples_by_area_on_average_over_seeds():
     z = (mean - frac) / sd
     uneven = (frac % 1 > 0.1) & (frac % 1 < 0.9)
     assert uneven.sum() >= 5 and np.all(np.abs(z[uneven]) < 4.5), (z[uneven], frac[uneven])
+
+
+def test_smooth_shading_keeps_the_ao_distance():
+    # The truncated cone (plane under a lid at h = 0.3, AO distance 0.5: AO = (h / d)^2 = 0.36) with
+    # shading normals that lean by up to 0.01 rad: the smooth path's directions are not unit length,
+    # and the rays must still reach exactly 0.5 (a lean of 0.01 changes the AO by well under 1e-3).
+    rng = np.random.default_rng(6)
+    p = plane()
+    n = np.concatenate([rng.uniform(-0.01, 0.01, (2, 3, 2)), np.ones((2, 3, 1))], axis=2)
+    smooth = Mesh(p.positions, p.triangles, p.uvs, normals=n, name="smooth")
+    lid = Mesh(np.array([[-1.0, -1.0, 0.3], [2.0, -1.0, 0.3], [2.0, 2.0, 0.3], [-1.0, 2.0, 0.3]]),
+               np.array([[0, 1, 2], [0, 2, 3]]), name="lid")
+    r = bake_ao(smooth, [lid], resolution=16, samples=256, max_distance=0.5, margin=0, source="independent", seed=2)
+    z = (r.ao - 0.36) / r.stderr
+    assert abs(z.mean()) < 4 / math.sqrt(z.size) + 0.1 and 0.75 < z.var() < 1.3, (r.ao.mean(), z.mean(), z.var())
