@@ -237,7 +237,7 @@ class Kernel:
                 if self.reach < FAR:
                     # Ray lengths are in units of the direction, which is not unit length here.
                     np.sqrt(size2, out=tfar)
-                    np.maximum(tfar, np.float32(1e-30), out=tfar)
+                    np.maximum(tfar, np.float32(self.reach / FAR), out=tfar)  # at most FAR long
                     np.divide(np.float32(self.reach), tfar, out=tfar)
                 else:
                     tfar.fill(FAR)

@@ -215,9 +215,15 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
     cy = py[ip, None] + np.array([0.0, 0.0, 1.0, 1.0])
     poly[:, :4, 0], poly[:, :4, 1] = cx, cy
     cnt = np.full(len(ip), 4)
+    # A triangle inside the texel is its own fragment (meshes with triangles smaller than texels).
+    txy = tris.xy[tri_ids[p_tri[ip]]]
+    within = np.all((txy.min(axis=1) >= np.stack([px[ip], py[ip]], 1))
+                    & (txy.max(axis=1) <= np.stack([px[ip], py[ip]], 1) + 1), axis=1)
+    poly[within, :3] = txy[within]
+    cnt[within] = 3
     for e in range(3):
         a_e, b_e, c_e = ea[ip, e], eb[ip, e], ec[ip, e]
-        cuts = np.flatnonzero(np.any(a_e[:, None] * cx + b_e[:, None] * cy + c_e[:, None] < 0, axis=1))
+        cuts = np.flatnonzero(~within & np.any(a_e[:, None] * cx + b_e[:, None] * cy + c_e[:, None] < 0, axis=1))
         if not len(cuts):
             continue
         slots = int(cnt[cuts].max())
