@@ -149,11 +149,17 @@ class Kernel:
         feats = self.pattern.features(self.kinds[curved])
         xf = ws.x[:n]
         x = xf.reshape(g, k, 6)
-        if self.pattern.xor:
+        aligned = not np.any(start & (k - 1))
+        if self.pattern.xor and aligned:
             np.take(feats.reshape(-1, k, 6), first // k, axis=0, out=x)
         else:
             idx = ws.idx[:n].reshape(g, k)
-            np.add(first[:, None], ws.ramp[None, :k], out=idx)
+            if self.pattern.xor:  # a piece of a split texel's share: rows in index order
+                np.add(start[:, None], ws.ramp[None, :k], out=idx)
+                idx ^= o[:, None]
+                idx += (e * self.pattern.span)[:, None]
+            else:
+                np.add(first[:, None], ws.ramp[None, :k], out=idx)
             np.take(feats, idx.reshape(n), axis=0, out=xf)
         xu = x.view(np.uint32)
         shift = keys.shift[tex]
@@ -265,7 +271,8 @@ class Kernel:
         if self.on_rays is not None:
             self.on_rays(RayBatch(origins=origins, directions=directions, tfar=traced_tfar, occluded=hit,
                                   texels=np.repeat(tile.texel_ids[tex], k),
-                                  samples=self.pattern.block_samples(e, o, first, k).ravel(),
+                                  samples=(self.pattern.block_samples(e, o, first, k) if aligned or not self.pattern.xor
+                                           else start[:, None] + ws.ramp[None, :k]).ravel(),
                                   seconds=clock.wall, cpu_seconds=clock.cpu))
         if value.dtype == bool and weight is None:
             s1 = value.view(np.uint8).reshape(g, k).sum(axis=1, dtype=np.int64).astype(np.float64)

@@ -21,7 +21,7 @@ A split texel's samples are shared among its units by systematic sampling: sampl
 ``count`` goes to the unit whose cumulative area fraction first exceeds (r + phi) / count, phi a
 per-texel random number. Every sample lands in a unit with probability proportional to its area
 (the estimate stays unbiased), each unit gets its area's share of samples to within one, and the
-samples of a unit are consecutive indices, traced together in aligned power-of-two pieces.
+samples of a unit are consecutive indices, traced together in power-of-two pieces.
 """
 
 from dataclasses import dataclass
@@ -135,8 +135,8 @@ def allocate(units, texels, start, count, seed, texel_ids):
     """Pieces of samples [start, start + count) of the tile's ``texels`` (indices into its texel
     list; ``texel_ids`` the global texel numbers of the whole list): which unit takes which samples.
 
-    Returns (unit, piece start, piece size) arrays: every unit's share of the block, cut into aligned
-    pieces whose sizes are powers of two (the kernel traces equal pieces together).
+    Returns (unit, piece start, piece size) arrays: every unit's share of the block, cut into pieces
+    whose sizes are powers of two (the kernel traces equal pieces together).
     """
     texels = np.asarray(texels, dtype=np.int64)
     lo, hi = units.first[texels], units.first[texels + 1]
@@ -157,21 +157,17 @@ def allocate(units, texels, start, count, seed, texel_ids):
     offset = np.where(multi, before, 0)
     keep = size > 0
     unit, size, offset = unit[keep], size[keep], offset[keep] + start
-    # Aligned power-of-two pieces: [a, b) cut into dyadic blocks [j 2^m, (j + 1) 2^m), each as large
-    # as a's alignment and the rest allow. An aligned block of a Sobol' pattern is a net, and its
-    # rows in the pool are consecutive (core.patterns), so the kernel gathers a piece in one copy.
-    a, b = offset, offset + size
+    # Power-of-two pieces, largest first: bit b of a unit's count is a piece of 2^b samples after
+    # those of the higher bits. A texel inside one triangle takes its whole block as one piece; the
+    # kernel traces equal pieces together.
+    bits = int(count).bit_length()
     pu, ps, pz = [], [], []
-    while len(a):
-        low = np.where(a > 0, a & -a, 1 << 62)                    # a's alignment
-        room = np.left_shift(1, np.floor(np.log2(b - a)).astype(np.int64))  # largest power <= b - a
-        step = np.minimum(low, room)
-        pu.append(unit)
-        ps.append(a)
-        pz.append(step)
-        a = a + step
-        more = a < b
-        unit, a, b = unit[more], a[more], b[more]
+    for b in range(bits - 1, -1, -1):
+        has = (size >> b) & 1 == 1
+        if has.any():
+            pu.append(unit[has])
+            ps.append(offset[has] + ((size[has] >> (b + 1)) << (b + 1)))
+            pz.append(np.full(int(has.sum()), 1 << b, np.int64))
     if not pu:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
     return np.concatenate(pu), np.concatenate(ps), np.concatenate(pz)
