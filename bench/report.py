@@ -226,7 +226,8 @@ def table(data):
 
     tg = data.get("targets")
     if tg:
-        L.append("Targets (issue 13; 'before': the previous committed run, or the issue's own figures)")
+        L.append("Targets (issue 13; 'before': results/baseline.json, the core before this kernel (run of 2026-11-23), "
+                 "or the issue's own figures where that run did not measure them)")
         L += _grid(["target", "wanted", "before", "now", "met"],
                    [[t["name"], t["target"], t.get("before", "-"), t["value"], "yes" if t["met"] else "NO"] for t in tg])
     return "\n".join(L)

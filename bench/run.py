@@ -103,12 +103,14 @@ class Context:
 
 
 def _previous(quick):
-    """The committed results of the run before this one (the 'before' column), if any."""
-    path = RESULTS / ("latest-quick.json" if quick else "latest.json")
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
+    """The 'before' column: results/baseline.json (the core before issue 13's kernel, the committed
+    run of 2026-11-23), else the previous committed run."""
+    for name in (("baseline-quick.json", "latest-quick.json") if quick else ("baseline.json", "latest.json")):
+        try:
+            return json.loads((RESULTS / name).read_text())
+        except (OSError, ValueError):
+            continue
+    return None
 
 
 #: Figures of the core before the kernel of issue 13 that its benchmark did not measure, as the

@@ -36,7 +36,7 @@ from .estimators import SamplingPlan, TexelEstimates, interval_half_width
 from .kernel import Kernel, TileContext
 from .margin import dilate
 from .mesh import Mesh
-from .patterns import TexelPattern, hash64
+from .patterns import TexelPattern
 from . import raster as R
 from .raster import bin_triangles, prepare, rasterize_tile
 from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE, BakeSettings, auto_tile_size,

@@ -28,7 +28,6 @@ import threading
 import numpy as np
 
 from . import warps
-from .surface import SQUARE
 from .tracing import FAR, Clock, RayBatch
 
 FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
