@@ -10,7 +10,9 @@ the terms and of their squares (the kernel hands them over per piece of samples)
 ``samples`` at once without adaptive sampling, else ``min_samples`` and then doubling rounds for
 the texels whose interval (:func:`interval_half_width`) is still wider than the target. The
 plan and the error estimate are the two places to change for another stopping rule or error model;
-they see nothing but these sums.
+they see nothing but these sums. An error model from independent randomisations per texel would
+add a replicate index to :meth:`TexelEstimates.add` (the sample pattern already draws independent
+randomisations by replicate, :meth:`core.patterns.TexelPattern.keys`).
 """
 
 import numpy as np

@@ -21,6 +21,15 @@ one matrix M per triangle, gives every ray's origin and direction:
 Turning each texel's directions by its own random angle (:meth:`core.patterns.TexelPattern.keys`)
 means texels that share a pool pattern trace different directions. Directions below the geometric
 surface are not traced (tfar 0) and count as occluded.
+
+Where to extend it: a stage that moves sample points elsewhere (onto a high-poly surface) can take
+the origins and the interpolated normals the smooth path computes (columns 0:3 and 3:6 of Y), replace
+them per sample, and form directions as normalize(n) + v exactly as that path does (the sphere form
+needs no frame, so any per-sample normal works); a miss mask joins ``below``. Points that are not
+texels (mesh vertices) are units of a degenerate triangle (position and normal constant, Px = Py =
+Nx = Ny = 0). Bent normals are the sum of the unoccluded ``directions`` (normalised) per piece, from
+the same rays. Independent randomisations of a texel for an error estimate are
+``TexelPattern.keys(texels, replicate=r)``.
 """
 
 import threading
