@@ -1,5 +1,14 @@
-"""The ceiling: embreex alone tracing the bake's own rays, the share of a bake spent inside embreex,
-and a profile of where the rest of the time goes."""
+"""The ceiling: a bake against Embree alone tracing the bake's own rays, the share of a bake spent
+inside embreex, and a profile of where the rest of the time goes.
+
+For each scene (the benchmark's Suzanne scene and a dense terrain), one thread:
+
+- the bake, timed (wall and process CPU), with embreex's own time from ``BakeResult.trace_seconds``
+  (wall) and ``trace_cpu_seconds`` (thread CPU): the share inside embreex;
+- the same bake once more with ``on_rays`` (core.tracing.RayBatch) recording every chunk of rays;
+- embreex alone replaying those chunks, 1 and 2 threads, interleaved with repeats of the bake: the
+  bake's rays/s against embreex's on the very same rays, fastest repeat each.
+"""
 
 import cProfile
 import os
@@ -11,54 +20,22 @@ import numpy as np
 
 from . import mcao
 from .common import log
-from .scene import DISTANCE
+from .scene import DISTANCE, displaced_grid
 
 
-def _record_rays(ctx, res, spp):
-    """Run one single-threaded bake and keep every chunk of rays it hands to Embree.
-
-    Wraps core.bake._Tracer.visibility (a private hook; None if the core no longer has it)."""
-    try:
-        from core import bake as core_bake_module
-        tracer_cls = core_bake_module._Tracer
-        original = tracer_cls.visibility
-    except AttributeError:
-        return None, None
+def _record_rays(target, occluders, **kw):
+    """One bake through the public on_rays hook: every chunk of rays it hands to Embree."""
     chunks = []
 
-    def recording(self, org, dirs):
-        chunks.append((np.array(org, np.float32), np.array(dirs, np.float32), float(self.tfar)))
-        return original(self, org, dirs)
+    def keep(batch):
+        chunks.append((np.array(batch.origins, np.float32), np.array(batch.directions, np.float32),
+                       np.array(batch.tfar, np.float32)))
 
-    tracer_cls.visibility = recording
-    try:
-        r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=1, max_distance=DISTANCE)
-    finally:
-        tracer_cls.visibility = original
+    r = mcao.core_bake(target, occluders, on_rays=keep, **kw)
     return chunks, r
 
 
-def _synthetic_rays(ctx, n, chunk):
-    """Rays like the bake's when its hook is gone: area-uniform points on the target, cosine directions."""
-    t = ctx.target
-    rng = np.random.default_rng(0)
-    p = t.positions[t.triangles]
-    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    tri = rng.choice(len(area), n, p=area / area.sum())
-    a, b = rng.random(n), rng.random(n)
-    flip = a + b > 1
-    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
-    org = p[tri, 0] + a[:, None] * (p[tri, 1] - p[tri, 0]) + b[:, None] * (p[tri, 2] - p[tri, 0])
-    nrm = t.face_normals[tri]
-    v = rng.normal(size=(n, 3))
-    d = nrm + v / np.linalg.norm(v, axis=1, keepdims=True)  # cosine-distributed about nrm
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    org = org + nrm * 1e-5
-    return [(org[i:i + chunk].astype(np.float32), d[i:i + chunk].astype(np.float32), DISTANCE)
-            for i in range(0, n, chunk)]
-
-
-def _embree_scene(meshes):
+def embree_scene(meshes):
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
@@ -73,98 +50,134 @@ def _embree_scene(meshes):
 
 
 def _replay(scene, chunks, threads):
-    """Seconds to trace every chunk (occlusion queries), on ``threads`` threads; fraction occluded."""
+    """(wall seconds, process CPU seconds, occluded fraction) of embreex tracing every chunk on
+    ``threads`` threads. The rays are in the bake's own (normalised) frame; so is the scene."""
     hits = [0] * len(chunks)
 
     def one(i):
         o, d, tf = chunks[i]
         # A fresh tfar array per call, as any caller needs (Embree may write into it).
-        hits[i] = int((scene.run(o, d, query="OCCLUDED", dists=np.full(len(o), tf, np.float32)) >= 0).sum())
+        hits[i] = int((scene.run(o, d, query="OCCLUDED", dists=tf.copy()) >= 0).sum())
 
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     if threads == 1:
         for i in range(len(chunks)):
             one(i)
     else:
         with ThreadPoolExecutor(threads) as pool:
             list(pool.map(one, range(len(chunks))))
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     n = sum(len(o) for o, _, _ in chunks)
-    return seconds, sum(hits) / max(n, 1)
+    return seconds, cpu, sum(hits) / max(n, 1)
 
 
-def _rechunk(chunks, size):
-    o = np.concatenate([c[0] for c in chunks])
-    d = np.concatenate([c[1] for c in chunks])
-    tf = chunks[0][2]
-    return [(o[i:i + size], d[i:i + size], tf) for i in range(0, len(o), size)]
+def _synthetic_rays(target, n, chunk, distance=DISTANCE):
+    """Rays like a bake's (area-uniform points on the target, cosine directions), for machines where
+    only embreex's own scaling is wanted (bench/device.py)."""
+    t = target
+    rng = np.random.default_rng(0)
+    p = t.positions[t.triangles]
+    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    tri = rng.choice(len(area), n, p=area / area.sum())
+    a, b = rng.random(n), rng.random(n)
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    org = p[tri, 0] + a[:, None] * (p[tri, 1] - p[tri, 0]) + b[:, None] * (p[tri, 2] - p[tri, 0])
+    nrm = t.face_normals[tri]
+    v = rng.normal(size=(n, 3))
+    d = nrm + v / np.linalg.norm(v, axis=1, keepdims=True)  # cosine-distributed about nrm
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    org = org + nrm * 1e-5
+    return [(org[i:i + chunk].astype(np.float32), d[i:i + chunk].astype(np.float32),
+             np.full(min(chunk, n - i), distance, np.float32)) for i in range(0, n, chunk)]
 
 
-def _profile(ctx, res, spp):
-    pr = cProfile.Profile()
+def _normalized(target, occluders):
+    """The bake's own frame (core.bake._normalized_scene), so that replayed rays hit the same scene."""
+    from core.bake import _normalized_scene
+
+    t, occ, _ = _normalized_scene(target, list(occluders))
+    return [t] + occ
+
+
+def _profile(ctx, target, occluders, res, spp, distance):
+    pr = cProfile.Profile(timer=time.thread_time)
     pr.enable()
-    r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=1, max_distance=DISTANCE)
+    r = mcao.core_bake(target, occluders, resolution=res, samples=spp, threads=1, max_distance=distance)
     pr.disable()
     st = pstats.Stats(pr)
-    total = r.seconds
-    rows = []
-    by_file = {}
+    total = sum(tt for (_, _, _), (_, _, tt, _, _) in st.stats.items())
+    rows, by_file = [], {}
     for (fname, line, func), (cc, nc, tt, ct, _) in st.stats.items():
         short = os.path.relpath(fname, ctx.root) if fname.startswith(str(ctx.root)) else fname
         if short.startswith(".venv") or "site-packages" in short:
             short = "numpy/other python"
         elif fname == "~":
-            short = "C: " + ("embreex" if "EmbreeScene" in func or "embree" in func.lower() else
-                             "numpy" if "numpy" in func else "builtin")
+            short = "C: " + ("numpy" if "numpy" in func else "builtin")
         rows.append({"function": f"{short}:{line}({func})", "ncalls": nc, "tottime": tt, "cumtime": ct})
         by_file[short] = by_file.get(short, 0.0) + tt
     rows.sort(key=lambda x: -x["tottime"])
     # embreex's run() is compiled Cython that cProfile does not see: its time lands in the own time of
-    # the Python function that calls it. Move the measured trace time to a group of its own.
-    for k in list(by_file):
-        if k == "core/bake.py":
-            by_file[k] -= r.trace_seconds
-    by_file["embreex (scene.run, from trace_seconds)"] = r.trace_seconds
+    # core/tracing.py. Move the measured (thread CPU) trace time to a group of its own.
+    if "core/tracing.py" in by_file:
+        by_file["core/tracing.py"] -= r.trace_cpu_seconds
+    by_file["embreex (scene.run, from trace_cpu_seconds)"] = r.trace_cpu_seconds
     groups = sorted(({"where": k, "seconds": v, "share": v / total} for k, v in by_file.items()),
                     key=lambda x: -x["seconds"])
-    return {"resolution": res, "samples": spp, "threads": 1, "bake_seconds": total,
-            "trace_seconds": r.trace_seconds, "top_functions": rows[:15], "by_file": groups[:12]}
+    return {"resolution": res, "samples": spp, "threads": 1, "cpu_seconds": total, "bake_seconds": r.seconds,
+            "trace_cpu_seconds": r.trace_cpu_seconds, "top_functions": rows[:15], "by_file": groups[:12]}
+
+
+def _scene_ceiling(ctx, name, target, occluders, distance, res, spp, repeats):
+    meshes = _normalized(target, occluders)
+    kw = dict(resolution=res, samples=spp, threads=1, max_distance=distance, margin=16)
+    mcao.core_bake(target, occluders, **dict(kw, resolution=64))  # warm up (pool, imports)
+    chunks, rec = _record_rays(target, occluders, **kw)
+    n = sum(len(o) for o, _, _ in chunks)
+    scene = embree_scene(meshes)
+    bakes, alone1, alone2 = [], [], []
+    for _ in range(repeats):
+        r = mcao.core_bake(target, occluders, **kw)
+        bakes.append(dict(seconds=r.seconds, cpu_seconds=r.cpu_seconds, trace_seconds=r.trace_seconds,
+                          trace_cpu_seconds=r.trace_cpu_seconds, rays=r.rays))
+        alone1.append(_replay(scene, chunks, 1))
+        alone2.append(_replay(scene, chunks, 2))
+    best = min(bakes, key=lambda b: b["seconds"])
+    best_cpu = min(bakes, key=lambda b: b["cpu_seconds"])
+    a1 = min(alone1, key=lambda x: x[0])
+    a1c = min(x[1] for x in alone1)
+    a2 = min(alone2, key=lambda x: x[0])
+    out = {"scene": name, "triangles": int(sum(m.triangle_count for m in meshes)), "resolution": res,
+           "samples": spp, "rays": n, "bake": best, "bake_all": bakes,
+           "share_wall": best["trace_seconds"] / best["seconds"],
+           "share_cpu": best_cpu["trace_cpu_seconds"] / best_cpu["cpu_seconds"],
+           "bake_mrays_per_s": best["rays"] / best["seconds"] / 1e6,
+           "alone_1": {"seconds": a1[0], "cpu_seconds": a1c, "mrays_per_s": n / a1[0] / 1e6, "occluded": a1[2]},
+           "alone_2": {"seconds": a2[0], "mrays_per_s": n / a2[0] / 1e6},
+           "bake_over_alone": best["seconds"] / a1[0], "bake_over_alone_cpu": best_cpu["cpu_seconds"] / a1c}
+    log(f"ceiling {name} {res}^2 x {spp}: bake {best['seconds']:.2f}s, {100 * out['share_wall']:.0f}% in embreex "
+        f"(CPU {100 * out['share_cpu']:.0f}%); embreex alone on the same rays {a1[0]:.2f}s "
+        f"(bake / alone {out['bake_over_alone']:.2f}x, CPU {out['bake_over_alone_cpu']:.2f}x)", ctx.clock)
+    del chunks
+    return out
+
+
+def terrain(n=256):
+    """The dense terrain: a displaced grid of 2 n^2 triangles (131k for n = 256), its own occluder."""
+    from core import Mesh
+
+    P, F, UV = displaced_grid(n)
+    return Mesh(P, F, UV, name=f"terrain{2 * n * n}"), [], 0.5
 
 
 def ceiling(ctx):
     cfg = ctx.cfg
     res, spp = cfg["ceil_res"], cfg["ceil_spp"]
-    chunks, r = _record_rays(ctx, res, spp)
-    recorded = chunks is not None
-    if not recorded:
-        log("ceiling: core.bake._Tracer.visibility not found; replaying synthetic rays", ctx.clock)
-        r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=1, max_distance=DISTANCE)
-        chunks = _synthetic_rays(ctx, r.rays, 1 << 16)
-    n = sum(len(o) for o, _, _ in chunks)
-    scene = _embree_scene([ctx.target] + list(ctx.occluders))
-    out = {"rays": n, "rays_source": "recorded from the bake" if recorded else "synthetic (area-uniform, cosine)",
-           "chunks_in_bake": len(chunks), "bake": {"resolution": res, "samples": spp, "threads": 1,
-                                                    "seconds": r.seconds, "trace_seconds": r.trace_seconds,
-                                                    "mrays_per_s": r.rays / r.seconds / 1e6,
-                                                    "trace_share": r.trace_seconds / r.seconds}}
-    replays = []
-    for threads in (1, 2):
-        best = min(_replay(scene, chunks, threads) for _ in range(3))
-        replays.append({"threads": threads, "chunk": "as in the bake", "seconds": best[0],
-                        "mrays_per_s": n / best[0] / 1e6, "occluded_fraction": best[1]})
-    for size in (1 << 12, 1 << 20):
-        rc = _rechunk(chunks, size)
-        best = min(_replay(scene, rc, 1) for _ in range(2))
-        replays.append({"threads": 1, "chunk": size, "seconds": best[0], "mrays_per_s": n / best[0] / 1e6,
-                        "occluded_fraction": best[1]})
-    out["embree_alone"] = replays
-    out["bake_vs_ceiling_1thread"] = out["bake"]["mrays_per_s"] / replays[0]["mrays_per_s"]
-    r2 = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=2, max_distance=DISTANCE)
-    out["bake_2threads"] = {"seconds": r2.seconds, "mrays_per_s": r2.rays / r2.seconds / 1e6,
-                            "trace_share": r2.trace_seconds / (r2.seconds * r2.threads)}
-    del chunks
-    log(f"ceiling: embreex alone {replays[0]['mrays_per_s']:.2f} Mrays/s (1 thread), "
-        f"{replays[1]['mrays_per_s']:.2f} (2 threads); bake {out['bake']['mrays_per_s']:.2f} Mrays/s, "
-        f"{100 * out['bake']['trace_share']:.0f}% inside embreex", ctx.clock)
-    out["profile"] = _profile(ctx, cfg["prof_res"], cfg["prof_spp"])
+    out = {"scenes": []}
+    out["scenes"].append(_scene_ceiling(ctx, "Suzanne scene", ctx.target, ctx.occluders, DISTANCE, res, spp,
+                                        cfg["ceil_repeats"]))
+    t, occ, d = terrain(cfg["terrain_n"])
+    out["scenes"].append(_scene_ceiling(ctx, f"terrain ({t.triangle_count} triangles)", t, occ, d, res, spp,
+                                        cfg["ceil_repeats"]))
+    out["profile"] = _profile(ctx, ctx.target, ctx.occluders, cfg["prof_res"], cfg["prof_spp"], DISTANCE)
     return out

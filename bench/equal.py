@@ -8,7 +8,7 @@ repeat is kept in the JSON.
 import numpy as np
 
 from . import cycles, mcao
-from .common import erode, interp_time_at, log, rmse
+from .common import ROOT, erode, interp_time_at, log, rmse
 from .scene import DISTANCE
 
 SOURCES = ("sobol", "stratified", "independent", "halton")
@@ -64,6 +64,52 @@ def equal_samples(ctx):
             "note": "texel-samples/s counts each baker's own texels: Cycles bakes texels whose centre a UV "
                     "triangle covers, mc_ao every texel a triangle touches (partial edge texels too); "
                     "ratio_time compares the same job (same image) and is the conservative figure."}
+
+
+#: AO distance of the dense scene (a 4 x 4 terrain displaced by up to 0.6), for both bakers.
+DENSE_DISTANCE = 1.0
+
+
+def dense_equal_samples(ctx):
+    """sample_scenes/dense.blend (524k triangles, smooth): Cycles' AO bake against mc_ao's operator and
+    core.bake_ao at the same resolution, samples and threads. Restores the benchmark scene after."""
+    from .scene import core_meshes, scene_arrays, select_only
+
+    bpy, cfg = ctx.bpy, ctx.cfg
+    res, spp, threads = cfg["dense_res"], cfg["dense_spp"], ctx.threads
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "dense.blend"))
+    scene = bpy.context.scene
+    if scene.world is None:
+        scene.world = bpy.data.worlds.new("World")
+    scene.world.light_settings.distance = DENSE_DISTANCE
+    obj = bpy.data.objects["Terrain"]
+    select_only(bpy, obj)
+    ta, oa = scene_arrays(bpy, "Terrain")
+    target, occluders = core_meshes(ta, oa)
+    cycles.bake(bpy, obj, 32, 32, 1, threads)
+    mcao.operator_bake(bpy, obj, 32, 1, threads, DENSE_DISTANCE)
+    cyc_t, op_t, core_t, cyc_c, op_c, shares = [], [], [], [], [], []
+    for _ in range(cfg["dense_repeats"]):
+        _, t = cycles.bake(bpy, obj, res, res, spp, threads, margin=16)
+        cyc_t.append(t)
+        cyc_c.append(cycles.LAST["cpu"])
+        _, t = mcao.operator_bake(bpy, obj, res, spp, threads, DENSE_DISTANCE, margin=16)
+        op_t.append(t)
+        op_c.append(mcao.LAST["cpu"])
+        r = mcao.core_bake(target, occluders, resolution=res, samples=spp, threads=threads,
+                           max_distance=DENSE_DISTANCE, margin=16)
+        core_t.append(r.seconds)
+        shares.append(r.trace_seconds / (r.seconds * r.threads))
+    row = {"scene": "sample_scenes/dense.blend, object Terrain", "triangles": int(target.triangle_count),
+           "resolution": res, "samples": spp, "threads": threads, "distance": DENSE_DISTANCE,
+           "cycles_s": min(cyc_t), "mc_operator_s": min(op_t), "mc_core_s": min(core_t),
+           "cycles_s_all": cyc_t, "mc_operator_s_all": op_t, "mc_core_s_all": core_t,
+           "ratio_time": min(cyc_t) / min(op_t), "ratio_cpu": min(cyc_c) / min(op_c),
+           "ratio_core": min(cyc_t) / min(core_t), "mc_core_trace_share": float(np.median(shares))}
+    log(f"dense.blend {res}^2 x {spp}: Cycles {row['cycles_s']:.2f}s, mc_ao operator {row['mc_operator_s']:.2f}s "
+        f"(core {row['mc_core_s']:.2f}s): {row['ratio_time']:.2f}x", ctx.clock)
+    ctx.restore_scene()
+    return row
 
 
 def _series_point(r, ref_ao, sel, label, **extra):

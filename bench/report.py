@@ -52,6 +52,16 @@ def table(data):
                  "when a neighbour takes a core)")
         L.append("")
 
+    dn = r.get("dense")
+    if dn:
+        L.append(f"1b. Equal samples on {dn['scene']} ({dn['triangles']} triangles, smooth), {dn['resolution']}^2 x "
+                 f"{dn['samples']} spp, AO distance {dn['distance']}")
+        L += _grid(["Cycles s", "mc op s", "mc core s", "time ratio", "CPU ratio", "core ratio", "core in embree"],
+                   [[_fmt(dn["cycles_s"], ".2f"), _fmt(dn["mc_operator_s"], ".2f"), _fmt(dn["mc_core_s"], ".2f"),
+                     _fmt(dn["ratio_time"], ".2f") + "x", _fmt(dn["ratio_cpu"], ".2f") + "x",
+                     _fmt(dn["ratio_core"], ".2f") + "x", _fmt(100 * dn["mc_core_trace_share"], ".0f") + "%"]])
+        L.append("")
+
     ee = r.get("equal_error")
     if ee:
         ref = ee["reference"]
@@ -126,19 +136,21 @@ def table(data):
 
     ce = r.get("ceiling")
     if ce:
-        b = ce["bake"]
-        L.append(f"4. Ceiling ({b['resolution']}^2 x {b['samples']}, {ce['rays']} rays {ce['rays_source']})")
-        rows = [["mc_ao bake, 1 thread", _fmt(b["seconds"], ".2f"), _fmt(b["mrays_per_s"], ".2f"),
-                 _fmt(100 * b["trace_share"], ".0f") + "%"],
-                ["mc_ao bake, 2 threads", _fmt(ce["bake_2threads"]["seconds"], ".2f"),
-                 _fmt(ce["bake_2threads"]["mrays_per_s"], ".2f"), _fmt(100 * ce["bake_2threads"]["trace_share"], ".0f") + "%"]]
-        for x in ce["embree_alone"]:
-            rows.append([f"embreex alone, {x['threads']} thr, chunk {x['chunk']}", _fmt(x["seconds"], ".2f"),
-                         _fmt(x["mrays_per_s"], ".2f"), ""])
-        L += _grid(["what", "seconds", "Mrays/s", "in embree"], rows)
+        L.append("4. Ceiling: one thread, the bake against embreex alone replaying the bake's own rays (recorded "
+                 "through core.bake_ao(on_rays=...))")
+        rows = []
+        for sc in ce["scenes"]:
+            b = sc["bake"]
+            rows.append([sc["scene"], f"{sc['resolution']}^2 x {sc['samples']}", sc["rays"], _fmt(b["seconds"], ".2f"),
+                         _fmt(b["cpu_seconds"], ".2f"), _fmt(100 * sc["share_wall"], ".0f") + "%",
+                         _fmt(100 * sc["share_cpu"], ".0f") + "%", _fmt(sc["alone_1"]["seconds"], ".2f"),
+                         _fmt(sc["alone_2"]["seconds"], ".2f"), _fmt(sc["bake_over_alone"], ".2f") + "x",
+                         _fmt(sc["bake_over_alone_cpu"], ".2f") + "x"])
+        L += _grid(["scene", "bake", "rays", "bake s", "bake CPU s", "in embree", "(CPU)", "alone 1 thr s",
+                    "alone 2 thr s", "bake/alone", "(CPU)"], rows)
         pr = ce["profile"]
-        L.append(f"  profile ({pr['resolution']}^2 x {pr['samples']}, 1 thread, {pr['bake_seconds']:.2f} s; "
-                 "own time by file):")
+        L.append(f"  profile ({pr['resolution']}^2 x {pr['samples']}, Suzanne scene, 1 thread, {pr['cpu_seconds']:.2f} s "
+                 "thread CPU; own time by file):")
         L += _grid(["where", "seconds", "share"], [[g["where"], _fmt(g["seconds"], ".3f"), _fmt(100 * g["share"], ".1f") + "%"]
                                                  for g in pr["by_file"][:8]])
         L.append("  top functions (own time):")
@@ -161,6 +173,7 @@ def table(data):
                 rows.append([f"resolution {x['resolution']}", f"{x['resolution']}^2 x {x['samples']}",
                              _fmt(x["seconds"], ".2f"), _fmt(x["mtexel_samples_per_s"], ".2f"),
                              _fmt(x["mrays_per_s"], ".2f"), _fmt(100 * x["trace_share"], ".0f") + "%"])
+
         if mem and "peak_rss_mib" in mem:
             rows.append([f"resolution {mem['resolution']}", f"{mem['resolution']}^2 x {mem['samples']}",
                          _fmt(mem["bake_seconds"], ".2f"), _fmt(mem["texel_samples_per_s"] / 1e6, ".2f"),
@@ -171,10 +184,16 @@ def table(data):
                              _fmt(x["seconds"], ".2f"), _fmt(x["mtexel_samples_per_s"], ".2f"),
                              _fmt(x["mrays_per_s"], ".2f"), _fmt(100 * x["trace_share"], ".0f") + "%"])
         L += _grid(["case", "bake", "seconds", "Mts/s", "Mrays/s", "in embree"], rows)
+        if rs:
+            L += [f"  fixed cost (1 spp, bake time less embreex time per thread): " + ", ".join(
+                f"{x['resolution']}^2 {x['fixed_seconds']:.2f} s of {x['seconds']:.2f} s" for x in rs["one_sample"])]
+        if tr and len(tr["rows"]) >= 2:
+            L.append(f"  triangles: {tr['rows'][-1]['triangles']} take {tr['rows'][-1]['seconds'] / tr['rows'][0]['seconds']:.2f}x "
+                     f"the time of {tr['rows'][0]['triangles']} ({tr['scene']})")
         if th:
             L.append(f"  speed-up 1 -> 2 threads: {th['speedup_1_to_2']:.2f}x (CPU/wall of the 2-thread bake "
-                     f"{th['rows'][1]['cpu_per_wall']:.2f}); embreex alone on the same machine at the same time: "
-                     f"{th['embree_alone_speedup_1_to_2']:.2f}x")
+                     f"{th['rows'][1]['cpu_per_wall']:.2f}); embreex alone on the bake's own rays, interleaved: "
+                     f"{th['embree_alone_speedup_1_to_2']:.2f}x; ratio {th['relative_to_embree']:.2f}")
         if mem and "peak_rss_mib" in mem:
             L.append(f"  peak memory {mem['resolution']}^2 x {mem['samples']}: {mem['peak_rss_mib']:.0f} MiB RSS "
                      f"({mem['rss_before_mib']:.0f} MiB before the bake, fresh process, no bpy); highest RSS while "
@@ -182,6 +201,14 @@ def table(data):
                      f"margin) {mem.get('peak_rss_after_tracing_mib', float('nan')):.0f} MiB")
         elif mem:
             L.append(f"  memory: {mem.get('skipped') or mem.get('error', '')[:200]}")
+        L.append("")
+
+    st = r.get("statistics")
+    if st:
+        L.append(f"5b. Statistics on the analytic scene ({st['scene']}, {st['resolution']}^2; core only)")
+        L += _grid(["source"] + [f"RMSE @{n}" for n in st["samples"]] + ["slope", "mean error"],
+                   [[k] + [_fmt(e, ".5f") for e in v["rmse"]] + [_fmt(v["slope"], "+.2f"),
+                    f"{v['mean_error']:+.6f}"] for k, v in st["sources"].items()])
         L.append("")
 
     dv = r.get("device")
@@ -199,7 +226,8 @@ def table(data):
 
     tg = data.get("targets")
     if tg:
-        L.append("Targets (issue 7)")
-        L += _grid(["target", "wanted", "measured", "met"], [[t["name"], t["target"], t["value"], "yes" if t["met"] else "NO"]
-                                                              for t in tg])
+        L.append("Targets (issue 13; 'before': results/baseline.json, the core before this kernel (run of 2026-11-23), "
+                 "or the issue's own figures where that run did not measure them)")
+        L += _grid(["target", "wanted", "before", "now", "met"],
+                   [[t["name"], t["target"], t.get("before", "-"), t["value"], "yes" if t["met"] else "NO"] for t in tg])
     return "\n".join(L)

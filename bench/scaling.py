@@ -12,22 +12,25 @@ from .scene import DISTANCE, displaced_grid
 def _bake_row(r, **extra):
     texels = int(r.mask.sum())
     return dict(seconds=r.seconds, texels=texels, rays=r.rays, threads=r.threads,
+                cpu_seconds=getattr(r, "cpu_seconds", None), trace_cpu_seconds=r.trace_cpu_seconds,
                 mtexel_samples_per_s=texels * r.samples[r.mask].mean() / r.seconds / 1e6 if texels else 0.0,
                 mrays_per_s=r.rays / r.seconds / 1e6, trace_share=r.trace_seconds / (r.seconds * r.threads),
                 **extra)
 
 
 def threads(ctx):
-    """1 against 2 threads, interleaved with embreex alone on 1 and 2 threads as a calibration: on a
-    shared machine the second core is not always free, and the calibration shows how much of it was."""
+    """1 against 2 threads, interleaved with embreex alone replaying the bake's own rays on 1 and 2
+    threads as a calibration: on a shared machine the second core is not always free, and the
+    calibration shows how much of it was at that moment."""
     import time
 
-    from .ceiling import _embree_scene, _replay, _synthetic_rays
+    from .ceiling import _normalized, _record_rays, _replay, embree_scene
 
     cfg = ctx.cfg
     res, spp = cfg["thr_res"], cfg["thr_spp"]
-    chunks = _synthetic_rays(ctx, 1 << 21, 1 << 16)
-    scene = _embree_scene([ctx.target] + list(ctx.occluders))
+    kw = dict(resolution=res, samples=spp, max_distance=DISTANCE, margin=16)
+    chunks, _ = _record_rays(ctx.target, ctx.occluders, threads=1, **kw)
+    scene = embree_scene(_normalized(ctx.target, ctx.occluders))
     times = {1: [], 2: []}
     calib = {1: [], 2: []}
     cpu = {}
@@ -36,23 +39,24 @@ def threads(ctx):
         for n in (1, 2):
             calib[n].append(_replay(scene, chunks, n)[0])
             c0 = time.process_time()
-            r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=n,
-                               max_distance=DISTANCE, margin=16)
+            r = mcao.core_bake(ctx.target, ctx.occluders, threads=n, **kw)
             c = time.process_time() - c0
             times[n].append(r.seconds)
             if n not in rows or r.seconds < rows[n]["seconds"]:
                 rows[n] = _bake_row(r, resolution=res, samples=spp)
                 cpu[n] = c / r.seconds
+    del chunks
     for n in (1, 2):
         rows[n]["cpu_per_wall"] = cpu[n]
     embree_speedup = min(calib[1]) / min(calib[2])
+    speedup = rows[1]["seconds"] / rows[2]["seconds"]
     out = {"resolution": res, "samples": spp, "rows": [rows[1], rows[2]], "seconds_all": times,
-           "speedup_1_to_2": rows[1]["seconds"] / rows[2]["seconds"],
-           "embree_alone_seconds_all": calib, "embree_alone_speedup_1_to_2": embree_speedup,
+           "speedup_1_to_2": speedup, "embree_alone_seconds_all": calib, "embree_alone_speedup_1_to_2": embree_speedup,
+           "relative_to_embree": speedup / embree_speedup,
            "note": "cpu_per_wall: process CPU seconds per wall second during the bake (2.0 = both cores busy); "
-                   "embree_alone_speedup: the same machine's 2-thread speed-up for GIL-free work at that time"}
+                   "embree_alone_speedup: embreex alone on the bake's own rays, 1 -> 2 threads, interleaved"}
     log(f"threads: 1 -> {rows[1]['seconds']:.2f}s, 2 -> {rows[2]['seconds']:.2f}s, speed-up "
-        f"{out['speedup_1_to_2']:.2f}x (embreex alone {embree_speedup:.2f}x; bake CPU/wall {cpu[2]:.2f})", ctx.clock)
+        f"{speedup:.2f}x (embreex alone {embree_speedup:.2f}x; bake CPU/wall {cpu[2]:.2f})", ctx.clock)
     return out
 
 
@@ -64,12 +68,16 @@ def resolution(ctx):
                            max_distance=DISTANCE, margin=16)
         rows.append(_bake_row(r, resolution=res, samples=cfg["scale_spp"]))
         log(f"resolution {res}^2 x {cfg['scale_spp']}: {r.seconds:.2f}s", ctx.clock)
-    # One sample per texel isolates the per-texel work that does not trace (rasterising, margin).
+    # One sample per texel isolates the per-texel work (rasterising, units, margin): the bake's time
+    # less its time inside embreex (per thread) is the fixed cost of the image's size.
     fixed = []
     for res in cfg["scale_res_1spp"]:
         r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=1, threads=ctx.threads,
                            max_distance=DISTANCE, margin=16)
-        fixed.append(_bake_row(r, resolution=res, samples=1))
+        fixed.append(_bake_row(r, resolution=res, samples=1,
+                               fixed_seconds=r.seconds - r.trace_seconds / r.threads))
+        log(f"resolution {res}^2 x 1: {r.seconds:.2f}s, of which outside embreex {fixed[-1]['fixed_seconds']:.2f}s",
+            ctx.clock)
     return {"rows": rows, "one_sample": fixed}
 
 

@@ -1,32 +1,62 @@
-"""Per-texel 4D sample points for the baker: (direction u0, u1, position-in-texel u2, u3).
+"""Per-texel 4D sample points for the baker: (direction u0, u1, position in the texel u2, u3).
 
-Each texel gets its own randomised copy of a sample set, addressed by (texel, sample index) alone:
-counter-based, like Cycles' per-pixel hashing and pbrt-v4's ``Hash(pixel, dimension, seed)``. So a
-texel's points do not depend on how texels are grouped into tiles, chunks, rounds or threads, which
-is what makes bakes bit-identical for any thread count.
+Every texel draws its points from a pool of P randomised point sets ("patterns") of the chosen
+source, built once per bake from the seed, and randomises them again on its own, all addressed by
+(seed, texel, sample index) alone: counter-based, like Cycles' per-pixel hashing and pbrt-v4's
+``Hash(pixel, dimension, seed)``. So a texel's points do not depend on how texels are grouped into
+tiles, chunks, rounds or threads, which is what makes bakes bit-identical for any thread count.
 
-Sources, all unbiased per texel (every point is uniform on [0, 1)^4):
+Texel t with sample index i takes the point
 
-- 'sobol': the first N points of the 4D Sobol' sequence, Owen-scrambled per texel and dimension
-  (hash-based nested scrambling). Dimensions 0 and 1, a (0, 2)-sequence, drive the direction.
-- 'halton': the 4D Halton sequence (bases 2, 3, 5, 7) with a per-texel Cranley-Patterson rotation.
-- 'stratified': jittered strata for the direction pair and for the position pair, each pair in its
-  own per-texel random order ("padding"), so the two pairs are not correlated.
-- 'independent': uniform random numbers from the hash.
+    u(t, i) = (q0, q1, q2 (op) d2(t), q3 (op) d3(t)),   q = pattern e(t), point perm_t(i)
+
+- e(t): a pattern picked by a hash of the texel;
+- perm_t: a per-texel reordering of the pattern's points that keeps the source's structure
+  (Sobol': i xor c(t), which maps every aligned block of 2^m indices onto another aligned block,
+  so every power-of-two prefix is still a net; Halton: a window i + o(t) of a pattern twice as long,
+  so every b^k consecutive points are still stratified in base b; stratified and independent:
+  (i + o(t)) mod N);
+- d2, d3: a per-texel random shift of the two position coordinates (Sobol', independent: a digital
+  shift, xor with a random 32-bit word, which maps elementary intervals onto elementary intervals;
+  Halton: a Cranley-Patterson rotation, which keeps its strata as arcs of the circle; stratified: a
+  digital shift below the strata, which keeps every point in its stratum).
+
+Each pattern is an independent randomisation of the source's point set, so every point of every
+texel is uniform on [0, 1)^4 (the estimate is unbiased) and each texel's set is a randomised copy of
+the source's set (Owen-scrambled Sobol' net, digit-permuted Halton, jittered grid, independent
+points). The pool size only limits how often two texels draw their direction coordinates from the
+same pattern (probability 1/P per pair); their positions still differ, and the baker also turns
+each texel's tangent frame by its own random angle (see :mod:`core.kernel`), so no two texels trace
+the same directions.
+
+The baker never evaluates warps per ray for the directions: :meth:`TexelPattern.features` lifts
+every pool point once into the quantities the kernel multiplies by each unit's affine map (see
+:mod:`core.kernel`).
 """
+
+import math
+import threading
+from collections import OrderedDict
 
 import numpy as np
 
+from . import warps
 from .errors import SettingsError
-from .sources import Halton, Stratified, reverse_bits_uint32, sobol_uint32
+from .sources import Stratified, owen_scramble_uint32, sobol_uint32
 
 SOURCE_NAMES = ("sobol", "stratified", "independent", "halton")
 DIMS = 4
+#: Points in a pool (all patterns together). 2^18 points hold 4096 Sobol' sets of 64 points; the
+#: pool and its lifted features take about 10 MiB.
+POOL_POINTS = 1 << 18
 
-_BELOW_ONE = np.nextafter(1.0, 0.0)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
+_TWO_M32 = 2.0 ** -32
+
+# Hash tags: one per independent quantity drawn from (seed, texel, replicate).
+_TAG_PATTERN, _TAG_ORDER, _TAG_SHIFT2, _TAG_SHIFT3, _TAG_TURN, _TAG_SCRAMBLE = 11, 12, 13, 14, 15, 16
 
 
 def _mix(x):
@@ -56,86 +86,273 @@ def hash_uniform(*keys):
     return (hash64(*keys) >> np.uint64(11)).astype(np.float64) * (2.0 ** -53)
 
 
-_C0, _C1, _C2 = np.uint32(0x3D20ADEA), np.uint32(0x05526C56), np.uint32(0x53A22864)
-
-
-def _owen_from_reversed(v_rev, seed):
-    """:func:`core.sources.owen_scramble_uint32` of values given already bit-reversed (broadcasting).
-
-    The same Laine-Karras hash with pbrt-v4's constants; skipping the input reversal saves a third
-    of the work, since the baker reverses its shared Sobol' base once per bake instead of per texel.
-    """
-    v = np.broadcast_to(v_rev, np.broadcast_shapes(v_rev.shape, seed.shape)).copy()
-    odd = (seed >> np.uint32(16)) | np.uint32(1)  # on the small seed array, broadcast below
-    tmp = np.empty_like(v)
-    np.multiply(v, _C0, out=tmp)
-    v ^= tmp
-    v += seed
-    v *= odd
-    np.multiply(v, _C1, out=tmp)
-    v ^= tmp
-    np.multiply(v, _C2, out=tmp)
-    v ^= tmp
-    return reverse_bits_uint32(v)
-
-
 def _seed_key(seed):
     return np.uint64(int(seed) % (1 << 64))
 
 
+def _below(x, n):
+    """Map uint64 hashes to integers in [0, n) (multiply-shift on the top 32 bits: unbiased to 2^-32)."""
+    return ((x >> np.uint64(32)) * np.uint64(n)) >> np.uint64(32)
+
+
+class TexelKeys:
+    """What one texel (and replicate) draws: pattern, reordering, position shifts and frame turn."""
+
+    __slots__ = ("pattern", "order", "shift", "cos_turn", "sin_turn")
+
+    def __init__(self, pattern, order, shift, cos_turn, sin_turn):
+        self.pattern = pattern    # (n,) int64, which pattern of the pool
+        self.order = order        # (n,) int64, the reordering key (xor mask or offset)
+        self.shift = shift        # (n, 2) uint32, position shifts d2, d3
+        self.cos_turn = cos_turn  # (n,) float64, the tangent frame's turn about the normal
+        self.sin_turn = sin_turn
+
+
 class TexelPattern:
-    """Sample points for texels, ``points(texels, start, count) -> (len(texels), count, 4)``.
+    """Sample points for texels: ``points(texels, start, count) -> (len(texels), count, 4)`` in [0, 1).
 
     Parameters
     ----------
     source : one of :data:`SOURCE_NAMES`.
     seed : non-negative integer; the same seed gives the same points.
-    max_samples : the most samples any texel takes (the stratified grid and the base sequences are
-        sized by it).
+    max_samples : the most samples any texel takes (the patterns are sized by it).
+    pool_points : points in the pool, all patterns together (at least one pattern).
     """
 
-    def __init__(self, source, seed, max_samples):
+    def __init__(self, source, seed, max_samples, pool_points=POOL_POINTS):
         if source not in SOURCE_NAMES:
             raise SettingsError(f"unknown sample source {source!r}; choose one of {', '.join(SOURCE_NAMES)}")
+        max_samples = int(max_samples)
+        if max_samples < 1:
+            raise SettingsError(f"max_samples must be at least 1, got {max_samples}")
         self.source = source
         self.seed = _seed_key(seed)
-        self.max_samples = int(max_samples)
-        if source == "sobol":
-            # Stored bit-reversed: the scramble works on reversed bits, and every texel shares the base.
-            self._base_rev = reverse_bits_uint32(sobol_uint32(np.arange(self.max_samples, dtype=np.uint64), DIMS).T)
-        elif source == "halton":
-            self._base = np.ascontiguousarray(Halton(DIMS, scramble=False).random(self.max_samples).T)
-        elif source == "stratified":
-            self._grid = Stratified.grid_shape(self.max_samples)
+        self.max_samples = max_samples
+        # Points per pattern (length) and rows per pattern in the pool (span), and how a texel
+        # reorders them (see the module docstring): xor for Sobol' and independent points; a window
+        # i + o for Halton and for the stratified sets, which are stored twice in a row so that
+        # (i + o) mod N needs no wrap. Either way, an aligned block of a texel's samples is a run of
+        # consecutive pool rows.
+        self.xor = source in ("sobol", "independent")
+        self.length = max_samples if source == "halton" else 1 << max(0, (max_samples - 1).bit_length())
+        self.span = self.length if self.xor else 2 * self.length
+        self.patterns = max(1, int(pool_points) // self.span)
+        self._pool = _pool(source, self.seed, self.patterns, self.span, self.length)
+        self.q = self._pool.q
+        # Position shifts: digital (xor) or Cranley-Patterson (add, modulo 2^32), and which bits.
+        self.shift_add = source == "halton"
+        if source == "stratified":
+            nx, ny = Stratified.grid_shape(self.length)
+            self.shift_mask = np.array([(1 << (32 - (nx.bit_length() - 1))) - 1,
+                                        (1 << (32 - (ny.bit_length() - 1))) - 1], dtype=np.uint32)
+        else:
+            self.shift_mask = np.array([0xFFFFFFFF, 0xFFFFFFFF], dtype=np.uint32)
 
-    def points(self, texels, start, count):
-        """Samples [start, start + count) of each texel: (len(texels), count, 4) in [0, 1)."""
-        return np.moveaxis(self.points_by_dim(texels, start, count), 0, -1)
+    # -- per texel -----------------------------------------------------------------------------
 
-    def points_by_dim(self, texels, start, count):
-        """The same points laid out dimension-major, (4, len(texels), count), for long inner loops."""
-        texels = np.asarray(texels, dtype=np.uint64)
+    def keys(self, texels, replicate=0):
+        """The random choices of ``texels`` (array of non-negative ints) for ``replicate``."""
+        t = np.asarray(texels, dtype=np.uint64)
+        r = np.uint64(replicate)
         s = self.seed
-        dims = np.arange(DIMS, dtype=np.uint64)[:, None]
-        if self.source == "sobol":
-            seeds = (hash64(s, texels[None, :], dims) >> np.uint64(32)).astype(np.uint32)
-            x = _owen_from_reversed(self._base_rev[:, None, start:start + count], seeds[:, :, None])
-            return x.astype(np.float64) * (2.0 ** -32)
-        if self.source == "halton":
-            shift = hash_uniform(s, texels[None, :], dims, np.uint64(1))
-            p = self._base[:, None, start:start + count] + shift[:, :, None]
-            p -= np.floor(p)
-            return np.minimum(p, _BELOW_ONE)
-        idx = np.arange(start, start + count, dtype=np.uint64)
-        u = hash_uniform(s, texels[None, :, None], idx[None, None, :], dims[:, :, None])
-        if self.source == "independent":
-            return u
-        nx, ny = self._grid
-        strata = np.arange(nx * ny, dtype=np.uint64)
-        for pair in range(2):
-            # A per-texel random order of the strata: sample i takes stratum order[i].
-            keys = hash64(s, texels[:, None], np.uint64(100 + pair), strata[None, :])
-            order = np.argsort(keys, axis=1)[:, start:start + count]
-            u[2 * pair] = (order % nx + u[2 * pair]) / nx
-            u[2 * pair + 1] = (order // nx + u[2 * pair + 1]) / ny
-        return np.minimum(u, _BELOW_ONE)
+        pattern = _below(hash64(s, t, r, _TAG_PATTERN), self.patterns).astype(np.int64)
+        h = hash64(s, t, r, _TAG_ORDER)
+        order = (h >> np.uint64(40)) & np.uint64(self.length - 1) if self.xor else _below(h, self.length)
+        shift = np.stack([(hash64(s, t, r, _TAG_SHIFT2) >> np.uint64(32)).astype(np.uint32),
+                          (hash64(s, t, r, _TAG_SHIFT3) >> np.uint64(32)).astype(np.uint32)], axis=-1)
+        shift &= self.shift_mask
+        turn = warps.TWO_PI * hash_uniform(s, t, r, _TAG_TURN)
+        return TexelKeys(pattern, order.astype(np.int64), shift, np.cos(turn), np.sin(turn))
+
+    def rows(self, keys, index):
+        """Pool rows of the samples ``index`` (n, k) of the texels whose keys are given: e * span + perm(i)."""
+        return self.rows_of(keys.pattern, keys.order, index)
+
+    def rows_of(self, pattern, order, index):
+        """:meth:`rows` from the keys' arrays: ``pattern``, ``order`` (n,), ``index`` (n, k)."""
+        index = np.asarray(index, dtype=np.int64)
+        perm = index ^ order[:, None] if self.xor else index + order[:, None]
+        perm += pattern[:, None] * self.span
+        return perm
+
+    def block_rows(self, pattern, order, start, size):
+        """First pool row of each texel's block of samples [start, start + size) (arrays (n,)),
+        ``start`` a multiple of the power of two ``size``: the block's points are the rows
+        first .. first + size - 1, in the order :meth:`block_samples` gives."""
+        base = (start ^ order) & ~np.int64(size - 1) if self.xor else start + order
+        return pattern * self.span + base
+
+    def block_samples(self, pattern, order, first, size):
+        """The sample index of every row of the blocks :meth:`block_rows` returned: (n, size)."""
+        row = (first - pattern * self.span)[:, None] + np.arange(size)[None, :]
+        return row ^ order[:, None] if self.xor else row - order[:, None]
+
+    def block_features(self, kind, size):
+        """The lifted features as overlapping windows: ``[first]`` gives the (size, 6) rows of a
+        block without copying, so ``[firsts]`` gathers whole blocks with one copy each."""
+        f = self.features(kind)
+        return np.lib.stride_tricks.as_strided(f, shape=(len(f) - size + 1, size, f.shape[1]),
+                                               strides=(f.strides[0], f.strides[0], f.strides[1]), writeable=False)
+
+    def shift_positions(self, q, shift):
+        """Apply the texels' position shifts to uint32 position coordinates ``q`` (..., 2) in place."""
+        if self.shift_add:
+            np.add(q, shift, out=q)  # uint32 wraps: a rotation of the circle [0, 1)
+        else:
+            np.bitwise_xor(q, shift, out=q)
+        return q
+
+    # -- what the tests and the baker read -----------------------------------------------------
+
+    def points(self, texels, start, count, replicate=0):
+        """Samples [start, start + count) of each texel: (len(texels), count, 4) float64 in [0, 1)."""
+        texels = np.asarray(texels)
+        keys = self.keys(texels, replicate)
+        if start < 0 or start + count > self.max_samples:
+            raise SettingsError(f"samples [{start}, {start + count}) lie outside [0, {self.max_samples})")
+        index = np.broadcast_to(np.arange(start, start + count)[None, :], (len(texels), count))
+        idx = self.rows(keys, index)
+        q = self.q[idx]  # (n, count, 4) uint32
+        if len(texels):
+            self.shift_positions(q[..., 2:], keys.shift[:, None, :])
+        return q.astype(np.float64) * _TWO_M32
+
+    def features(self, kind):
+        """Lifted pool rows for the kernel, float32 (span * patterns, 6), one row per pool point:
+        [q2, q3 (uint32 bits), 1, f0, f1, f2] with f the direction features of ``kind``:
+
+        - 'cosine': Malley's polar map of (u0, u1), the direction in the tangent frame;
+        - 'cosine_sphere': the sphere point v with normalize(n + v) that direction (per-sample normals);
+        - 'uniform': the uniform hemisphere direction (cos theta = u0) in the tangent frame;
+        - 'uniform_sphere': the uniform sphere point, folded onto the normal's side per sample.
+        """
+        return self._pool.features(kind)
+
+
+def _lift(q, kind):
+    u0 = q[:, 0].astype(np.float64) * _TWO_M32
+    u1 = q[:, 1].astype(np.float64) * _TWO_M32
+    if kind in ("cosine", "cosine_sphere"):
+        d = warps.cosine_hemisphere_polar_xyz(u0, u1)
+        if kind == "cosine_sphere":
+            d = warps.cosine_sphere_point(*d)
+    elif kind == "uniform":
+        d = warps.uniform_hemisphere_xyz(u0, u1)
+    elif kind == "uniform_sphere":
+        w = warps.sample_uniform_sphere(np.stack([u0, u1], axis=1))
+        d = (w[:, 0], w[:, 1], w[:, 2])
+    else:
+        raise ValueError(f"unknown feature kind {kind!r}")
+    out = np.empty((len(q), 6), np.float32)
+    out[:, 0:2].view(np.uint32)[...] = q[:, 2:4]
+    out[:, 2] = 1.0
+    for j in range(3):
+        out[:, 3 + j] = d[j]
+    return out
+
+
+class _Pool:
+    """A pool's points and, built on first use, their lifted features (read-only, shared by bakes)."""
+
+    def __init__(self, q):
+        self.q = q
+        self._features = {}
+        self._lock = threading.Lock()
+
+    def features(self, kind):
+        with self._lock:
+            f = self._features.get(kind)
+            if f is None:
+                f = _lift(self.q, kind)
+                f.setflags(write=False)
+                self._features[kind] = f
+            return f
+
+
+_POOLS = OrderedDict()
+_POOLS_LOCK = threading.Lock()
+_POOLS_KEEP = 4
+
+
+def _pool(source, seed, patterns, span, length):
+    """The pool of ``source`` for ``seed``; the last few are kept (a bake's pattern is built once,
+    and a series of bakes with the same settings, as in the benchmark or the tests, reuses it)."""
+    key = (source, int(seed), patterns, span, length)
+    with _POOLS_LOCK:
+        if key in _POOLS:
+            _POOLS.move_to_end(key)
+            return _POOLS[key]
+    pool = _Pool(_build_pool(source, seed, patterns, span, length))
+    with _POOLS_LOCK:
+        _POOLS[key] = pool
+        while len(_POOLS) > _POOLS_KEEP:
+            _POOLS.popitem(last=False)
+    return pool
+
+
+def _build_pool(source, seed, patterns, span, length):
+    """The points (patterns * span, 4) uint32 of ``source`` for ``seed``."""
+    e = np.arange(patterns, dtype=np.uint64)[:, None]
+    dims = np.arange(DIMS, dtype=np.uint64)[None, :]
+    if source == "sobol":
+        # Each pattern: the first `length` 4D Sobol' points, Owen-scrambled with its own seed per
+        # dimension (a seed shared by two dimensions would correlate them).
+        seeds = (hash64(seed, e, dims, _TAG_SCRAMBLE) >> np.uint64(32)).astype(np.uint32)  # (P, 4)
+        base = sobol_uint32(np.arange(span, dtype=np.uint64), DIMS)  # (span, 4)
+        q = owen_scramble_uint32(base[None, :, :], seeds[:, None, :])
+    elif source == "independent":
+        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(seed) >> 32, 1])
+        q = rng.integers(0, 1 << 32, size=(patterns, span, DIMS), dtype=np.uint32)
+    elif source == "stratified":
+        q = _stratified_pool(seed, patterns, length)
+        q = np.concatenate([q, q], axis=1)  # stored twice: a window i + o needs no wrap
+    else:
+        q = _halton_pool(seed, patterns, span)
+    q = np.ascontiguousarray(q.reshape(patterns * span, DIMS))
+    q.setflags(write=False)
+    return q
+
+
+def _stratified_pool(seed, patterns, n):
+    """Jittered sets: dims (0, 1) and (2, 3) each one point per stratum of an nx x ny grid
+    (n = nx * ny, powers of two), each pair in its own random order ("padding")."""
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(seed) >> 32, 2])
+    nx, ny = Stratified.grid_shape(n)
+    q = np.empty((patterns, n, DIMS), np.uint32)
+    for pair in range(2):
+        order = np.argsort(rng.random((patterns, n)), axis=1)  # a random stratum per point
+        jitter = rng.integers(0, 1 << 32, size=(patterns, n, 2), dtype=np.uint64)
+        col, row = order % nx, order // nx
+        # (stratum + jitter) / count in 32-bit fixed point: strata are dyadic, so this is exact.
+        q[..., 2 * pair] = ((col.astype(np.uint64) << np.uint64(32)) + jitter[..., 0]) // np.uint64(nx)
+        q[..., 2 * pair + 1] = ((row.astype(np.uint64) << np.uint64(32)) + jitter[..., 1]) // np.uint64(ny)
+    return q
+
+
+_HALTON_BASES = (2, 3, 5, 7)
+
+
+def _halton_pool(seed, patterns, span):
+    """Digit-permuted 4D Halton sets: every pattern its own random permutation of the digits at each
+    digit position of each dimension (pbrt-v4's PermuteDigits), and random digits below those the
+    indices reach (so each point is uniform on [0, 1))."""
+    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(seed) >> 32, 3])
+    idx = np.arange(span)
+    q = np.empty((patterns, span, DIMS), np.uint32)
+    for j, b in enumerate(_HALTON_BASES):
+        ndig = max(1, math.ceil(math.log(span, b) + 1e-9))
+        while b ** ndig < span:
+            ndig += 1
+        perms = np.argsort(rng.random((patterns, ndig, b)), axis=2)  # (P, ndig, b)
+        value = np.zeros((patterns, span))
+        digits = idx.copy()
+        for k in range(ndig):
+            d = digits % b
+            digits //= b
+            value += perms[:, k, d] * float(b) ** -(k + 1)
+        value += rng.random((patterns, 1)) * float(b) ** -ndig  # the random tail below
+        q[..., j] = np.minimum(np.floor(value * 2.0**32), 2.0**32 - 1).astype(np.uint32)
+    return q
+
+
+__all__ = ["SOURCE_NAMES", "DIMS", "POOL_POINTS", "TexelPattern", "TexelKeys", "hash64", "hash_uniform"]

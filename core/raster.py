@@ -23,32 +23,23 @@ MIN_FRAGMENT_AREA = 1e-9
 OVERLAP_REPORT_AREA = 1e-3
 
 
-# Columns of UVTriangles.table: origin (x, y), position at the origin, d position / dx, / dy,
-# normal at the origin, d normal / dx, / dy, unit face normal.
-TABLE_ORIGIN, TABLE_P0, TABLE_PDX, TABLE_PDY, TABLE_N0, TABLE_NDX, TABLE_NDY, TABLE_FN = 0, 2, 5, 8, 11, 14, 17, 20
-TABLE_WIDTH = 23
-
-
 @dataclass
 class UVTriangles:
     """Per-triangle data of the target in texel space, shared by every tile."""
 
     xy: np.ndarray         # (T, 3, 2) corners in texel coordinates, counter-clockwise
+    corners: np.ndarray    # (T, 3, 2) corners in texel coordinates, in the mesh's order
     valid: np.ndarray      # (T,) bool: positive UV area and area in space (others are skipped)
-    origin_xy: np.ndarray  # (T, 2) float64, the first corner: the origin of the local affine maps
-    table: np.ndarray      # (T, 23) float32: origin, position and normal at the origin and their
-                           # derivatives along x and y, face normal (columns TABLE_*); one gather per texel
-    table_t: np.ndarray    # (23, T) the same, column-major: gathers per sample come out contiguous
     degenerate: int        # number of triangles with zero UV area (skipped)
     degenerate_space: int  # number of triangles with UV area but zero area in space (skipped)
     outside: int           # number of valid triangles with some UV outside [0, 1]
 
 
 def prepare(mesh, width, height):
-    """Texel-space corners and the affine maps texel (x, y) -> world position and normal, per triangle.
+    """Texel-space corners of every triangle, which of them can be baked, and counts of the others.
 
-    The maps are anchored at each triangle's own first corner, not at the UV origin, so evaluating
-    them loses no precision for small triangles far from (0, 0).
+    The surface each texel point lies on (position and normal as affine maps of texel space) is
+    :class:`core.surface.SurfaceTable`'s business.
     """
     xy = mesh.uvs * np.array([width, height], dtype=np.float64)
     e1 = xy[:, 1] - xy[:, 0]
@@ -65,29 +56,10 @@ def prepare(mesh, width, height):
     cw = det < 0
     xy_ccw = xy.copy()
     xy_ccw[cw, 1], xy_ccw[cw, 2] = xy[cw, 2], xy[cw, 1]
-
-    safe = np.where(valid, det, 1.0)
-    # Barycentric coordinates b1, b2 as linear functions of (x - x0, y - y0): inverse of [e1 e2].
-    inv = np.empty((len(xy), 2, 2))
-    inv[:, 0, 0] = e2[:, 1] / safe
-    inv[:, 0, 1] = -e2[:, 0] / safe
-    inv[:, 1, 0] = -e1[:, 1] / safe
-    inv[:, 1, 1] = e1[:, 0] / safe
-    # d b1 / d(x, y) = inv[:, 0, :], d b2 / d(x, y) = inv[:, 1, :]
-    P = mesh.positions[mesh.triangles]
-    N = mesh.normals
-    dP1, dP2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    dN1, dN2 = N[:, 1] - N[:, 0], N[:, 2] - N[:, 0]
-    pos_j = inv[:, 0, :, None] * dP1[:, None, :] + inv[:, 1, :, None] * dP2[:, None, :]
-    nrm_j = inv[:, 0, :, None] * dN1[:, None, :] + inv[:, 1, :, None] * dN2[:, None, :]
     uv = mesh.uvs
     outside = int((valid & np.any((uv < 0) | (uv > 1), axis=(1, 2))).sum())
-    table = np.concatenate([xy[:, 0], P[:, 0], pos_j[:, 0], pos_j[:, 1], N[:, 0], nrm_j[:, 0], nrm_j[:, 1],
-                            mesh.face_normals], axis=1)
-    return UVTriangles(xy_ccw, valid, xy[:, 0].copy(), table=np.ascontiguousarray(table, dtype=np.float32),
-                       table_t=np.ascontiguousarray(table.T, dtype=np.float32),
-                       degenerate=int((~valid).sum()) - degenerate_space, degenerate_space=degenerate_space,
-                       outside=outside)
+    return UVTriangles(xy_ccw, xy, valid, degenerate=int((~valid).sum()) - degenerate_space,
+                       degenerate_space=degenerate_space, outside=outside)
 
 
 def bin_triangles(tris, width, height, tile):
@@ -169,8 +141,6 @@ class TileFragments:
     sub_cdf: np.ndarray
     sub_start: np.ndarray
     coverage: np.ndarray
-    sub_key: np.ndarray = None  # sub_texel + sub_cdf: increasing, so one searchsorted finds any texel's pick
-    contact: np.ndarray = None  # (n,) bool, set by the baker: another object touches the texel's surface
 
 
 def _edges(xy):
@@ -238,13 +208,29 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
     f_y = np.concatenate([f_y, py[full]])
 
     # Clip the texel square by the three edges for the partial pairs.
+    # Only the edges that cut a texel clip it (usually one): each pass takes the pairs it cuts.
     ip = np.flatnonzero(part)
-    sq = np.zeros((len(ip), 4, 2))
-    sq[..., 0] = px[ip, None] + np.array([0, 1, 1, 0])
-    sq[..., 1] = py[ip, None] + np.array([0, 0, 1, 1])
-    poly, cnt = sq, np.full(len(ip), 4)
+    poly = np.zeros((len(ip), 7, 2))
+    cx = px[ip, None] + np.array([0.0, 1.0, 1.0, 0.0])
+    cy = py[ip, None] + np.array([0.0, 0.0, 1.0, 1.0])
+    poly[:, :4, 0], poly[:, :4, 1] = cx, cy
+    cnt = np.full(len(ip), 4)
+    # A triangle inside the texel is its own fragment (meshes with triangles smaller than texels).
+    txy = tris.xy[tri_ids[p_tri[ip]]]
+    within = np.all((txy.min(axis=1) >= np.stack([px[ip], py[ip]], 1))
+                    & (txy.max(axis=1) <= np.stack([px[ip], py[ip]], 1) + 1), axis=1)
+    poly[within, :3] = txy[within]
+    cnt[within] = 3
     for e in range(3):
-        poly, cnt = _clip(poly, cnt, ea[ip, e], eb[ip, e], ec[ip, e])
+        a_e, b_e, c_e = ea[ip, e], eb[ip, e], ec[ip, e]
+        cuts = np.flatnonzero(~within & np.any(a_e[:, None] * cx + b_e[:, None] * cy + c_e[:, None] < 0, axis=1))
+        if not len(cuts):
+            continue
+        slots = int(cnt[cuts].max())
+        clipped, cnt[cuts] = _clip(poly[cuts, :slots], cnt[cuts], a_e[cuts], b_e[cuts], c_e[cuts])
+        poly[cuts, :slots + 1] = clipped
+        poly[cuts, slots + 1:] = 0.0
+    poly = poly[:, :max(int(cnt.max()) if len(cnt) else 3, 3)]
     # Fan triangulation around vertex 0: sub-triangles (0, k, k+1), k = 1 .. cnt - 2.
     K = poly.shape[1]
     ks = np.arange(1, K - 1)
@@ -307,5 +293,4 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
     if len(sub_cdf):
         last = sub_start[1:][sub_start[1:] > sub_start[:-1]] - 1
         sub_cdf[last] = 1.0
-    return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage,
-                         sub_key=sub_tex + sub_cdf)
+    return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage)

@@ -187,6 +187,105 @@ def invert_cosine_hemisphere(w):
     return invert_uniform_disk_concentric(w[:, :2])
 
 
+def cosine_hemisphere_polar_xyz(u0, u1):
+    """Malley's method with the polar disk map, on component arrays (any shape): returns (x, y, z).
+
+    r = sqrt(u0), phi = 2 pi u1 on the disk, lifted to z = sqrt(1 - u0): density cos(theta)/pi.
+    sin^2(theta) = u0, so u0 orders directions by their angle from the normal and u1 by azimuth: a
+    rotation about the normal is a shift of u1. This is the map the baker uses (core.patterns).
+    """
+    r = np.sqrt(u0)
+    phi = TWO_PI * u1
+    return r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(0.0, 1.0 - u0))
+
+
+def sample_cosine_hemisphere_polar(u):
+    """Cosine-weighted hemisphere around +z by Malley's method with the polar disk map. Returns (n, 3)."""
+    u = _as_points(u, 2)
+    return np.stack(cosine_hemisphere_polar_xyz(u[:, 0], u[:, 1]), axis=1)
+
+
+def invert_cosine_hemisphere_polar(w):
+    """u = (x^2 + y^2, phi / 2 pi), the inverse of :func:`sample_cosine_hemisphere_polar`."""
+    w = _as_points(w, 3)
+    return np.stack([w[:, 0] ** 2 + w[:, 1] ** 2, _wrap_unit(np.arctan2(w[:, 1], w[:, 0]) * INV_TWO_PI)], axis=1)
+
+
+def cosine_sphere_point(x, y, z):
+    """The point v of the unit sphere with normalize(n + v) = (x, y, z), for a direction (x, y, z)
+    given in the frame of the normal n (z along n); component arrays in, (vx, vy, vz) out.
+
+    A sphere of radius 1 centred at n passes through the surface point, and the direction from the
+    point to a uniform point n + v of that sphere has density cos(theta)/pi (inscribed angle: the
+    direction's theta is half the angle between v and n, so sin^2(theta) = (1 - v.n) / 2). Hence
+    v = (2 z x, 2 z y, 2 z^2 - 1), and for v drawn by :func:`sample_uniform_sphere` with a pole
+    along n, normalize(n + v) is exactly :func:`sample_cosine_hemisphere_polar` of the same u. The
+    baker uses this form where the shading normal changes from sample to sample: it needs no frame
+    at each sample, only the normal.
+    """
+    return 2.0 * z * x, 2.0 * z * y, 2.0 * z * z - 1.0
+
+
+def uniform_hemisphere_xyz(u0, u1):
+    """:func:`sample_uniform_hemisphere` on component arrays: cos(theta) = u0, phi = 2 pi u1."""
+    s = np.sqrt(np.maximum(0.0, 1.0 - u0 * u0))
+    phi = TWO_PI * u1
+    return s * np.cos(phi), s * np.sin(phi), u0
+
+
+def sample_uniform_hemisphere_by_flip(u, n=(0.0, 0.0, 1.0)):
+    """Uniform hemisphere around ``n``: a uniform sphere direction, negated when it points below.
+
+    The sphere is symmetric under w -> -w, so folding its lower half onto the upper one doubles the
+    density there: 1/(2 pi). The baker uses it with per-sample normals (no frame needed). Returns (n, 3).
+    """
+    w = sample_uniform_sphere(u)
+    n = np.asarray(n, dtype=np.float64)
+    return np.where((w @ n < 0.0)[:, None], -w, w)
+
+
+# --- triangles ---------------------------------------------------------------------------------------
+
+
+def square_to_triangle(a, b, out=None):
+    """Heitz's low-distortion map from the square to the triangle, on component arrays of any scale.
+
+    Heitz 2019, "A Low-Distortion Map Between Triangle and Square" (pbrt-v4's SampleUniformTriangle):
+    if a < b then (a / 2, b - a / 2) else (a - b / 2, b / 2), which is (a - m, b - m) with m half the
+    smaller coordinate. Returns the barycentric weights (b0, b1) of corners 0 and 1 (b2 = s - b0 - b1
+    at scale s). Homogeneous of degree 1, so it also works on coordinates scaled by 2^32. ``out``:
+    a pair of arrays to write (b0, b1) into (may be a and b themselves).
+    """
+    m = np.minimum(a, b)
+    m *= 0.5
+    if out is None:
+        return a - m, b - m
+    np.subtract(a, m, out=out[0])
+    np.subtract(b, m, out=out[1])
+    return out
+
+
+def sample_uniform_triangle(u):
+    """Uniform point of the triangle {b0, b1 >= 0, b0 + b1 <= 1} as barycentrics (b0, b1). Returns (n, 2)."""
+    u = _as_points(u, 2)
+    return np.stack(square_to_triangle(u[:, 0], u[:, 1]), axis=1)
+
+
+def uniform_triangle_pdf(b):
+    """p(b0, b1) = 2 per unit area of the (b0, b1) plane inside the triangle; 0 outside."""
+    b = _as_points(b, 2)
+    inside = (b[:, 0] >= 0.0) & (b[:, 1] >= 0.0) & (b[:, 0] + b[:, 1] <= 1.0)
+    return np.where(inside, 2.0, 0.0)
+
+
+def invert_uniform_triangle(b):
+    """The inverse of :func:`sample_uniform_triangle`: (2 b0, b0 + b1) if b0 < b1, else (b0 + b1, 2 b1)."""
+    b = _as_points(b, 2)
+    first = b[:, 0] < b[:, 1]
+    s = b[:, 0] + b[:, 1]
+    return np.stack([np.where(first, 2.0 * b[:, 0], s), np.where(first, s, 2.0 * b[:, 1])], axis=1)
+
+
 # --- orienting around a normal ---------------------------------------------------------------------
 
 
@@ -217,6 +316,15 @@ def basis_components(x, y, z):
     a = -1.0 / (sign + z)
     b = x * y * a
     return 1.0 + sign * x * x * a, sign * b, -sign * x, b, sign + y * y * a, -y
+
+
+def rotate_tangents(s, t, cos_a, sin_a):
+    """Tangents (s, t) turned by an angle a about their normal: (cos a s + sin a t, cos a t - sin a s).
+
+    A direction with azimuth phi in the turned frame has azimuth phi + a in the original one, so
+    turning the frame is a shift of the polar map's u1 by a / (2 pi). Arrays broadcast together.
+    """
+    return cos_a * s + sin_a * t, cos_a * t - sin_a * s
 
 
 def to_world(local, n):
@@ -515,6 +623,10 @@ EXAMPLE_TABLE_2D = np.array([
 EXAMPLE_NORMAL = np.array([0.48, -0.6, -0.64])
 
 
+def _normalized(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
 def _rejection_entry(name, domain, dim, make):
     r = make()
     return Sampler(name, domain, dim, pdf=r.pdf, draw=r.draw, rejection=r,
@@ -536,6 +648,18 @@ def _build_registry():
                 invert_uniform_hemisphere),
         Sampler("hemisphere_cosine", "hemisphere", 3, cosine_hemisphere_pdf, sample_cosine_hemisphere,
                 invert_cosine_hemisphere),
+        Sampler("hemisphere_cosine_polar", "hemisphere", 3, cosine_hemisphere_pdf, sample_cosine_hemisphere_polar,
+                invert_cosine_hemisphere_polar),
+        Sampler("hemisphere_cosine_sphere", "hemisphere", 3,
+                lambda w: cosine_hemisphere_pdf(to_local(_as_points(w, 3), EXAMPLE_NORMAL / np.linalg.norm(EXAMPLE_NORMAL))),
+                lambda u: _normalized(EXAMPLE_NORMAL / np.linalg.norm(EXAMPLE_NORMAL)
+                                      + to_world(sample_uniform_sphere(u), EXAMPLE_NORMAL / np.linalg.norm(EXAMPLE_NORMAL))),
+                normal=EXAMPLE_NORMAL),
+        Sampler("hemisphere_uniform_flip", "hemisphere", 3,
+                lambda w: uniform_hemisphere_pdf(to_local(_as_points(w, 3), EXAMPLE_NORMAL / np.linalg.norm(EXAMPLE_NORMAL))),
+                lambda u: sample_uniform_hemisphere_by_flip(u, EXAMPLE_NORMAL / np.linalg.norm(EXAMPLE_NORMAL)),
+                normal=EXAMPLE_NORMAL),
+        Sampler("triangle_heitz", "triangle", 2, uniform_triangle_pdf, sample_uniform_triangle, invert_uniform_triangle),
         _oriented("hemisphere_uniform_oriented", sample_uniform_hemisphere, uniform_hemisphere_pdf,
                   invert_uniform_hemisphere, EXAMPLE_NORMAL),
         _oriented("hemisphere_cosine_oriented", sample_cosine_hemisphere, cosine_hemisphere_pdf,

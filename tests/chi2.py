@@ -35,6 +35,13 @@ def to_params(sampler, pts):
         return x[:, None], (x >= 0) & (x <= 1)
     if d == "square":
         return pts, np.all((pts >= 0) & (pts <= 1), axis=1)
+    if d == "triangle":
+        # (s, t) = ((1 - b0)^2, b1 / (1 - b0)): area-preserving up to the constant factor 1/2.
+        b0, b1 = pts[:, 0], pts[:, 1]
+        rest = 1.0 - b0
+        inside = (b0 >= 0) & (b1 >= 0) & (b0 + b1 <= 1.0 + 1e-12)
+        t = np.where(rest > 0, b1 / np.where(rest > 0, rest, 1.0), 0.0)
+        return np.stack([rest * rest, np.clip(t, 0.0, 1.0)], axis=1), inside
     if d == "disk":
         r2 = np.einsum("ij,ij->i", pts, pts)
         t = np.mod(np.arctan2(pts[:, 1], pts[:, 0]) / (2 * math.pi), 1.0)
@@ -57,6 +64,9 @@ def from_params(sampler, prm):
         return prm[:, :1], 1.0
     if d == "square":
         return prm, 1.0
+    if d == "triangle":
+        r = np.sqrt(prm[:, 0])
+        return np.stack([1.0 - r, prm[:, 1] * r], axis=1), 0.5
     if d == "disk":
         r, phi = np.sqrt(prm[:, 0]), 2 * math.pi * prm[:, 1]
         return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1), math.pi
@@ -73,7 +83,7 @@ def default_resolution(sampler):
     # Cell edges fall on the piecewise tables' bin edges (12 bins, 8 x 6 bins) so the pdf is smooth
     # inside every cell and quadrature is exact; odd counts elsewhere keep edges off symmetry lines.
     return {"interval": (48,), "square": (24, 24), "disk": (21, 41), "sphere": (31, 61),
-            "hemisphere": (25, 51)}[sampler.domain]
+            "hemisphere": (25, 51), "triangle": (25, 25)}[sampler.domain]
 
 
 def expected_fractions(sampler, res, order=4):

@@ -224,20 +224,11 @@ def test_the_memory_estimate_counts_samples_and_chunks():
 
 def test_a_texel_with_many_samples_is_traced_in_bounded_pieces():
     """2^17 samples of one texel: chunks of at most 2^16 rays, and the same numbers as in one piece."""
-    sizes = []
     from core import bake as B
 
-    real = B._TileBaker._values
-
-    def spy(self, frag, sel, start, k):
-        sizes.append(len(sel) * k)
-        return real(self, frag, sel, start, k)
-
-    B._TileBaker._values = spy
-    try:
-        r = bake_ao(plane(), [Mesh(LID_Q, F, name="lid")], resolution=1, samples=1 << 17, margin=0, threads=1)
-    finally:
-        B._TileBaker._values = real
+    sizes = []
+    r = bake_ao(plane(), [Mesh(LID_Q, F, name="lid")], resolution=1, samples=1 << 17, margin=0, threads=1,
+                on_rays=lambda batch: sizes.append(len(batch.origins)))
     assert max(sizes) <= B.SAMPLE_PIECE and sum(sizes) == 1 << 17
     assert r.samples[0, 0] == 1 << 17
 

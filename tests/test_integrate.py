@@ -133,6 +133,9 @@ def _case(name):
         return (lambda p: p[:, 0] ** 2 + 1.0), math.pi / 4 + math.pi
     if s.domain == "sphere":
         return (lambda w: w[:, 2] ** 2 + w[:, 0]), 4 * math.pi / 3
+    if s.domain == "triangle":
+        # Over {b0, b1 >= 0, b0 + b1 <= 1}: integral of b0 b1 is 1/24, of 1 is 1/2.
+        return (lambda b: b[:, 0] * b[:, 1] + 1.0), 1 / 24 + 1 / 2
     n = getattr(s, "normal", np.array([0.0, 0.0, 1.0]))
     return (lambda w: (w @ n) ** 2), 2 * math.pi / 3
 

@@ -21,10 +21,11 @@ def test_registry_holds_every_sampler_of_the_lecture_and_issue():
     expected = {"linear_ramp", "piecewise_constant_1d", "piecewise_constant_2d", "disk_polar",
                 "disk_concentric", "disk_rejection", "sphere_uniform", "sphere_rejection",
                 "hemisphere_uniform", "hemisphere_cosine", "hemisphere_rejection_z",
-                "hemisphere_rejection_normal", "hemisphere_rejection_flip"}
+                "hemisphere_rejection_normal", "hemisphere_rejection_flip", "triangle_heitz",
+                "hemisphere_cosine_polar", "hemisphere_cosine_sphere", "hemisphere_uniform_flip"}
     assert expected <= set(NAMES)
     for s in warps.REGISTRY.values():
-        assert s.domain in {"interval", "square", "disk", "sphere", "hemisphere"}
+        assert s.domain in {"interval", "square", "disk", "sphere", "hemisphere", "triangle"}
 
 
 @pytest.mark.slow
@@ -77,6 +78,8 @@ def test_pdf_is_zero_outside_the_domain(name):
     s = warps.REGISTRY[name]
     outside = {"interval": np.array([[-0.1], [1.1]]), "square": np.array([[-0.1, 0.5], [0.5, 1.2]]),
                "disk": np.array([[0.9, 0.9], [-1.1, 0.0]])}.get(s.domain)
+    if s.domain == "triangle":
+        outside = np.array([[-0.1, 0.5], [0.6, 0.6], [0.5, -0.01]])
     if s.domain == "hemisphere":
         n = getattr(s, "normal", np.array([0.0, 0.0, 1.0]))
         outside = np.array([-n, -(n + 0.3 * warps.orthonormal_basis(n)[0]) / np.linalg.norm(n + 0.3)])
@@ -181,3 +184,51 @@ def test_piecewise_constant_never_samples_zero_bins():
 def test_piecewise_constant_rejects_bad_tables(bad):
     with pytest.raises(ValueError):
         warps.PiecewiseConstant1D(bad)
+
+
+def test_chi_square_rejects_a_triangle_map_that_folds():
+    # The naive fold (u0 + u1 > 1 -> 1 - u) is uniform too; a map that squeezes towards corner 0 is not.
+    s = _Perturbed(warps.REGISTRY["triangle_heitz"], lambda b: b * (0.9 + 0.1 * (b[:, :1] + b[:, 1:])))
+    p, msg = chi2_test(s, 200_000, np.random.default_rng(8))
+    assert p < ALPHA, msg
+
+
+def test_heitz_map_is_the_one_the_baker_uses():
+    # square_to_triangle (component form, any scale) against pbrt-v4's branchy form.
+    rng = np.random.default_rng(12)
+    u = rng.random((10_000, 2))
+    first = u[:, 0] < u[:, 1]
+    b0 = np.where(first, u[:, 0] / 2, u[:, 0] - u[:, 1] / 2)
+    b1 = np.where(first, u[:, 1] - u[:, 0] / 2, u[:, 1] / 2)
+    got = warps.square_to_triangle(u[:, 0], u[:, 1])
+    np.testing.assert_allclose(got[0], b0, atol=1e-15)
+    np.testing.assert_allclose(got[1], b1, atol=1e-15)
+    scaled = warps.square_to_triangle(u[:, 0] * 2.0**32, u[:, 1] * 2.0**32)
+    np.testing.assert_allclose(scaled[0] * 2.0**-32, b0, atol=1e-12)
+
+
+def test_cosine_by_the_sphere_equals_the_polar_map():
+    # normalize(n + v), v the uniform sphere point of u with its pole along n, is Malley's polar
+    # map of the same u: the form the baker uses with per-sample normals gives the same directions.
+    rng = np.random.default_rng(13)
+    u = rng.random((5000, 2))
+    d = warps.sample_cosine_hemisphere_polar(u)
+    v = np.stack(warps.cosine_sphere_point(d[:, 0], d[:, 1], d[:, 2]), axis=1)
+    np.testing.assert_allclose(v, warps.sample_uniform_sphere(np.stack([u[:, 0], u[:, 1]], 1)), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(v, axis=1), 1.0, atol=1e-12)
+    w = v + np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(w / np.linalg.norm(w, axis=1, keepdims=True), d, atol=1e-9)
+
+
+def test_turning_the_frame_shifts_the_azimuth():
+    rng = np.random.default_rng(14)
+    n = rng.normal(size=(200, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    s, t = warps.orthonormal_basis(n)
+    a = rng.random(200) * 2 * np.pi
+    s2, t2 = warps.rotate_tangents(s, t, np.cos(a)[:, None], np.sin(a)[:, None])
+    u = rng.random((200, 2))
+    local = warps.sample_cosine_hemisphere_polar(u)
+    d = local[:, :1] * s2 + local[:, 1:2] * t2 + local[:, 2:] * n
+    shifted = warps.sample_cosine_hemisphere_polar(np.stack([u[:, 0], (u[:, 1] + a / (2 * np.pi)) % 1.0], 1))
+    np.testing.assert_allclose(d, shifted[:, :1] * s + shifted[:, 1:2] * t + shifted[:, 2:] * n, atol=1e-12)

@@ -1,0 +1,313 @@
+"""The sampling kernel: pieces of sample units -> rays -> per-piece sums, one matrix product per chunk.
+
+A piece is ``K`` consecutive samples (an aligned block, see :mod:`core.surface`) of one unit, a
+piece of one triangle. Each sample's pattern point (:mod:`core.patterns`) comes as a feature row
+
+    x = [a, b, 1, f0, f1, f2]
+
+(a, b: the sample's position in the triangle's texel space, from u2, u3 after the texel's shift,
+through Heitz's map for a unit that is a piece of triangle, and the unit's map; f: the direction
+features of u0, u1, lifted once for the whole pool, turned by the texel's own angle about the
+normal), and everything a ray needs is linear in x, so one batched product Y = X M per chunk, with
+one matrix M per triangle, gives every ray's origin and direction:
+
+- flat-shaded triangles (the shading normal is the face normal): f = Malley's polar map of (u0, u1)
+  in the triangle's tangent frame; M maps x to [origin (3), direction (3)];
+- smooth-shaded triangles: f = v, the sphere point of (u0, u1) (:func:`core.warps.cosine_sphere_point`);
+  M maps x to [origin, interpolated normal n(a, b), v in world space, n . gn, v . gn], and each
+  sample's direction is normalize(n) + v: cosine-distributed about the sample's own shading normal,
+  with no per-sample frame (or v folded onto n's side, for uniform directions).
+
+Turning each texel's directions by its own random angle (:meth:`core.patterns.TexelPattern.keys`)
+means texels that share a pool pattern trace different directions. Directions below the geometric
+surface are not traced (tfar 0) and count as occluded.
+
+Where to extend it: a stage that moves sample points elsewhere (onto a high-poly surface) can take
+the origins and the interpolated normals the smooth path computes (columns 0:3 and 3:6 of Y), replace
+them per sample, and form directions as normalize(n) + v exactly as that path does (the sphere form
+needs no frame, so any per-sample normal works); a miss mask joins ``below``. Points that are not
+texels (mesh vertices) are units of a degenerate triangle (position and normal constant, Px = Py =
+Nx = Ny = 0). Bent normals are the sum of the unoccluded ``directions`` (normalised) per piece, from
+the same rays. Independent randomisations of a texel for an error estimate are
+``TexelPattern.keys(texels, replicate=r)``.
+"""
+
+import threading
+
+import numpy as np
+
+from . import warps
+from .tracing import FAR, Clock, RayBatch
+
+FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
+
+
+def triangle_matrices(table, tris, offset):
+    """Per triangle of ``tris`` (unique ids), the float32 matrix (6, 6) (flat-shaded) or (6, 11)
+    (smooth-shaded) taking a feature row to what its rays need; returns (flat, curved, slot), slot
+    mapping a triangle id to its row in the array of its kind (-1 for triangles not in ``tris``)."""
+    smooth = table.smooth[tris]
+    # The ray offset: from the largest |coordinate| on the triangle (at a corner: |.|_inf is convex).
+    eps = offset(np.abs(table.corners[tris]).max(axis=(1, 2)))
+    fn = table.FN[tris]
+    centre = table.origin[tris] + (table.corners_xy[tris].sum(axis=1) / 3.0 - table.origin[tris])
+    nref = table.normal(tris, centre[:, 0], centre[:, 1])
+    ln = np.linalg.norm(nref, axis=1)
+    nref = np.where((ln > 1e-12)[:, None], nref / np.where(ln > 0, ln, 1.0)[:, None], fn)
+    gn = np.where((np.einsum("ij,ij->i", fn, nref) < 0)[:, None], -fn, fn)  # to the shading side
+    nref = np.where(smooth[:, None], nref, gn)
+    sx, sy, sz, tx, ty, tz = warps.basis_components(nref[:, 0], nref[:, 1], nref[:, 2])
+    fs, ft = np.stack([sx, sy, sz], 1), np.stack([tx, ty, tz], 1)
+    org = table.P0[tris] + gn * eps[:, None]  # the offset, folded into the constant row
+    slot = np.full(len(table.P0), -1, np.int64)
+    flat_i, curved_i = np.flatnonzero(~smooth), np.flatnonzero(smooth)
+    slot[tris[flat_i]] = np.arange(len(flat_i))
+    slot[tris[curved_i]] = np.arange(len(curved_i))
+
+    i = flat_i
+    mf = np.zeros((len(i), 6, FLAT_COLUMNS), np.float32)
+    mf[:, 0, 0:3] = table.Px[tris[i]]
+    mf[:, 1, 0:3] = table.Py[tris[i]]
+    mf[:, 2, 0:3] = org[i]
+    mf[:, 3, 3:6] = fs[i]
+    mf[:, 4, 3:6] = ft[i]
+    mf[:, 5, 3:6] = nref[i]
+
+    i = curved_i
+    t = tris[i]
+    g = gn[i]
+    mc = np.zeros((len(i), 6, CURVED_COLUMNS), np.float32)
+    for r, (e, f) in enumerate(((table.Px[t], table.Nx[t]), (table.Py[t], table.Ny[t]), (org[i], table.N0[t]))):
+        mc[:, r, 0:3] = e
+        mc[:, r, 3:6] = f
+        mc[:, r, 9] = np.einsum("ij,ij->i", f, g)
+    for r, v in ((3, fs[i]), (4, ft[i]), (5, nref[i])):
+        mc[:, r, 6:9] = v
+        mc[:, r, 10] = np.einsum("ij,ij->i", v, g)
+    return mf, mc, slot, gn, eps
+
+
+class TileContext:
+    """What the kernel needs of one tile: its units, its texels' keys, its triangles' matrices."""
+
+    def __init__(self, table, units, keys, texel_ids, contact, offset):
+        self.units = units
+        self.keys = keys
+        self.texel_ids = texel_ids      # global flat texel index of each of the tile's texels
+        self.contact = contact          # per tile texel: probe its samples for contact
+        tris = np.unique(units.tri)
+        self.flat_m, self.curved_m, self.slot, gn, eps = triangle_matrices(table, tris, offset)
+        self.smooth = table.smooth
+        # The geometric normal and offset of each unit (for contact probes).
+        pos = np.searchsorted(tris, units.tri)
+        self.unit_gn, self.unit_eps = gn[pos], eps[pos]
+        self.coef = units.coef.astype(np.float32)
+
+
+def _per_piece(values, k):
+    """Per-piece values (g,) as (g, 1) to broadcast over a piece's k samples, or repeated (g, k) when
+    k is small (numpy's inner loops are slow on a short broadcast axis)."""
+    return values[:, None] if k >= 8 else np.repeat(values, k).reshape(len(values), k)
+
+
+class Kernel:
+    """Traces pieces of sample units; one instance per bake, shared by the worker threads.
+
+    Parameters
+    ----------
+    pattern : core.patterns.TexelPattern; tracer : core.tracing.Tracer;
+    distribution : 'cosine' or 'uniform'; on_rays : None or a callable taking a RayBatch.
+    """
+
+    def __init__(self, pattern, tracer, distribution, on_rays=None):
+        self.pattern = pattern
+        self.tracer = tracer
+        self.uniform = distribution == "uniform"
+        self.on_rays = on_rays
+        self.kinds = {False: "uniform" if self.uniform else "cosine",
+                      True: "uniform_sphere" if self.uniform else "cosine_sphere"}
+        self.reach = float(tracer.tfar)
+        self._local = threading.local()
+
+    def _workspace(self, n):
+        """This thread's buffers for ``n`` rays. Reused from call to call: fresh large arrays cost
+        page faults on every call, which on a busy machine take as long as the arithmetic."""
+        ws = getattr(self._local, "ws", None)
+        if ws is None or ws.n < n:
+            ws = self._local.ws = _Workspace(n)
+        return ws
+
+    def run(self, tile, curved, unit, start, size, squares):
+        """Trace the aligned blocks of ``size`` samples from ``start`` (per piece) of each piece's ``unit``;
+        the first ``squares`` pieces are texel squares, the rest pieces of triangles; all pieces'
+        triangles flat-shaded (``curved`` False) or all smooth-shaded.
+
+        Returns (s1, s2, rays, seconds, cpu_seconds): per piece the sum of its samples' terms and of
+        their squares (float64), the rays traced, and the time spent inside Embree.
+        """
+        units, keys = tile.units, tile.keys
+        g, k = len(unit), int(size)
+        n = g * k
+        ws = self._workspace(n)
+        tex = units.texel[unit]
+        e, o = keys.pattern[tex], keys.order[tex]
+        first = self.pattern.block_rows(e, o, start, k)
+        # Feature rows of the pieces' blocks: consecutive pool rows from each block's first. Blocks
+        # of xor-ordered patterns are aligned, so they are whole rows of a (rows / k, k, 6) view.
+        feats = self.pattern.features(self.kinds[curved])
+        xf = ws.x[:n]
+        x = xf.reshape(g, k, 6)
+        aligned = not np.any(start & (k - 1))
+        if self.pattern.xor and aligned:
+            np.take(feats.reshape(-1, k, 6), first // k, axis=0, out=x)
+        else:
+            idx = ws.idx[:n].reshape(g, k)
+            if self.pattern.xor:  # a piece of a split texel's share: rows in index order
+                np.add(start[:, None], ws.ramp[None, :k], out=idx)
+                idx ^= o[:, None]
+                idx += (e * self.pattern.span)[:, None]
+            else:
+                np.add(first[:, None], ws.ramp[None, :k], out=idx)
+            np.take(feats, idx.reshape(n), axis=0, out=xf)
+        xu = x.view(np.uint32)
+        shift = keys.shift[tex]
+        a, b = x[:, :, 0], x[:, :, 1]
+        for c, dst in ((0, a), (1, b)):
+            # The texel's shift of the position coordinate, in place, then to [0, 1) in float32.
+            self.pattern.shift_positions(xu[:, :, c], _per_piece(shift[:, c], k))
+            np.copyto(dst, xu[:, :, c], casting="unsafe")
+            dst *= np.float32(2.0 ** -32)
+        # (u, v) -> the triangle's texel space: a translation for squares, Heitz's map and the
+        # piece's corners for pieces of triangles.
+        coef = tile.coef[unit]
+        sq = slice(0, squares)
+        a[sq] += _per_piece(coef[sq, 0], k)
+        b[sq] += _per_piece(coef[sq, 3], k)
+        if squares < g:
+            tr = slice(squares, g)
+            u, v = warps.square_to_triangle(a[tr], b[tr])
+            ct = coef[tr]
+            a[tr] = _per_piece(ct[:, 0], k) + _per_piece(ct[:, 1], k) * u + _per_piece(ct[:, 2], k) * v
+            b[tr] = _per_piece(ct[:, 3], k) + _per_piece(ct[:, 4], k) * u + _per_piece(ct[:, 5], k) * v
+        # The texel's turn about the normal: a rotation of the first two direction features.
+        cos_t = _per_piece(keys.cos_turn[tex].astype(np.float32), k)
+        sin_t = _per_piece(keys.sin_turn[tex].astype(np.float32), k)
+        f0, f1 = x[:, :, 3], x[:, :, 4]
+        t0 = f0 * cos_t
+        t0 -= f1 * sin_t
+        f1 *= cos_t
+        f1 += f0 * sin_t
+        f0[...] = t0
+        m = (tile.curved_m if curved else tile.flat_m)[tile.slot[units.tri[unit]]]
+        cols = m.shape[2]
+        y = ws.y[:n * cols].reshape(g, k, cols)
+        np.matmul(x, m, out=y)
+        y = y.reshape(n, cols)
+        origins = y[:, 0:3]
+        tfar = ws.tfar[:n]
+        below = ws.below[:n]
+        weight = None
+        if not curved:
+            directions = y[:, 3:6]
+            below.fill(False)  # the shading hemisphere is the face's own
+            tfar.fill(self.reach)
+            if self.uniform:
+                weight = 2.0 * xf[:, 5]                                  # 2 cos(theta), uniform hemisphere
+        else:
+            nx, ny, nz = y[:, 3], y[:, 4], y[:, 5]
+            length, tmp = ws.f1[:n], ws.f2[:n]
+            np.multiply(nx, nx, out=length)
+            np.multiply(ny, ny, out=tmp)
+            length += tmp
+            np.multiply(nz, nz, out=tmp)
+            length += tmp
+            np.sqrt(length, out=length)
+            directions = ws.dirs[:n]
+            if self.uniform:
+                nv = nx * y[:, 6]
+                nv += ny * y[:, 7]
+                nv += nz * y[:, 8]
+                side = np.where(nv < 0, np.float32(-1), np.float32(1))
+                for c in range(3):
+                    np.multiply(y[:, 6 + c], side, out=directions[:, c])
+                np.multiply(y[:, 10], side, out=tmp)
+                np.less_equal(tmp, 0, out=below)
+                weight = 2.0 * np.abs(nv) / np.maximum(length, 1e-30)
+                tfar.fill(self.reach)
+            else:
+                # |n| (n / |n| + v): cosine-distributed about the sample's own normal n.
+                size2 = ws.f3[:n]
+                size2.fill(0)
+                for c in range(3):
+                    dc = directions[:, c]
+                    np.multiply(y[:, 6 + c], length, out=dc)
+                    dc += y[:, 3 + c]
+                    np.multiply(dc, dc, out=tmp)
+                    size2 += tmp
+                np.multiply(y[:, 10], length, out=tmp)
+                tmp += y[:, 9]
+                np.less_equal(tmp, 0, out=below)
+                below |= size2 < 1e-20
+                if self.reach < FAR:
+                    # Ray lengths are in units of the direction, which is not unit length here.
+                    np.sqrt(size2, out=tfar)
+                    np.maximum(tfar, np.float32(self.reach / FAR), out=tfar)  # at most FAR long
+                    np.divide(np.float32(self.reach), tfar, out=tfar)
+                else:
+                    tfar.fill(FAR)
+            tfar[below] = 0.0
+        traced_tfar = tfar.copy() if self.on_rays is not None else None
+        clock = Clock()
+        touch = None
+        near = tile.contact[tex]
+        with clock:
+            if self.tracer.simple:
+                hit = self.tracer.occluded(origins, directions, tfar)
+                value = hit | below
+                np.logical_not(value, out=value)
+            else:
+                value = self.tracer.visibility(origins, directions, tfar)
+                hit = value < 1.0
+            if near.any():
+                # Samples where another object's face lies on the surface are occluded (see Tracer).
+                sel = np.flatnonzero(np.repeat(near, k))
+                piece = unit[sel // k]
+                gn, eps = tile.unit_gn[piece], tile.unit_eps[piece]
+                touch = self.tracer.contact(origins[sel].astype(np.float64) - gn * eps[:, None], gn, eps)
+        if touch is not None and touch.any():
+            value[sel[touch]] = 0
+        if self.on_rays is not None:
+            self.on_rays(RayBatch(origins=origins, directions=directions, tfar=traced_tfar, occluded=hit,
+                                  texels=np.repeat(tile.texel_ids[tex], k),
+                                  samples=(self.pattern.block_samples(e, o, first, k) if aligned or not self.pattern.xor
+                                           else start[:, None] + ws.ramp[None, :k]).ravel(),
+                                  seconds=clock.wall, cpu_seconds=clock.cpu))
+        if value.dtype == bool and weight is None:
+            s1 = value.view(np.uint8).reshape(g, k).sum(axis=1, dtype=np.int64).astype(np.float64)
+            return s1, s1, n, clock.wall, clock.cpu
+        term = value.astype(np.float64)
+        if weight is not None:
+            term *= weight
+        term = term.reshape(g, k)
+        return term.sum(axis=1), (term * term).sum(axis=1), n, clock.wall, clock.cpu
+
+
+class _Workspace:
+    """Buffers for up to ``n`` rays (see :meth:`Kernel._workspace`)."""
+
+    def __init__(self, n):
+        self.n = n
+        self.ramp = np.arange(n, dtype=np.int64)
+        self.idx = np.empty(n, np.int64)
+        self.x = np.empty((n, 6), np.float32)
+        self.y = np.empty(n * CURVED_COLUMNS, np.float32)
+        self.u32 = np.empty(n, np.uint32)
+        self.tfar = np.empty(n, np.float32)
+        self.below = np.empty(n, bool)
+        self.dirs = np.empty((n, 3), np.float32)
+        self.f1 = np.empty(n, np.float32)
+        self.f2 = np.empty(n, np.float32)
+        self.f3 = np.empty(n, np.float32)
+
+
+__all__ = ["Kernel", "TileContext", "triangle_matrices", "FLAT_COLUMNS", "CURVED_COLUMNS"]

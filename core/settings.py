@@ -1,0 +1,195 @@
+"""A bake's settings, checked once: the limits, the validated values, and what they imply (memory, tiles).
+
+:func:`BakeSettings.from_arguments` turns the arguments of :func:`core.bake_ao` into a frozen
+:class:`BakeSettings`, refusing bad input with a :class:`~core.errors.SettingsError` that names the
+setting and the problem, before any heavy work. Everything downstream reads this object.
+"""
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SettingsError
+from .patterns import POOL_POINTS, SOURCE_NAMES
+
+DISTRIBUTIONS = ("cosine", "uniform")
+#: Largest image side the baker accepts (the same as Blender's image size limit).
+MAX_RESOLUTION = 65536
+#: Most samples per texel. Chunks stay bounded for any count (a texel's samples are traced in
+#: pieces), but the sample pool grows with it: 2^20 keeps it to tens of MiB, and a reference bake
+#: rarely needs a tenth of it.
+MAX_SAMPLES = 1 << 20
+#: Samples of one texel traced in one piece; more are traced in pieces of this many.
+SAMPLE_PIECE = 1 << 16
+
+
+def _positive_int(value, what, lo=1):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise SettingsError(f"{what} must be an integer, got {value!r}")
+    if value < lo:
+        raise SettingsError(f"{what} must be at least {lo}, got {value}")
+    return int(value)
+
+
+def _resolution(resolution):
+    if isinstance(resolution, (int, np.integer)) and not isinstance(resolution, bool):
+        resolution = (resolution, resolution)
+    try:
+        w, h = resolution
+    except (TypeError, ValueError):
+        raise SettingsError(f"resolution must be an integer or a (width, height) pair, got {resolution!r}") from None
+    w = _positive_int(w, "resolution width")
+    h = _positive_int(h, "resolution height")
+    if w > MAX_RESOLUTION or h > MAX_RESOLUTION:
+        raise SettingsError(f"resolution {w} x {h} exceeds the largest supported side, {MAX_RESOLUTION}")
+    return w, h
+
+
+def _cpu_count():
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+@dataclass(frozen=True)
+class BakeSettings:
+    """The validated settings of one bake (see :func:`core.bake_ao` for their meaning).
+
+    ``max_distance`` is in world units here; the baker scales it into its normalised scene frame.
+    """
+
+    width: int
+    height: int
+    samples: int
+    min_samples: int
+    target_error: float
+    max_distance: float
+    distribution: str
+    source: str
+    margin: int
+    seed: int
+    threads: int
+    ignore_backfaces: bool
+    falloff: float
+    tile_size: int
+    chunk_rays: int
+
+    @classmethod
+    def from_arguments(cls, resolution, samples, min_samples, target_error, max_distance, distribution, source,
+                       margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays):
+        w, h = _resolution(resolution)
+        samples = _positive_int(samples, "samples")
+        if samples > MAX_SAMPLES:
+            raise SettingsError(f"samples must be at most {MAX_SAMPLES} per texel, got {samples}")
+        min_samples = _positive_int(min_samples, "min_samples")
+        try:
+            target_error = float(target_error)
+            max_distance = float(max_distance)
+            falloff = float(falloff)
+        except (TypeError, ValueError):
+            raise SettingsError("target_error, max_distance and falloff must be numbers") from None
+        if not (math.isfinite(target_error) and target_error >= 0):
+            raise SettingsError(f"target_error must be a finite number >= 0 (0 turns adaptive sampling off), "
+                                f"got {target_error}")
+        if not (max_distance > 0):  # also refuses NaN
+            raise SettingsError(f"max_distance must be positive (inf for unlimited), got {max_distance}")
+        if not (math.isfinite(falloff) and falloff >= 0):
+            raise SettingsError(f"falloff must be a finite number >= 0, got {falloff}")
+        if falloff > 0 and not math.isfinite(max_distance):
+            raise SettingsError("a distance falloff needs a finite max_distance to fall off over")
+        if distribution not in DISTRIBUTIONS:
+            raise SettingsError(f"unknown distribution {distribution!r}; choose one of {', '.join(DISTRIBUTIONS)}")
+        if source not in SOURCE_NAMES:
+            raise SettingsError(f"unknown sample source {source!r}; choose one of {', '.join(SOURCE_NAMES)}")
+        margin = _positive_int(margin, "margin", lo=0)
+        seed = _positive_int(seed, "seed", lo=0)
+        threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
+        chunk_rays = _positive_int(chunk_rays, "chunk_rays")
+        tile_size = auto_tile_size(w, h, samples, threads) if tile_size is None else _positive_int(tile_size, "tile_size")
+        return cls(width=w, height=h, samples=samples, min_samples=min(min_samples, samples),
+                   target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
+                   margin=margin, seed=seed, threads=threads, ignore_backfaces=bool(ignore_backfaces),
+                   falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays)
+
+    @property
+    def adaptive(self):
+        return self.target_error > 0
+
+    @property
+    def binary(self):
+        """Whether every sample's term is 0 or 1 (cosine directions, no falloff): hits are counted."""
+        return self.distribution == "cosine" and self.falloff == 0
+
+    @property
+    def bound(self):
+        """The largest value a sample's term takes (2 cos(theta) V for uniform directions)."""
+        return 2.0 if self.distribution == "uniform" else 1.0
+
+    def pool_points(self):
+        """Points the sample pool holds: no more patterns than texels, at most :data:`POOL_POINTS`."""
+        span = pattern_span(self.source, self.samples)
+        texels = 1 << max(0, (self.width * self.height - 1).bit_length())
+        return max(span, min(POOL_POINTS, texels * span))
+
+    def metadata(self, max_distance_world):
+        return {"samples": self.samples, "min_samples": self.min_samples, "target_error": self.target_error,
+                "sample_source": self.source, "distribution": self.distribution, "seed": self.seed,
+                "max_distance": max_distance_world, "falloff": self.falloff,
+                "ignore_backfaces": self.ignore_backfaces, "margin": self.margin,
+                "resolution": f"{self.width}x{self.height}"}
+
+
+def pattern_span(source, samples):
+    """Points one pattern of ``source`` holds for ``samples`` samples per texel (see core.patterns)."""
+    if source == "halton":
+        return 2 * samples
+    length = 1 << max(0, (samples - 1).bit_length())
+    return 2 * length if source == "stratified" else length
+
+
+def available_memory():
+    """Bytes of memory available to a new allocation (MemAvailable on Linux), or None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, source="sobol"):
+    """Peak bytes a bake needs: output planes, margin work, per-thread chunks, the sample pool, triangles.
+
+    A chunk holds at most ``max(chunk_rays, SAMPLE_PIECE)`` rays (a texel with more samples is
+    traced in pieces). The sample pool holds at least one pattern of the sample count (its 4D points
+    and two sets of lifted features: 40 bytes a point) and at most :data:`POOL_POINTS` points
+    otherwise; a tile's sample units hold their affine maps (about 600 bytes each, a few per texel).
+    """
+    texels = width * height
+    planes = texels * (4 + 4 + 4 + 1)          # ao, stderr, samples, mask
+    margin_work = texels * (4 + 4 + 1 + 1)      # dilation values, masks, frontier
+    per_ray = 200                               # feature rows, outputs, indices and results of a chunk
+    chunks = threads * max(chunk_rays, min(samples, SAMPLE_PIECE)) * per_ray
+    span = pattern_span(source, samples)
+    pool = max(span, min(POOL_POINTS, texels * span)) * 64
+    units = threads * (256 * 256) * 4 * 600     # a tile's units, at most 256^2 texels of a few units
+    tris = triangles * 300                      # texel-space corners, affine maps, Embree buffers
+    return planes + margin_work + chunks + pool + min(units, texels * 4 * 600 * threads) + tris
+
+
+def auto_tile_size(width, height, samples, threads):
+    """A power of two between 16 and 256: about 2^20 rays per tile, so the fixed costs of a tile and
+    of each call into the kernel (a few dozen numpy calls) stay small next to tracing, and at least
+    three tiles per thread, so threads share the work evenly."""
+    side = 2 ** round(math.log2(math.sqrt((1 << 20) / samples)))
+    enough = 2 ** math.floor(math.log2(max(1.0, math.sqrt(width * height / (3 * threads)))))
+    return int(min(max(min(side, enough), 16), 256))
+
+
+__all__ = ["BakeSettings", "DISTRIBUTIONS", "MAX_RESOLUTION", "MAX_SAMPLES", "SAMPLE_PIECE", "available_memory",
+           "estimate_memory", "auto_tile_size", "pattern_span"]

@@ -1,0 +1,220 @@
+"""Surface sampling: where on the target each texel's samples lie, with which normals.
+
+The rasteriser (:mod:`core.raster`) says which parts of which triangles each texel covers. This
+module turns that into *sample units*, each a piece of one triangle with a map from the sample's
+position coordinates to the triangle's texel space:
+
+    (x, y) = (A0 + A1 u + A2 v,  B0 + B1 u + B2 v)        (texel units, from the triangle's first corner)
+
+- a texel inside one triangle is one unit, a square: (u, v) in [0, 1)^2 is the point's position in
+  the texel (u2, u3 of the sample pattern), and the map is a translation to the texel's corner;
+- a texel split among triangles (an island edge, or triangles smaller than texels) has one unit per
+  piece of triangle inside it (the rasteriser's sub-triangles): (u, v) are the weights of the
+  piece's corners 0 and 1 from Heitz's square-to-triangle map of (u2, u3)
+  (:func:`core.warps.square_to_triangle`), corner 2 the origin.
+
+The surface itself is per triangle (:class:`SurfaceTable`): position and interpolated shading
+normal are affine in texel space, so every sample's point and normal are exact. The kernel
+(:mod:`core.kernel`) turns each triangle's maps into one matrix.
+
+A split texel's samples are shared among its units by systematic sampling: sample r of a block of
+``count`` goes to the unit whose cumulative area fraction first exceeds (r + phi) / count, phi a
+per-texel random number. Every sample lands in a unit with probability proportional to its area
+(the estimate stays unbiased), each unit gets its area's share of samples to within one, and the
+samples of a unit are consecutive indices, traced together in power-of-two pieces.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .patterns import hash_uniform
+
+SQUARE, TRIANGLE = 0, 1
+_TAG_ALLOCATE = 21
+
+
+@dataclass
+class SurfaceTable:
+    """Affine maps from texel space (x, y) to the surface, per triangle, anchored at its first corner.
+
+    position(x, y) = P0 + (x - ox) Px + (y - oy) Py; normal(x, y) = N0 + (x - ox) Nx + (y - oy) Ny
+    (the interpolated corner normals, unnormalised); FN the unit face normal. float64.
+    """
+
+    origin: np.ndarray
+    P0: np.ndarray
+    Px: np.ndarray
+    Py: np.ndarray
+    N0: np.ndarray
+    Nx: np.ndarray
+    Ny: np.ndarray
+    FN: np.ndarray
+    corners: np.ndarray = None  # (T, 3, 3) the corners' positions
+    smooth: np.ndarray = None   # (T,) bool: the shading normal is not the face normal everywhere
+    corners_xy: np.ndarray = None  # (T, 3, 2) the corners in texel space
+
+    @classmethod
+    def build(cls, mesh, uvtris):
+        xy = uvtris.corners
+        e1 = xy[:, 1] - xy[:, 0]
+        e2 = xy[:, 2] - xy[:, 0]
+        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        safe = np.where(uvtris.valid, det, 1.0)
+        # Barycentric weights b1, b2 of corners 1, 2 as linear functions of (x - x0, y - y0).
+        d1 = np.stack([e2[:, 1], -e2[:, 0]], axis=1) / safe[:, None]   # d b1 / d(x, y)
+        d2 = np.stack([-e1[:, 1], e1[:, 0]], axis=1) / safe[:, None]   # d b2 / d(x, y)
+        P = mesh.positions[mesh.triangles]
+        N = mesh.normals
+        dP1, dP2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+        dN1, dN2 = N[:, 1] - N[:, 0], N[:, 2] - N[:, 0]
+        return cls(origin=xy[:, 0].copy(), P0=P[:, 0].copy(), corners_xy=xy,
+                   Px=d1[:, 0, None] * dP1 + d2[:, 0, None] * dP2, Py=d1[:, 1, None] * dP1 + d2[:, 1, None] * dP2,
+                   N0=N[:, 0].copy(),
+                   Nx=d1[:, 0, None] * dN1 + d2[:, 0, None] * dN2, Ny=d1[:, 1, None] * dN1 + d2[:, 1, None] * dN2,
+                   FN=mesh.face_normals, corners=P,
+                   smooth=np.any(np.abs(N - N[:, :1]) > 0, axis=(1, 2)) | np.any(np.abs(N[:, 0] - mesh.face_normals) > 1e-7,
+                                                                                  axis=1))
+
+    def position(self, tri, x, y):
+        dx, dy = x - self.origin[tri, 0], y - self.origin[tri, 1]
+        return self.P0[tri] + dx[:, None] * self.Px[tri] + dy[:, None] * self.Py[tri]
+
+    def normal(self, tri, x, y):
+        dx, dy = x - self.origin[tri, 0], y - self.origin[tri, 1]
+        return self.N0[tri] + dx[:, None] * self.Nx[tri] + dy[:, None] * self.Ny[tri]
+
+
+@dataclass
+class Units:
+    """The sample units of one tile, sorted by texel (see the module docstring).
+
+    kind : SQUARE or TRIANGLE; texel : the unit's texel, as an index into the tile's texel list;
+    tri : its triangle; first : (n_texels + 1,) units of texel k are first[k]:first[k + 1];
+    cdf : cumulative area fraction of the texel's covered area up to and including the unit;
+    coef : (U, 6) float64, (A0, A1, A2, B0, B1, B2) of the map above.
+    """
+
+    kind: np.ndarray
+    texel: np.ndarray
+    tri: np.ndarray
+    first: np.ndarray
+    cdf: np.ndarray
+    coef: np.ndarray
+
+    def __len__(self):
+        return len(self.kind)
+
+
+def build_units(frag, table, width):
+    """The units of a tile's fragments."""
+    simple = np.flatnonzero(frag.full_tri >= 0)
+    tri_s = frag.full_tri[simple]
+    tex = frag.texels[simple]
+    # Squares: a translation to the texel's corner.
+    coef_s = np.zeros((len(simple), 6))
+    coef_s[:, 0] = (tex % width) - table.origin[tri_s, 0]
+    coef_s[:, 1] = 1.0
+    coef_s[:, 3] = (tex // width) - table.origin[tri_s, 1]
+    coef_s[:, 5] = 1.0
+    # Sub-triangles: corner 2 plus the weights of corners 0 and 1 times the edges to them.
+    tri_t = frag.sub_tri
+    c = frag.sub_xy - table.origin[tri_t][:, None, :]
+    coef_t = np.stack([c[:, 2, 0], c[:, 0, 0] - c[:, 2, 0], c[:, 1, 0] - c[:, 2, 0],
+                       c[:, 2, 1], c[:, 0, 1] - c[:, 2, 1], c[:, 1, 1] - c[:, 2, 1]], axis=1)
+    kind = np.concatenate([np.full(len(simple), SQUARE, np.int8), np.full(len(tri_t), TRIANGLE, np.int8)])
+    texel = np.concatenate([simple, frag.sub_texel]).astype(np.int64)
+    order = np.argsort(texel, kind="stable")  # sub-triangles keep their order within a texel
+    return Units(kind=kind[order], texel=texel[order], tri=np.concatenate([tri_s, tri_t])[order],
+                 first=np.searchsorted(texel[order], np.arange(len(frag.texels) + 1)),
+                 cdf=np.concatenate([np.ones(len(simple)), frag.sub_cdf])[order],
+                 coef=np.concatenate([coef_s, coef_t])[order])
+
+
+def allocate(units, texels, start, count, seed, texel_ids):
+    """Pieces of samples [start, start + count) of the tile's ``texels`` (indices into its texel
+    list; ``texel_ids`` the global texel numbers of the whole list): which unit takes which samples.
+
+    Returns (unit, piece start, piece size) arrays: every unit's share of the block, cut into pieces
+    whose sizes are powers of two (the kernel traces equal pieces together).
+    """
+    texels = np.asarray(texels, dtype=np.int64)
+    lo, hi = units.first[texels], units.first[texels + 1]
+    per = hi - lo
+    unit = np.repeat(lo, per) + (np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per))
+    owner = np.repeat(texels, per)
+    multi = np.repeat(per > 1, per)
+    # Systematic sampling among a split texel's units: the first sample past each unit's cumulative share.
+    phi = hash_uniform(seed, texel_ids[owner], np.uint64(start), _TAG_ALLOCATE)
+    edge = np.clip(np.ceil(units.cdf[unit] * count - phi), 0, count).astype(np.int64)
+    last = np.ones(len(unit), bool)
+    last[:-1] = owner[1:] != owner[:-1]
+    edge[last] = count
+    before = np.zeros(len(unit), np.int64)
+    before[1:] = edge[:-1]
+    before[np.concatenate([[True], owner[1:] != owner[:-1]])] = 0
+    size = np.where(multi, edge - before, count)
+    offset = np.where(multi, before, 0)
+    keep = size > 0
+    unit, size, offset = unit[keep], size[keep], offset[keep] + start
+    # Power-of-two pieces, largest first: bit b of a unit's count is a piece of 2^b samples after
+    # those of the higher bits. A texel inside one triangle takes its whole block as one piece; the
+    # kernel traces equal pieces together.
+    bits = int(count).bit_length()
+    pu, ps, pz = [], [], []
+    for b in range(bits - 1, -1, -1):
+        has = (size >> b) & 1 == 1
+        if has.any():
+            pu.append(unit[has])
+            ps.append(offset[has] + ((size[has] >> (b + 1)) << (b + 1)))
+            pz.append(np.full(int(has.sum()), 1 << b, np.int64))
+    if not pu:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(pu), np.concatenate(ps), np.concatenate(pz)
+
+
+def contact_texels(frag, table, width, tracer, samples):
+    """Per texel, whether another object's surface touches this one somewhere in the texel.
+
+    Probes (see :class:`core.tracing.Tracer`) at the corners and centre of texels inside one
+    triangle, and at the corners and centroid of every sub-triangle of split texels: contact is a
+    property of the position, not of the direction, so texels that no probe finds in contact skip
+    the per-sample probes. Contact smaller than these probe points are apart can go unnoticed.
+    """
+    n_tex = len(frag.texels)
+    if tracer.contact_scene is None or n_tex == 0:
+        return np.zeros(n_tex, bool)
+    # Only triangles whose bounding box, grown by twice the largest offset, meets an occluder's can
+    # touch one: the probes go to their texels alone.
+    tris = np.unique(np.concatenate([frag.full_tri[frag.full_tri >= 0], frag.sub_tri]))
+    corners3 = table.corners[tris]
+    grow = 2.0 * tracer.offset(np.abs(corners3).max(axis=(1, 2)))[:, None]
+    near = np.zeros(len(table.P0), bool)
+    near[tris] = tracer.near_occluders(corners3.min(axis=1) - grow, corners3.max(axis=1) + grow)
+    candidates = np.zeros(n_tex, bool)
+    candidates[frag.full_tri >= 0] = near[frag.full_tri[frag.full_tri >= 0]]
+    candidates[frag.sub_texel[near[frag.sub_tri]]] = True
+    if not candidates.any():
+        return candidates
+    if samples <= 8:
+        return candidates  # as few samples as probe points: probe the samples themselves
+    corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0.5, 0.5]])
+    simple = np.flatnonzero((frag.full_tri >= 0) & candidates)
+    tex = frag.texels[simple]
+    xy_s = (np.stack([tex % width, tex // width], 1)[:, None, :] + corners[None]).reshape(-1, 2)
+    tri_s = np.repeat(frag.full_tri[simple], len(corners))
+    own_s = np.repeat(simple, len(corners))
+    sub = np.flatnonzero(near[frag.sub_tri])
+    c3 = frag.sub_xy[sub]
+    xy_p = np.concatenate([c3, c3.mean(axis=1, keepdims=True)], axis=1).reshape(-1, 2)
+    tri_p = np.repeat(frag.sub_tri[sub], 4)
+    own_p = np.repeat(frag.sub_texel[sub], 4)
+    xy = np.concatenate([xy_s, xy_p]).astype(np.float64)
+    tri = np.concatenate([tri_s, tri_p])
+    own = np.concatenate([own_s, own_p])
+    pos = table.position(tri, xy[:, 0], xy[:, 1])
+    hit = tracer.contact(pos, table.FN[tri])
+    return np.bincount(own[hit], minlength=n_tex) > 0
+
+
+__all__ = ["FLAT_TURN", "SQUARE", "TRIANGLE", "SurfaceTable", "Units", "build_units", "allocate", "contact_texels"]

@@ -1,0 +1,200 @@
+"""Rays: the Embree scenes of a bake, occlusion queries, contact probes, and the hook that sees every ray.
+
+Every ray the baker traces goes through :class:`Tracer`, one call into embreex per chunk, timed
+(wall and thread CPU seconds) so a bake can report how much of it was spent inside Embree. A caller
+may pass ``on_rays`` to :func:`core.bake_ao`; it receives a :class:`RayBatch` after every call, which
+is how the benchmark records a bake's own rays and how the tests check what the baker traces.
+
+Ray origins are pushed off the surface along the geometric normal by :meth:`Tracer.offset`, which
+grows with the scene's size and with the point's distance from the origin (float32 rays lose
+absolute precision with both).
+"""
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Offsets off the surface: relative to the scene's bounding-box diagonal and to |position|.
+EPS_SCENE = 1e-6
+EPS_POSITION = 2.0 ** -18
+#: Embree's largest useful ray length (float32).
+FAR = 1e37
+
+
+@dataclass(frozen=True)
+class RayBatch:
+    """One call into Embree, as handed to an ``on_rays`` hook. Arrays are read-only views, valid
+    during the call only (copy what you keep).
+
+    origins, directions : (n, 3) float32; directions are not always unit length (see ``tfar``).
+    tfar : (n,) float32, each ray's length in units of its direction (0 for a ray not traced because
+        its direction points below the geometric surface; it counts as occluded).
+    occluded : (n,) bool, Embree's answer (before samples below the surface or in contact are
+        counted as occluded).
+    texels : (n,) int64, the flat texel index (row * width + column) each ray belongs to.
+    samples : (n,) int64, each ray's sample index within its texel.
+    seconds, cpu_seconds : wall and thread CPU time of the Embree call.
+    """
+
+    origins: np.ndarray
+    directions: np.ndarray
+    tfar: np.ndarray
+    occluded: np.ndarray
+    texels: np.ndarray
+    samples: np.ndarray
+    seconds: float
+    cpu_seconds: float
+
+
+def embree_scene(meshes):
+    """A committed Embree scene of ``meshes`` (one geometry), and its positions."""
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    positions = np.concatenate([m.positions for m in meshes])
+    offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
+    tris = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
+    scene = rtcore_scene.EmbreeScene()
+    mesh = TriangleMesh(scene, positions.astype(np.float32), tris.astype(np.int32))
+    # Commit (build the BVH) now, once, before any worker thread traces.
+    scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), query="OCCLUDED",
+              dists=np.ones(1, np.float32))
+    return scene, mesh, positions
+
+
+class Tracer:
+    """Occlusion queries against the committed Embree scene of the target and its occluders.
+
+    Contact: a face of another object lying on the target's surface (a box resting on a floor) sits
+    where the pushed-off ray origin cannot see it: the origin starts inside the box. Cycles, which
+    starts rays on the surface and skips only the triangle they leave, finds that face at distance 0
+    and calls the point occluded, which is right for a point in contact. To agree, samples are first
+    probed against a second scene of the occluders alone with a ray of length 2 * offset crossing the
+    surface along the normal: a hit means other geometry coincides with the surface there, and the
+    sample is occluded in every direction.
+
+    Parameters
+    ----------
+    meshes : the target first, then its occluders (in the baker's normalised frame).
+    ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the same frame).
+    """
+
+    def __init__(self, meshes, ignore_backfaces=False, falloff=0.0, max_distance=float("inf")):
+        self.scene, self._mesh, positions = embree_scene(meshes)
+        self.face_normals = np.concatenate([m.face_normals for m in meshes])
+        self.contact_scene = embree_scene(meshes[1:])[0] if len(meshes) > 1 else None
+        if len(meshes) > 1:
+            corners = np.concatenate([m.positions[m.triangles] for m in meshes[1:]])  # (m, 3, 3)
+            self._occ_lo, self._occ_hi = corners.min(axis=1), corners.max(axis=1)
+        lo, hi = positions.min(axis=0), positions.max(axis=0)
+        self.extent = float(np.linalg.norm(hi - lo))
+        self.ignore_backfaces = ignore_backfaces
+        self.falloff = falloff
+        self.max_distance = max_distance
+        self.tfar = np.float32(min(max_distance, FAR))
+        #: Only occlusion is asked (not hit distances): one query per ray.
+        self.simple = not ignore_backfaces and falloff == 0
+
+    def offset(self, max_abs):
+        """Distance to push ray origins off the surface, given each point's largest |coordinate|."""
+        return EPS_SCENE * self.extent + EPS_POSITION * max_abs
+
+    def occluded(self, origins, directions, tfar):
+        """Embree's occlusion answer per ray (n,) bool; ``tfar`` (n,) float32 is overwritten."""
+        return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
+
+    def near_occluders(self, lo, hi):
+        """Per box [lo, hi] (n, 3), whether some occluder triangle's bounding box overlaps it: a
+        cheap, conservative test of where contact probes can find anything."""
+        lo, hi = np.atleast_2d(lo), np.atleast_2d(hi)
+        out = np.zeros(len(lo), bool)
+        if self.contact_scene is None or not len(lo):
+            return out
+        # Only occluders overlapping the boxes' union can overlap any of them.
+        ulo, uhi = lo.min(axis=0), hi.max(axis=0)
+        cand = np.flatnonzero(np.all((self._occ_lo <= uhi) & (self._occ_hi >= ulo), axis=1))
+        for c0 in range(0, len(cand), 256):
+            c = cand[c0:c0 + 256]
+            out |= np.any(np.all((self._occ_lo[c][None] <= hi[:, None]) & (self._occ_hi[c][None] >= lo[:, None]),
+                                 axis=2), axis=1)
+        return out
+
+    def contact(self, points, normals, lengths=None):
+        """Per point (n, 3), whether another object's surface crosses the segment of length 2 * offset
+        through it along its unit geometric normal (n, 3): whether something touches it."""
+        points = np.asarray(points, dtype=np.float64)
+        e = self.offset(np.abs(points).max(axis=1)) if lengths is None else np.asarray(lengths, np.float64)
+        below = (points - normals * e[:, None]).astype(np.float32)
+        hit = self.contact_scene.run(below, np.ascontiguousarray(normals, dtype=np.float32), query="OCCLUDED",
+                                     dists=(2.0 * e).astype(np.float32))
+        return hit >= 0
+
+    def visibility(self, origins, directions, tfar):
+        """Per ray, 1 for unoccluded within its length, 0 for occluded, between with falloff; rays whose
+        ``tfar`` is 0 are not traced (they count as occluded). Used when hit distances matter."""
+        org = np.asarray(origins, dtype=np.float64)
+        dirs = np.asarray(directions, dtype=np.float64)
+        n = len(org)
+        length = np.linalg.norm(dirs, axis=1)
+        dirs = dirs / np.where(length > 0, length, 1.0)[:, None]
+        reach = np.asarray(tfar, dtype=np.float64) * length  # world length of each ray
+        o32 = np.ascontiguousarray(org, dtype=np.float32)
+        d32 = np.ascontiguousarray(dirs, dtype=np.float32)
+        remaining = reach.astype(np.float32)
+        travelled = np.zeros(n)
+        vis = np.where(reach > 0, 1.0, 0.0)
+        todo = np.flatnonzero(reach > 0)
+        for _ in range(64):
+            if not len(todo):
+                break
+            out = self.scene.run(o32[todo], d32[todo], dists=remaining[todo].copy(), output=True)
+            prim = out["primID"]
+            hit = prim >= 0
+            t = out["tfar"].astype(np.float64)
+            if self.ignore_backfaces:
+                back = hit & (np.einsum("ij,ij->i", self.face_normals[np.maximum(prim, 0)], dirs[todo]) > 0)
+            else:
+                back = np.zeros_like(hit)
+            front = hit & ~back
+            idx = todo[front]
+            dist = travelled[idx] + t[front]
+            if self.falloff > 0:
+                vis[idx] = 1.0 - np.clip(1.0 - dist / self.max_distance, 0.0, 1.0) ** self.falloff
+            else:
+                vis[idx] = 0.0
+            # Back-face hits: continue from just past the hit point with the distance left.
+            cont = todo[back]
+            if len(cont):
+                hit_at = org[cont] + dirs[cont] * (travelled[cont] + t[back])[:, None]
+                step = t[back] + self.offset(np.abs(hit_at).max(axis=1))
+                travelled[cont] += step
+                o32[cont] = (org[cont] + dirs[cont] * travelled[cont, None]).astype(np.float32)
+                remaining[cont] = np.maximum(reach[cont] - travelled[cont], 0).astype(np.float32)
+                cont = cont[remaining[cont] > 0]
+            todo = cont
+        return vis
+
+
+class Clock:
+    """Wall and thread-CPU seconds spent in a block, added to running totals."""
+
+    __slots__ = ("wall", "cpu", "last_wall", "last_cpu", "_w", "_c")
+
+    def __init__(self):
+        self.wall = self.cpu = self.last_wall = self.last_cpu = 0.0
+
+    def __enter__(self):
+        self._w = time.perf_counter()
+        self._c = time.thread_time()
+        return self
+
+    def __exit__(self, *exc):
+        self.last_wall = time.perf_counter() - self._w
+        self.last_cpu = time.thread_time() - self._c
+        self.wall += self.last_wall
+        self.cpu += self.last_cpu
+        return False
+
+
+__all__ = ["RayBatch", "Tracer", "embree_scene", "EPS_SCENE", "EPS_POSITION", "FAR"]

@@ -1,0 +1,254 @@
+"""What the baker traces, seen through its public ``on_rays`` hook: the rays are the texels' pattern
+points through the warps, every sample is traced once, directions pass a chi-square test against
+their pdf (about each sample's own shading normal), and split texels share their samples by area."""
+
+import math
+
+import numpy as np
+import pytest
+
+from core import Mesh, bake_ao, warps
+from core.patterns import TexelPattern
+from core.settings import pattern_span
+from chi2 import SUITE_ALPHA, chi2_test, sidak
+from scenes import plane
+
+W = 16
+SOURCES = ["sobol", "halton", "stratified", "independent"]
+
+
+def record(mesh, **kw):
+    """Bake ``mesh`` and return every ray it traced, concatenated, with the result."""
+    batches = []
+
+    def keep(b):
+        batches.append({k: np.array(getattr(b, k)) for k in ("origins", "directions", "tfar", "occluded",
+                                                              "texels", "samples")})
+
+    r = bake_ao(mesh, threads=1, margin=0, on_rays=keep, **kw)
+    return {k: np.concatenate([b[k] for b in batches]) for k in batches[0]}, r
+
+
+class _Drawn:
+    """A registry-like sampler whose draws are given (for the chi-square harness)."""
+
+    def __init__(self, points, pdf, domain="hemisphere", dim=3):
+        self.points, self.pdf, self.domain, self.dim = points, pdf, domain, dim
+
+    def draw(self, n, rng):
+        return self.points[:n]
+
+
+@pytest.mark.parametrize("source", SOURCES)
+def test_every_sample_of_every_texel_is_traced_once(source):
+    rays, r = record(plane(), resolution=W, samples=24, source=source)
+    key = rays["texels"] * 1000 + rays["samples"]
+    assert np.unique(key).size == key.size == W * W * 24
+    assert set(np.unique(rays["samples"])) == set(range(24))
+    assert r.rays == key.size
+
+
+@pytest.mark.parametrize("source", SOURCES)
+@pytest.mark.parametrize("distribution", ["cosine", "uniform"])
+def test_rays_are_the_patterns_points_through_the_warps(source, distribution):
+    # On a plane (UVs = xy, normal +z) the rays of texels inside one triangle must be exactly: origin
+    # at the texel's corner plus (u2, u3) of the texel's pattern point, direction the distribution's
+    # warp of (u0, u1) turned by the texel's own angle. A kernel that mixes up the pattern's
+    # dimensions, the texel's keys or the warp fails here.
+    samples = 32
+    rays, _ = record(plane(), resolution=W, samples=samples, source=source, distribution=distribution, seed=5)
+    col, row = rays["texels"] % W, rays["texels"] // W
+    simple = np.abs(col - row) > 1  # away from the plane's diagonal, where texels are split
+    pattern = TexelPattern(source, 5, samples, pool_points=min(1 << 18, 256 * pattern_span(source, samples)))
+    t, i = rays["texels"][simple], rays["samples"][simple]
+    u = np.stack([pattern.points(np.array([a]), int(b), 1)[0, 0] for a, b in zip(t[:4000], i[:4000])])
+    # The baker works in a frame centred on the target and scaled to its size: the unit plane maps
+    # to [-0.5, 0.5]^2, so compare in that frame.
+    org = rays["origins"][simple][:4000]
+    np.testing.assert_allclose(org[:, 0] + 0.5, ((t[:4000] % W) + u[:, 2]) / W, atol=2e-6)
+    np.testing.assert_allclose(org[:, 1] + 0.5, ((t[:4000] // W) + u[:, 3]) / W, atol=2e-6)
+    assert np.all(org[:, 2] > 0) and np.all(org[:, 2] < 1e-5)  # pushed off the surface, barely
+    if distribution == "cosine":
+        local = warps.sample_cosine_hemisphere_polar(u[:, :2])
+    else:
+        local = np.stack(warps.uniform_hemisphere_xyz(u[:, 0], u[:, 1]), axis=1)
+    keys = pattern.keys(t[:4000])
+    c, s = keys.cos_turn, keys.sin_turn
+    want = np.stack([c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1], local[:, 2]], axis=1)
+    np.testing.assert_allclose(rays["directions"][simple][:4000], want, atol=2e-6)
+
+
+CHI2_CASES = [("cosine", "flat"), ("uniform", "flat"), ("cosine", "smooth"), ("uniform", "smooth")]
+CHI2_ALPHA = sidak(SUITE_ALPHA, 64)
+
+
+def bumpy_plane():
+    """The unit plane as a 4 x 4 grid of quads whose corner normals lean by up to 25 degrees in
+    different directions: the shading normal changes across every triangle."""
+    n = 4
+    t = np.linspace(0.0, 1.0, n + 1)
+    X, Y = np.meshgrid(t, t)
+    P = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    i = np.arange(n)
+    a = (i[None, :] + (n + 1) * i[:, None]).ravel()
+    F = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+    rng = np.random.default_rng(3)
+    lean = rng.uniform(-0.45, 0.45, size=(len(P), 2))
+    vn = np.concatenate([lean, np.ones((len(P), 1))], axis=1)
+    vn /= np.linalg.norm(vn, axis=1, keepdims=True)
+    return Mesh(P, F, uvs=P[F][:, :, :2], normals=vn[F], name="bumpy"), vn
+
+
+def shading_normal_at(points, mesh, vn):
+    """The interpolated shading normal at points on the bumpy plane (its z = 0 frame)."""
+    P = mesh.positions
+    out = np.zeros((len(points), 3))
+    done = np.zeros(len(points), bool)
+    for f in mesh.triangles:
+        a, b, c = P[f, :2]
+        m = np.array([[b[0] - a[0], c[0] - a[0]], [b[1] - a[1], c[1] - a[1]]])
+        l1, l2 = np.linalg.solve(m, (points[:, :2] - a).T)
+        l0 = 1 - l1 - l2
+        inside = (l0 > -1e-9) & (l1 > -1e-9) & (l2 > -1e-9) & ~done
+        n = l0[:, None] * vn[f[0]] + l1[:, None] * vn[f[1]] + l2[:, None] * vn[f[2]]
+        out[inside] = n[inside]
+        done |= inside
+    assert done.all()
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("distribution, shading", CHI2_CASES)
+def test_traced_directions_follow_their_pdf_about_each_samples_normal(distribution, shading):
+    # Every direction the baker hands to Embree (those below the surface too: they are samples of
+    # the same distribution, only not traced), in the frame of the shading normal at its origin,
+    # against cos(theta)/pi or 1/(2 pi) with the chi-square harness of the warps.
+    if shading == "flat":
+        mesh, normal = plane(), None
+    else:
+        mesh, vn = bumpy_plane()
+    rays, _ = record(mesh, resolution=64, samples=64, distribution=distribution, seed=9)
+    d = rays["directions"].astype(np.float64)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    if shading == "flat":
+        n = np.broadcast_to([0.0, 0.0, 1.0], d.shape)
+    else:
+        # Origins are in the baker's frame (centred, scaled): back to the unit plane.
+        n = shading_normal_at(rays["origins"].astype(np.float64) + [0.5, 0.5, 0.0], mesh, vn)
+    local = np.stack([np.einsum("ij,ij->i", d, s) for s in warps.orthonormal_basis(n)] + [np.einsum("ij,ij->i", d, n)], 1)
+    pdf = warps.cosine_hemisphere_pdf if distribution == "cosine" else warps.uniform_hemisphere_pdf
+    p, msg = chi2_test(_Drawn(local, pdf), len(local), None)
+    assert p > CHI2_ALPHA, f"{distribution}, {shading}: p = {p:.3g} ({msg}, {len(local)} rays)"
+    if shading == "smooth":
+        below = rays["tfar"] == 0
+        assert below.any(), "the leaning normals should send some directions below the face"
+        assert np.all(d[below, 2] <= 1e-6) and np.all(d[~below, 2] > -1e-6)
+
+
+def test_the_chi_square_of_traced_rays_can_fail():
+    # The same harness rejects cosine directions read against the uniform pdf, and directions taken
+    # about the face normal instead of each sample's shading normal on the bumpy plane.
+    rays, _ = record(plane(), resolution=32, samples=64, seed=9)
+    d = rays["directions"].astype(np.float64)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    p, _ = chi2_test(_Drawn(d, warps.uniform_hemisphere_pdf), len(d), None)
+    assert p < CHI2_ALPHA
+    mesh, vn = bumpy_plane()
+    rays, _ = record(mesh, resolution=32, samples=64, seed=9)
+    d = rays["directions"].astype(np.float64)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    keep = d[:, 2] > 0
+    p, _ = chi2_test(_Drawn(d[keep], warps.cosine_hemisphere_pdf), int(keep.sum()), None)
+    assert p < CHI2_ALPHA
+
+
+def test_split_texels_share_samples_by_area_and_cover_each_piece():
+    # The plane's diagonal splits texels into two triangles of known area. Systematic sampling
+    # gives each piece its area's share of every texel's samples to within one, and the samples of
+    # a piece lie inside it.
+    samples = 64
+    rays, _ = record(plane(), resolution=W, samples=samples, seed=2)
+    x = (rays["origins"][:, 0] + 0.5) * W
+    y = (rays["origins"][:, 1] + 0.5) * W
+    col, row = rays["texels"] % W, rays["texels"] // W
+    assert np.all((x >= col - 1e-4) & (x <= col + 1 + 1e-4) & (y >= row - 1e-4) & (y <= row + 1 + 1e-4))
+    diag = col == row
+    below = (y < x)  # the triangle (0, 1, 2) of the plane lies below the diagonal y = x
+    counts = np.bincount(rays["texels"][diag], weights=below[diag], minlength=W * W)[np.arange(W) * (W + 1)]
+    assert np.all(np.abs(counts - samples / 2) <= 1), counts
+
+
+def test_directions_below_the_face_count_as_occluded():
+    # A plane whose shading normal leans by alpha from its face normal: with nothing around, the
+    # directions of the cosine lobe about the shading normal that dip below the face (a fraction
+    # (1 - cos alpha) / 2, by the sphere construction: d ~ n + v, v uniform, below iff g.v < -cos alpha)
+    # count as occluded, so AO = (1 + cos alpha) / 2, the same everywhere.
+    alpha = math.radians(35)
+    n = np.array([math.sin(alpha), 0.0, math.cos(alpha)])
+    p = plane()
+    lean = Mesh(p.positions, p.triangles, p.uvs, normals=np.broadcast_to(n, (2, 3, 3)), name="lean")
+    r = bake_ao(lean, resolution=16, samples=256, margin=0, seed=4, source="independent")
+    exact = (1 + math.cos(alpha)) / 2
+    z = (r.ao - exact) / r.stderr
+    assert abs(z.mean()) < 4 / math.sqrt(z.size) and 0.75 < z.var() < 1.3, (r.ao.mean(), exact, z.var())
+
+
+def test_split_texels_share_samples_by_area_on_average_over_seeds():
+    # A texel split into pieces of area fractions w gets count * w samples in each on average over
+    # the per-texel random numbers (to within one in every bake): the allocation is unbiased. A
+    # resolution of 16 x 13 makes the plane's diagonal cut texels unevenly.
+    from core.raster import prepare, rasterize_tile
+
+    w_, h_, samples, bakes = 16, 13, 4, 48
+    frag = rasterize_tile(prepare(plane(), w_, h_), np.array([0, 1]), w_, h_, 0, 0, w_, h_)
+    lower = {}
+    for k in np.flatnonzero(frag.full_tri < 0):  # texels the diagonal cuts
+        tri = frag.sub_tri[frag.sub_start[k]:frag.sub_start[k + 1]]
+        share = np.diff(np.concatenate([[0.0], frag.sub_cdf[frag.sub_start[k]:frag.sub_start[k + 1]]]))
+        lower[frag.texels[k]] = share[tri == 0].sum()  # area fraction of triangle 0
+    counts = {t: [] for t in lower}
+    for seed in range(bakes):
+        rays, _ = record(plane(), resolution=(w_, h_), samples=samples, seed=seed)
+        x = (rays["origins"][:, 0] + 0.5) * w_
+        y = (rays["origins"][:, 1] + 0.5) * h_
+        in0 = y * w_ < x * h_  # triangle 0 lies below the diagonal from (0, 0) to (W, H)
+        for t in lower:
+            counts[t].append(int(in0[rays["texels"] == t].sum()))
+    frac = np.array([samples * lower[t] for t in lower])
+    mean = np.array([np.mean(counts[t]) for t in lower])
+    spread = np.array([max(np.ptp(counts[t]), 0) for t in lower])
+    assert np.all(spread <= 1)  # always within one of its share
+    sd = np.sqrt(np.maximum((frac % 1) * (1 - frac % 1), 1e-12) / bakes)
+    z = (mean - frac) / sd
+    uneven = (frac % 1 > 0.1) & (frac % 1 < 0.9)
+    assert uneven.sum() >= 5 and np.all(np.abs(z[uneven]) < 4.5), (z[uneven], frac[uneven])
+
+
+def test_smooth_shading_keeps_the_ao_distance():
+    # The truncated cone (plane under a lid at h = 0.3, AO distance 0.5: AO = (h / d)^2 = 0.36) with
+    # shading normals that lean by up to 0.01 rad: the smooth path's directions are not unit length,
+    # and the rays must still reach exactly 0.5 (a lean of 0.01 changes the AO by well under 1e-3).
+    rng = np.random.default_rng(6)
+    p = plane()
+    n = np.concatenate([rng.uniform(-0.01, 0.01, (2, 3, 2)), np.ones((2, 3, 1))], axis=2)
+    smooth = Mesh(p.positions, p.triangles, p.uvs, normals=n, name="smooth")
+    lid = Mesh(np.array([[-1.0, -1.0, 0.3], [2.0, -1.0, 0.3], [2.0, 2.0, 0.3], [-1.0, 2.0, 0.3]]),
+               np.array([[0, 1, 2], [0, 2, 3]]), name="lid")
+    r = bake_ao(smooth, [lid], resolution=16, samples=256, max_distance=0.5, margin=0, source="independent", seed=2)
+    z = (r.ao - 0.36) / r.stderr
+    assert abs(z.mean()) < 4 / math.sqrt(z.size) + 0.1 and 0.75 < z.var() < 1.3, (r.ao.mean(), z.mean(), z.var())
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(distribution="uniform", source="halton"),
+                                dict(falloff=1.0, ignore_backfaces=True, source="stratified"),
+                                dict(samples=128, min_samples=8, target_error=0.05)])
+def test_smooth_split_and_adaptive_bakes_are_bit_identical_for_any_threads_tiles_and_chunks(kw):
+    # The leaning-normal grid (smooth path, texels split along every triangle edge) under a lid with
+    # a finite distance: every path of the kernel, traced in different groupings, gives the same bits.
+    mesh, _ = bumpy_plane()
+    lid = Mesh(np.array([[0.1, 0.1, 0.2], [0.8, 0.2, 0.25], [0.7, 0.9, 0.3]]), np.array([[0, 1, 2]]), name="lid")
+    args = dict(resolution=24, samples=32, max_distance=0.6, margin=0, seed=8)
+    args.update(kw)
+    a = bake_ao(mesh, [lid], threads=1, **args)
+    b = bake_ao(mesh, [lid], threads=2, tile_size=8, chunk_rays=333, **args)
+    for name in ("ao", "stderr", "samples", "mask"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name

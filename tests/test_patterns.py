@@ -1,0 +1,285 @@
+"""The per-texel sample points every bake draws (core.patterns.TexelPattern), tested like a sampler.
+
+In the style of pbrt-v4's sampler tests and scipy's QMCEngine test mixin: one contract class that
+every sample source's test class reuses. A texel's points are addressed by (texel, sample index)
+alone, so the contract is:
+
+- each sample index, over many texels, is uniform on [0, 1)^4: every coordinate and every pair of
+  coordinates (chi-square);
+- the four dimensions are independent, over texels and within each texel's own set;
+- texels are independent of each other (neighbours in a row and in a column);
+- the same (texel, index) always gives the same point, whatever else is drawn with it, and drawing
+  a sequence in pieces equals drawing it at once;
+- the structure each source promises holds per texel: Sobol' prefixes of 2^m points are nets
+  (every elementary interval of the right volume holds its share of points), Halton's first b^k
+  points are stratified in the base-b dimension, the stratified source fills every stratum.
+
+Each statistical test keeps a family-wise false-alarm rate of ALPHA (Sidak within the test).
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from core.patterns import DIMS, SOURCE_NAMES, TexelPattern
+from core.sources import Stratified, sobol_uint32
+
+ALPHA = 1e-3
+#: The texels the statistical tests look at: a 64 x 64 block of a 64-texel-wide image, so that
+#: texel t + 1 is its right neighbour and t + WIDE the one above.
+WIDE = 64
+TEXELS = np.arange(WIDE * WIDE)
+#: Samples per texel in the tests: a power of two and a square (the stratified grid is 8 x 8).
+N = 64
+PAIRS = [(a, b) for a in range(DIMS) for b in range(a + 1, DIMS)]
+
+
+def sidak(alpha, m):
+    return 1.0 - (1.0 - alpha) ** (1.0 / m)
+
+
+def chi2_uniform(values, bins):
+    """p-value of values in [0, 1) against the uniform law on ``bins`` equal cells."""
+    idx = np.floor(np.asarray(values) * bins).astype(np.int64)
+    assert idx.min() >= 0 and idx.max() < bins, "values outside [0, 1)"
+    return stats.chisquare(np.bincount(idx, minlength=bins)).pvalue
+
+
+def chi2_joint(x, y, bins):
+    """p-value of the points (x, y) against the uniform law on a bins x bins grid."""
+    cell = np.floor(np.asarray(x) * bins).astype(np.int64) * bins + np.floor(np.asarray(y) * bins).astype(np.int64)
+    return stats.chisquare(np.bincount(cell, minlength=bins * bins)).pvalue
+
+
+def elementary_counts_ok(points, m, t):
+    """Whether the 2^m points (n, s) form a (t, m, s)-net in base 2: every elementary interval
+    prod_j [a_j 2^-k_j, (a_j + 1) 2^-k_j) with sum k_j = m - t holds exactly 2^t points."""
+    n, s = points.shape
+    assert n == 2**m
+    level = m - t
+    if level <= 0:
+        return True
+    cells = [np.floor(points[:, j] * 2.0**k).astype(np.int64) for j in range(s) for k in range(level + 1)]
+    cells = np.array(cells).reshape(s, level + 1, n)
+
+    def splits(total, parts):
+        if parts == 1:
+            yield (total,)
+            return
+        for first in range(total + 1):
+            for rest in splits(total - first, parts - 1):
+                yield (first,) + rest
+
+    for ks in splits(level, s):
+        key = np.zeros(n, np.int64)
+        for j, k in enumerate(ks):
+            key = key * (2**k) + cells[j, k]
+        counts = np.bincount(key, minlength=2**level)
+        if not np.all(counts == 2**t):
+            return False
+    return True
+
+
+def stratified_on_circle(x):
+    """Whether the n values hold one point in each of n equal arcs of the circle [0, 1), for some
+    rotation of the arcs: sorted, x_(j) - j / n spans less than 1 / n."""
+    n = len(x)
+    y = np.sort(np.asarray(x)) - np.arange(n) / n
+    return bool(y.max() - y.min() < 1.0 / n)
+
+
+def t_value(points, m):
+    """The smallest t for which the 2^m points are a (t, m, s)-net in base 2."""
+    for t in range(m + 1):
+        if elementary_counts_ok(points, m, t):
+            return t
+    return m
+
+
+# ---------------------------------------------------------------------------------------------
+# The contract every source honours
+# ---------------------------------------------------------------------------------------------
+
+
+class PatternContract:
+    source = None
+
+    def make(self, seed=20261201, max_samples=N):
+        return TexelPattern(self.source, seed, max_samples)
+
+    @pytest.fixture(scope="class")
+    def full(self):
+        """Every test texel's N points, drawn at once: (texels, N, 4)."""
+        return np.asarray(self.make().points(TEXELS, 0, N), dtype=np.float64)
+
+    def test_shape_and_bounds(self, full):
+        assert full.shape == (len(TEXELS), N, DIMS)
+        assert np.all(full >= 0.0) and np.all(full < 1.0)
+        assert self.make().points(np.array([3, 9]), 5, 0).shape == (2, 0, DIMS)
+        assert self.make().points(np.zeros(0, np.int64), 0, 4).shape == (0, 4, DIMS)
+
+    def test_same_texel_and_index_give_the_same_point(self, full):
+        # Whatever else is drawn in the same call, in whatever order, by a fresh object: a texel's
+        # points depend on (seed, texel, index) alone. This is what makes a bake bit-identical for
+        # any thread count, tile size and chunk size.
+        some = np.array([4095, 17, 64, 0, 2 * WIDE + 5])
+        got = np.asarray(self.make().points(some, 11, 20), dtype=np.float64)
+        np.testing.assert_array_equal(got, full[some, 11:31])
+        one = np.asarray(self.make().points(np.array([17]), 0, N), dtype=np.float64)
+        np.testing.assert_array_equal(one[0], full[17])
+        # Texel numbers beyond this block (a 65536^2 image) work the same way.
+        far = np.array([65536 * 65536 - 1, 123456789])
+        a = self.make().points(far, 0, 8)
+        b = self.make().points(far[::-1], 0, 8)[::-1]
+        np.testing.assert_array_equal(a, b)
+
+    def test_continuing_equals_drawing_at_once(self, full):
+        t = TEXELS[::97]
+        parts = [self.make().points(t, a, b - a) for a, b in ((0, 5), (5, 32), (32, 33), (33, N))]
+        np.testing.assert_array_equal(np.concatenate(parts, axis=1), full[t])
+
+    def test_seed_decides_the_points(self, full):
+        again = np.asarray(self.make().points(TEXELS[:64], 0, N), dtype=np.float64)
+        np.testing.assert_array_equal(again, full[:64])
+        other = np.asarray(self.make(seed=7).points(TEXELS[:64], 0, N), dtype=np.float64)
+        assert np.mean(other != full[:64]) > 0.99
+        big = self.make(seed=2**63 + 5).points(TEXELS[:4], 0, 4)
+        assert np.all((big >= 0) & (big < 1))
+
+    def test_each_sample_index_is_uniform_over_texels(self, full):
+        # Unbiasedness, index by index: over 4096 texels, the i-th point of a texel is uniform in
+        # [0, 1)^4. Each coordinate on 16 cells (256 expected per cell) and each pair on 8 x 8
+        # cells (64 expected). A source that forgets to randomise per texel (every texel the
+        # same points), or randomises two dimensions alike (index 0 of Sobol' on the diagonal),
+        # or gives two pairs one stratum order, fails here.
+        indices = (0, 1, 7, N - 1)
+        level = sidak(ALPHA, len(indices) * (DIMS + len(PAIRS)) + DIMS + 2 * len(PAIRS))
+        for i in indices:
+            u = full[:, i]
+            for j in range(DIMS):
+                assert chi2_uniform(u[:, j], 16) > level, f"index {i}, dimension {j}"
+            for a, b in PAIRS:
+                assert chi2_joint(u[:, a], u[:, b], 8) > level, f"index {i}, dimensions {a}, {b}"
+        # Finer, on 256 cells (16 expected per cell): a dimension that takes only a few dozen values
+        # over the texels (a sequence randomised only by where each texel starts in it) fails here.
+        for j in range(DIMS):
+            assert chi2_uniform(full[:, 0, j], 256) > level, f"index 0, dimension {j}, 256 cells"
+        # Two dimensions that coincide for some of the points (scrambled alike) put excess mass on
+        # the diagonal, too little to show on 8 x 8 cells: for independent uniform coordinates
+        # their difference modulo 1 is uniform (64 cells).
+        for i in (0, 5):
+            for a, b in PAIRS:
+                diff = np.mod(full[:, i, a] - full[:, i, b], 1.0)
+                assert chi2_uniform(np.minimum(diff, np.nextafter(1.0, 0.0)), 64) > level, f"index {i}, u{a} - u{b}"
+
+    def test_dimensions_are_independent_within_each_texel(self, full):
+        # Each texel's own 64 points, every pair of dimensions on a 4 x 4 grid (4 expected per
+        # cell): the per-texel chi-square statistics summed over texels are one chi-square test
+        # with 4096 x 15 degrees of freedom. Structured sets (nets, strata) score far below it;
+        # a texel whose position is a function of its direction (the points on a curve) far above.
+        # One-sided: only too much structure in the wrong place fails.
+        level = sidak(ALPHA, len(PAIRS))
+        for a, b in PAIRS:
+            cell = np.floor(full[..., a] * 4).astype(np.int64) * 4 + np.floor(full[..., b] * 4).astype(np.int64)
+            counts = np.zeros((len(TEXELS), 16))
+            np.add.at(counts, (np.repeat(np.arange(len(TEXELS)), N), cell.ravel()), 1.0)
+            stat = float((((counts - N / 16) ** 2) / (N / 16)).sum())
+            p = stats.chi2.sf(stat, len(TEXELS) * 15)
+            assert p > level, f"dimensions {a}, {b}: chi2 {stat:.0f} on {len(TEXELS) * 15} dof"
+
+    def test_texels_are_independent_of_their_neighbours(self, full):
+        # The same index (and two different indices) of neighbouring texels, jointly on 8 x 8
+        # cells: a hash that correlates neighbours, or one shared set for every texel, fails.
+        left = TEXELS.reshape(WIDE, WIDE)[:, :-1].ravel()
+        below = TEXELS.reshape(WIDE, WIDE)[:-1, :].ravel()
+        cases = [(left, left + 1, 0, 0), (below, below + WIDE, 0, 0), (left, left + 1, 5, 5),
+                 (below, below + WIDE, 3, 40)]
+        level = sidak(ALPHA, len(cases) * DIMS)
+        for a, b, i, k in cases:
+            for j in range(DIMS):
+                p = chi2_joint(full[a, i, j], full[b, k, j], 8)
+                assert p > level, f"texels {a[0]} / {b[0]}, indices {i} / {k}, dimension {j}"
+
+    def test_texels_draw_different_sets(self, full):
+        # No two of the 4096 texels share their set of points (checked through the first points).
+        assert np.unique(full[:, :4].reshape(len(TEXELS), -1), axis=0).shape[0] == len(TEXELS)
+
+
+@pytest.mark.parametrize("source", SOURCE_NAMES)
+def test_every_source_has_a_contract_class(source):
+    assert any(getattr(cls, "source", None) == source for cls in PatternContract.__subclasses__())
+
+
+class TestSobol(PatternContract):
+    source = "sobol"
+
+    def test_prefixes_and_aligned_blocks_are_nets_per_texel(self, full):
+        # Per texel, the first 2^m points (and every aligned block of 2^m points, which is what
+        # adaptive sampling's doubling rounds and the baker's pieces trace) hold one point in every
+        # elementary interval of dimensions (0, 1), the (0, 2)-sequence that drives the direction,
+        # and in every interval of length 2^-m of each dimension on its own.
+        for t in TEXELS[::257]:
+            u = full[t]
+            for m in range(int(math.log2(N)) + 1):
+                for start in range(0, N, 2**m):
+                    block = u[start:start + 2**m]
+                    assert elementary_counts_ok(block[:, :2], m, 0), (t, m, start)
+                    for j in range(DIMS):
+                        assert elementary_counts_ok(block[:, j:j + 1], m, 0), (t, m, start, j)
+
+    def test_each_texel_keeps_the_t_value_of_the_4d_sobol_points(self, full):
+        # The 4D set of each texel is a (t, m, 4)-net with the t of the unscrambled 4D Sobol'
+        # points (the scramble permutes elementary intervals, so it cannot lose any), for the
+        # position pair (2, 3) and for all four dimensions together.
+        m = int(math.log2(N))
+        base = sobol_uint32(np.arange(N), DIMS).astype(np.float64) * 2.0**-32
+        t_pos = t_value(base[:, 2:], m)
+        t_all = t_value(base, m)
+        for t in TEXELS[::511]:
+            assert elementary_counts_ok(full[t][:, 2:], m, t_pos), t
+            assert elementary_counts_ok(full[t], m, t_all), t
+
+    def test_net_checker_can_fail(self):
+        rng = np.random.default_rng(1)
+        assert not elementary_counts_ok(rng.random((64, 2)), 6, 0)
+        bad = sobol_uint32(np.arange(64), 2).astype(np.float64) * 2.0**-32
+        bad[:, 1] = (bad[:, 1] + 0.3) % 1.0  # a toroidal shift breaks the elementary intervals
+        assert not elementary_counts_ok(bad, 6, 0)
+
+
+class TestHalton(PatternContract):
+    source = "halton"
+
+    def test_first_points_are_stratified_per_texel(self, full):
+        # Per texel, the first b^k points of the dimension with base b (2, 3, 5, 7) fall one in
+        # each of b^k equal arcs of the circle [0, 1), for some rotation of the arcs (a texel's
+        # randomisation may rotate the circle, which keeps strata as arcs): sorted, the points
+        # x_(j) - j / b^k all lie within one arc length.
+        for t in TEXELS[::257]:
+            for j, b in enumerate((2, 3, 5, 7)):
+                k = 1
+                while b**k <= N:
+                    assert stratified_on_circle(full[t, :b**k, j]), (t, j, b, k)
+                    k += 1
+
+    def test_circle_check_can_fail(self):
+        assert stratified_on_circle(np.array([0.05, 0.3, 0.55, 0.8]))
+        assert stratified_on_circle(np.array([0.95, 0.2, 0.45, 0.7]))
+        assert not stratified_on_circle(np.array([0.05, 0.1, 0.15, 0.8]))
+
+
+class TestStratified(PatternContract):
+    source = "stratified"
+
+    def test_every_stratum_holds_one_point_per_texel(self, full):
+        nx, ny = Stratified.grid_shape(N)
+        for t in TEXELS[::257]:
+            for j in (0, 2):
+                cell = np.floor(full[t, :, j] * nx).astype(np.int64) * ny + np.floor(full[t, :, j + 1] * ny).astype(np.int64)
+                np.testing.assert_array_equal(np.sort(cell), np.arange(N), err_msg=f"texel {t}, dims {j}, {j + 1}")
+
+
+class TestIndependent(PatternContract):
+    source = "independent"
