@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import bent as bent_mod
 from ._version import __version__
 from .errors import BakeCancelled, BakeMemoryError, MeshError, SettingsError
 from .estimators import SamplingPlan, TexelEstimates, interval_half_width
@@ -63,6 +64,8 @@ class BakeResult:
         in space skipped (they have no surface), triangles with UVs
         outside [0, 1] (only their part inside the image is baked), texels covered by more than one
         UV island (averaged over all surfaces covering them), covered texels.
+    bent : None, or with ``bent_normals``, (H, W, 3) float32 unit bent normals in the bake's
+        ``bent_space`` (covered and margin texels; zero elsewhere), see :mod:`core.bent`.
     """
 
     ao: np.ndarray
@@ -76,6 +79,7 @@ class BakeResult:
     trace_cpu_seconds: float = 0.0
     metadata: dict = field(default_factory=dict)
     report: dict = field(default_factory=dict)
+    bent: np.ndarray = None
 
     @property
     def rays_per_second(self):
@@ -133,29 +137,44 @@ class _Stop(Exception):
 
 
 class _TileBaker:
-    """Bakes one tile: rasterise, build its sample units, trace the plan's rounds, estimate."""
+    """Bakes one tile: rasterise, build its sample units, trace the plan's rounds, estimate.
 
-    def __init__(self, uvtris, table, kernel, tracer, pattern, settings, shared):
+    ``bent``: also sum each texel's unoccluded directions (bent normals, :mod:`core.bent`).
+    """
+
+    def __init__(self, uvtris, table, kernel, tracer, pattern, settings, shared, bent=False):
         self.uvtris, self.table, self.kernel, self.tracer = uvtris, table, kernel, tracer
         self.pattern, self.s, self.shared = pattern, settings, shared
         self.plan = SamplingPlan(settings)
         self.seed = np.uint64(settings.seed)
+        self.bent = bent
 
     def bake(self, key, tri_ids):
-        s, shared = self.s, self.shared
+        """(fragments, estimates, direction sums or None) of the tile ``key``'s texels."""
+        s = self.s
         ty, tx = key
         x0, y0 = tx * s.tile_size, ty * s.tile_size
         x1, y1 = min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height)
         frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1)
-        n_tex = len(frag.texels)
-        est = TexelEstimates(n_tex)
-        if n_tex == 0:
-            return frag, est
+        if len(frag.texels) == 0:
+            return frag, TexelEstimates(0), None
         units = build_units(frag, self.table, s.width)
         contact = contact_texels(frag, self.table, s.width, self.tracer, s.samples)
-        tile = TileContext(self.table, units, self.pattern.keys(frag.texels), frag.texels, contact, self.tracer.offset)
+        est, vectors = self.trace(units, frag.texels, contact)
+        return frag, est, vectors
+
+    def trace(self, units, texel_ids, contact):
+        """Trace the plan's rounds for sample units ``units`` of the texels ``texel_ids`` (global
+        ids: they key the texels' random choices); ``contact`` per texel, probe its samples for
+        contact. Texels need not be texels: mesh vertices are units of their own
+        (:mod:`core.vertices`). Returns (TexelEstimates, direction sums (n, 3) or None)."""
+        s, shared = self.s, self.shared
+        n_tex = len(texel_ids)
+        est = TexelEstimates(n_tex)
+        sums = np.zeros((n_tex, 3)) if self.bent else None
+        tile = TileContext(self.table, units, self.pattern.keys(texel_ids), texel_ids, contact, self.tracer.offset)
         for start, count, texels in self.plan.rounds(est, np.arange(n_tex)):
-            unit, first, size = allocate(units, texels, start, count, self.seed, frag.texels)
+            unit, first, size = allocate(units, texels, start, count, self.seed, texel_ids)
             # Equal pieces go through the kernel together, squares before triangles, in a fixed order
             # (so every texel's sums are added in the same order however the pieces are chunked).
             kind = units.kind[unit].astype(np.int64)
@@ -172,12 +191,15 @@ class _TileBaker:
                     shared.check()
                     c = slice(c0, min(c0 + step, hi))
                     squares = int(np.count_nonzero(kind[c] == 0))
-                    s1, s2, rays, sec, cpu = self.kernel.run(tile, curved, unit[c], first[c], k, squares)
+                    vec = None if sums is None else np.empty((c.stop - c.start, 3))
+                    s1, s2, rays, sec, cpu = self.kernel.run(tile, curved, unit[c], first[c], k, squares, vectors=vec)
                     est.add(units.texel[unit[c]], k, s1, s2)
+                    if vec is not None:
+                        np.add.at(sums, units.texel[unit[c]], vec)
                     shared.advance(rays, rays, sec, cpu)
         # Credit the work the adaptive stop saved, so progress reaches 1.
         shared.advance(n_tex * s.samples - int(est.n.sum()))
-        return frag, est
+        return est, sums
 
 
 
@@ -228,7 +250,7 @@ def _normalized_scene(target, occluders):
 def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, progress=None, cancel=None, on_tile=None,
-            tile_size=None, chunk_rays=1 << 16, on_rays=None):
+            tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     Parameters
@@ -267,6 +289,11 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     on_rays : called as on_rays(batch) from worker threads after every call into Embree, with a
         :class:`core.tracing.RayBatch` (origins, directions, lengths, Embree's answer, the texel and
         sample index of every ray, the call's time). Its arrays are valid during the call only.
+    bent_normals : also estimate each texel's bent normal from the same rays (no extra ray):
+        ``BakeResult.bent``. See :mod:`core.bent`.
+    bent_space : the space of the bent normals: None (world space), a (3, 3) matrix (M b,
+        normalised; Blender's object space is the inverse of the object's matrix) or a
+        :class:`core.bent.TangentFrames` (tangent space, Blender's normal-map convention).
 
     Returns
     -------
@@ -287,6 +314,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays)
+    bent_space = bent_mod.check_space(bent_space, target) if bent_normals else None
     target, occluders, unit = _normalized_scene(target, occluders)
     w, h = s.width, s.height
     tri_total = target.triangle_count + sum(o.triangle_count for o in occluders)
@@ -309,18 +337,19 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     # so count each tile's texels times samples as it is rasterised, against an upper bound.
     planned = sum(min(tile, w - kx * tile) * min(tile, h - ky * tile) for ky, kx in bins) * s.samples
     shared = _Shared(planned, progress, cancel)
-    baker = _TileBaker(uvtris, table, kernel, tracer, pattern, s, shared)
+    baker = _TileBaker(uvtris, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals))
 
     ao = np.zeros((h, w), np.float32)
     se = np.zeros((h, w), np.float32)
     count = np.zeros((h, w), np.int32)
     mask = np.zeros((h, w), bool)
+    bent = np.zeros((h, w, 3), np.float32) if bent_normals else None
     coverage_over = 0
     keys = sorted(bins)
 
     def work(key):
         nonlocal coverage_over
-        frag, est = baker.bake(key, bins[key])
+        frag, est, sums = baker.bake(key, bins[key])
         ty, tx = key
         rect = min(tile, w - tx * tile) * min(tile, h - ty * tile)
         shared.advance(rect * s.samples - len(frag.texels) * s.samples)
@@ -330,6 +359,10 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             se[rows, cols] = est.stderr
             count[rows, cols] = est.n
             mask[rows, cols] = True
+            if sums is not None:
+                tri = bent_mod.primary_pieces(frag, w)
+                weights = bent_mod.barycentric(table.corners_xy, tri, cols + 0.5, rows + 0.5)
+                bent[rows, cols] = bent_mod.texel_directions(sums, tri, weights, target.normals, bent_space)
             with shared.lock:
                 coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
             if on_tile is not None:
@@ -361,6 +394,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
 
     if s.margin > 0:
         ao = dilate(ao, mask, s.margin)
+    if bent is not None:
+        bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, dilate)
     seconds = time.perf_counter() - t_start
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=shared.rays)
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
@@ -368,7 +403,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
               "uv_outside_triangles": uvtris.outside, "overlapping_texels": coverage_over}
     return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=shared.rays, seconds=seconds,
                       trace_seconds=shared.trace_seconds, threads=s.threads, metadata=metadata, report=report,
-                      trace_cpu_seconds=shared.trace_cpu_seconds)
+                      trace_cpu_seconds=shared.trace_cpu_seconds, bent=bent)
 
 
 __all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "MAX_RESOLUTION", "SAMPLE_PIECE",

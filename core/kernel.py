@@ -137,13 +137,18 @@ class Kernel:
             ws = self._local.ws = _Workspace(n)
         return ws
 
-    def run(self, tile, curved, unit, start, size, squares):
+    def run(self, tile, curved, unit, start, size, squares, vectors=None):
         """Trace the aligned blocks of ``size`` samples from ``start`` (per piece) of each piece's ``unit``;
         the first ``squares`` pieces are texel squares, the rest pieces of triangles; all pieces'
         triangles flat-shaded (``curved`` False) or all smooth-shaded.
 
         Returns (s1, s2, rays, seconds, cpu_seconds): per piece the sum of its samples' terms and of
         their squares (float64), the rays traced, and the time spent inside Embree.
+
+        ``vectors``: None, or a (pieces, 3) float64 array that receives, per piece, the sum of its
+        samples' unit directions each weighted by the sample's term (V for cosine directions,
+        2 cos(theta) V for uniform ones, times the falloff): the bent-normal estimator, from the same
+        rays (:mod:`core.bent`).
         """
         units, keys = tile.units, tile.keys
         g, k = len(unit), int(size)
@@ -276,6 +281,8 @@ class Kernel:
                 touch = self.tracer.contact(origins[sel].astype(np.float64) - gn * eps[:, None], gn, eps)
         if touch is not None and touch.any():
             value[sel[touch]] = 0
+        if vectors is not None:
+            _direction_sums(directions, value, weight, g, k, vectors)
         if self.on_rays is not None:
             self.on_rays(RayBatch(origins=origins, directions=directions, tfar=traced_tfar, occluded=hit,
                                   texels=np.repeat(tile.texel_ids[tex], k),
@@ -290,6 +297,17 @@ class Kernel:
             term *= weight
         term = term.reshape(g, k)
         return term.sum(axis=1), (term * term).sum(axis=1), n, clock.wall, clock.cpu
+
+
+def _direction_sums(directions, value, weight, g, k, out):
+    """Per piece of ``k`` samples, the sum of the unit directions weighted by the samples' terms."""
+    d = directions.astype(np.float64)
+    d /= np.maximum(np.sqrt(np.einsum("ij,ij->i", d, d)), 1e-300)[:, None]
+    term = value.astype(np.float64)
+    if weight is not None:
+        term = term * weight
+    d *= term[:, None]
+    out[...] = d.reshape(g, k, 3).sum(axis=1)
 
 
 class _Workspace:

@@ -1,0 +1,219 @@
+"""UDIM tiles: which tiles a UV layout touches, and a bake of each, as Cycles bakes a tiled image.
+
+Numbering (Blender's ``BKE_image_get_tile_from_pos``): tile 1001 + u_tile + 10 v_tile covers
+u in [u_tile, u_tile + 1), v in [v_tile, v_tile + 1), with u_tile in 0..9 and v_tile in 0..99 (tiles
+1001 to 2000). Cycles bakes every tile of the target image with the UVs shifted by the tile's origin
+and clipped to its square, and extends the margin per tile (``RE_bake_pixels_populate``,
+``write_internal_bake_pixels``; ``/work/wt/notes/udim.md``). :func:`bake_udim` does the same with
+one :func:`core.bake_ao` per tile: the UVs minus the tile's origin, each tile its own image of the
+same size, margin and all.
+
+A triangle belongs to every tile its UV triangle overlaps with positive area: clipped to each tile's
+square, exactly (a triangle with an edge on a tile border is not in the tile across it; one that
+crosses a border is baked in both tiles, each the part in its square). Texel centres never lie on a
+border. The tiles a layout touches are those where this overlap covers some of a texel
+(:data:`core.raster.MIN_FRAGMENT_AREA`, the rasteriser's own threshold).
+
+Each tile draws its own random numbers: tile 1001 with the bake's seed (a UDIM bake of a layout
+inside [0, 1] equals a plain bake), tile t with the seed plus (t - 1001) * 2^32, so that tiles do
+not repeat one another's noise.
+"""
+
+import copy
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bake import bake_ao
+from .errors import MeshError, SettingsError
+from .mesh import Mesh
+from .raster import MIN_FRAGMENT_AREA, _clip, prepare
+from .settings import _resolution
+
+FIRST_TILE, LAST_TILE = 1001, 2000
+U_TILES, V_TILES = 10, 100
+
+
+def tile_origin(tile):
+    """(u, v) of tile ``tile``'s lower left corner: ((t - 1001) % 10, (t - 1001) // 10)."""
+    t = int(tile) - FIRST_TILE
+    return t % U_TILES, t // U_TILES
+
+
+def tile_of(u_tile, v_tile):
+    return FIRST_TILE + int(u_tile) + U_TILES * int(v_tile)
+
+
+def tile_seed(seed, tile):
+    """The seed tile ``tile`` draws with (see the module docstring)."""
+    return int(seed) + (int(tile) - FIRST_TILE) * (1 << 32)
+
+
+def check_tiles(tiles):
+    """The tile numbers, sorted and unique, after checking that each is a UDIM tile (1001 .. 2000)."""
+    out = []
+    for t in tiles:
+        if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not FIRST_TILE <= t <= LAST_TILE:
+            raise SettingsError(f"UDIM tile {t!r} does not exist: tiles are numbered {FIRST_TILE} to {LAST_TILE}")
+        out.append(int(t))
+    return sorted(set(out))
+
+
+@dataclass
+class TileCoverage:
+    """What :func:`covered_tiles` found: the tiles and how much of each the UVs cover.
+
+    tiles : sorted tile numbers; area : {tile: UV area covered (sum over triangles, overlaps counted
+    twice)}; outside : triangles with some of their UV area outside the tiles (u < 0, v < 0, u > 10
+    or v > 100), whose part outside is not baked.
+    """
+
+    tiles: list
+    area: dict = field(default_factory=dict)
+    outside: int = 0
+
+
+def covered_tiles(mesh, resolution=None):
+    """The UDIM tiles the UV triangles of ``mesh`` overlap with positive area (see the module docstring).
+
+    ``resolution`` (int or (W, H)): a tile counts when the overlap covers at least
+    :data:`core.raster.MIN_FRAGMENT_AREA` of a texel at that size, as the rasteriser counts a texel;
+    None: any positive area.
+    """
+    if mesh.uvs is None:
+        raise MeshError(f"mesh {mesh.name!r} has no UVs: the baker needs a UV map to know where each texel lies")
+    w, h = _resolution(resolution) if resolution is not None else (1, 1)
+    threshold = MIN_FRAGMENT_AREA / (w * h) if resolution is not None else 0.0
+    uv = mesh.uvs
+    valid = prepare(mesh, 1, 1).valid
+    idx = np.flatnonzero(valid)
+    tri = uv[idx]
+    lo = np.floor(tri.min(axis=1)).astype(np.int64)
+    hi = np.ceil(tri.max(axis=1)).astype(np.int64)  # exclusive
+    hi = np.maximum(hi, lo + 1)
+    # Triangle area inside the tile grid, to find the ones reaching outside it.
+    full = 0.5 * np.abs((tri[:, 1, 0] - tri[:, 0, 0]) * (tri[:, 2, 1] - tri[:, 0, 1])
+                        - (tri[:, 1, 1] - tri[:, 0, 1]) * (tri[:, 2, 0] - tri[:, 0, 0]))
+    glo = np.maximum(lo, 0)
+    ghi = np.minimum(hi, [U_TILES, V_TILES])
+    nx = np.maximum(ghi[:, 0] - glo[:, 0], 0)
+    ny = np.maximum(ghi[:, 1] - glo[:, 1], 0)
+    count = nx * ny
+    rep = np.repeat(np.arange(len(idx)), count)
+    k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
+    tu = glo[rep, 0] + k % np.maximum(nx[rep], 1)
+    tv = glo[rep, 1] + k // np.maximum(nx[rep], 1)
+    area = np.zeros(len(rep))
+    for c0 in range(0, len(rep), 1 << 16):
+        c = slice(c0, min(c0 + (1 << 16), len(rep)))
+        area[c] = _overlap(tri[rep[c]], tu[c], tv[c])
+    inside_total = np.bincount(rep, weights=area, minlength=len(idx))
+    outside = int(np.count_nonzero(inside_total < full * (1.0 - 1e-9) - 1e-300))
+    hit = area > threshold
+    numbers = FIRST_TILE + tu[hit] + U_TILES * tv[hit]
+    per_tile = {}
+    for t, a in zip(numbers.tolist(), area[hit].tolist()):
+        per_tile[t] = per_tile.get(t, 0.0) + a
+    return TileCoverage(tiles=sorted(per_tile), area=per_tile, outside=outside)
+
+
+def _overlap(tri, tu, tv):
+    """Area of each UV triangle (n, 3, 2) inside the unit square at (tu, tv)."""
+    n = len(tri)
+    poly = np.zeros((n, 8, 2))
+    poly[:, :3] = tri
+    cnt = np.full(n, 3)
+    zero, one = np.zeros(n), np.ones(n)
+    # x >= tu, x <= tu + 1, y >= tv, y <= tv + 1, as a x + b y + c >= 0.
+    for a, b, c in ((one, zero, -tu), (-one, zero, tu + 1.0), (zero, one, -tv), (zero, -one, tv + 1.0)):
+        k = poly.shape[1] - 1
+        clipped, cnt = _clip(poly[:, :k], cnt, a, b, c.astype(np.float64))
+        poly = np.zeros((n, 8, 2))
+        poly[:, :k + 1] = clipped
+    x, y = poly[..., 0], poly[..., 1]
+    slot = np.arange(poly.shape[1])
+    nxt = np.where(slot[None, :] + 1 < cnt[:, None], slot[None, :] + 1, 0)
+    alive = slot[None, :] < cnt[:, None]
+    xn = np.take_along_axis(x, nxt, axis=1)
+    yn = np.take_along_axis(y, nxt, axis=1)
+    return 0.5 * np.abs(np.where(alive, x * yn - xn * y, 0.0).sum(axis=1))
+
+
+@dataclass
+class UdimResult:
+    """What :func:`bake_udim` returns: one :class:`core.BakeResult` per tile, and the bake's report.
+
+    report : the tiles' reports summed, with ``uv_outside_triangles`` replaced by
+    ``uv_outside_udim_triangles`` (triangles reaching outside the tiles 1001 .. 2000), and
+    ``tiles``, the tiles baked.
+    """
+
+    tiles: dict
+    report: dict = field(default_factory=dict)
+
+    @property
+    def seconds(self):
+        return sum(r.seconds for r in self.tiles.values())
+
+    @property
+    def rays(self):
+        return sum(r.rays for r in self.tiles.values())
+
+
+def shifted(mesh, tile):
+    """``mesh`` with its UVs moved by minus tile ``tile``'s origin (the tile's square onto [0, 1])."""
+    du, dv = tile_origin(tile)
+    out = copy.copy(mesh)
+    out.uvs = mesh.uvs - np.array([du, dv], dtype=np.float64)
+    return out
+
+
+def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, tiles=None, seed=0, progress=None,
+              cancel=None, on_tile=None, **kwargs):
+    """Bake every UDIM tile the UVs of ``target`` touch (or the given ``tiles``), one image each.
+
+    Parameters
+    ----------
+    tiles : None (the tiles :func:`covered_tiles` finds) or tile numbers; a listed tile the UVs do
+        not touch is baked empty (nothing covered, all zero), as Cycles clears such a tile.
+    on_tile : called as on_tile(tile, rows, cols, ao_block), as :func:`core.bake_ao`'s with the tile.
+    progress : fraction of the whole bake, each tile weighed by the UV area it covers.
+    The other parameters are :func:`core.bake_ao`'s, for every tile (the margin is per tile).
+
+    Returns
+    -------
+    UdimResult
+    """
+    if not isinstance(target, Mesh):
+        raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
+    coverage = covered_tiles(target, resolution)
+    todo = coverage.tiles if tiles is None else check_tiles(tiles)
+    weight = np.array([coverage.area.get(t, 0.0) for t in todo]) + 1e-12
+    weight /= weight.sum()
+    done = np.concatenate([[0.0], np.cumsum(weight)])
+    results = {}
+    for i, tile in enumerate(todo):
+        def tile_progress(f, i=i):
+            if progress is not None:
+                progress(min(done[i] + weight[i] * f, 1.0))
+
+        def tile_block(rows, cols, block, tile=tile):
+            on_tile(tile, rows, cols, block)
+
+        results[tile] = bake_ao(shifted(target, tile), occluders, resolution, samples, seed=tile_seed(seed, tile),
+                                progress=tile_progress, cancel=cancel,
+                                on_tile=None if on_tile is None else tile_block, **kwargs)
+    report = {}
+    for r in results.values():
+        for key, value in r.report.items():
+            if key in ("degenerate_uv_triangles", "degenerate_triangles"):
+                report[key] = value  # the same in every tile: each tile counts every triangle
+            elif key != "uv_outside_triangles":
+                report[key] = report.get(key, 0) + value
+    report["uv_outside_udim_triangles"] = coverage.outside
+    report["tiles"] = list(todo)
+    return UdimResult(tiles=results, report=report)
+
+
+__all__ = ["bake_udim", "covered_tiles", "UdimResult", "TileCoverage", "tile_origin", "tile_of", "tile_seed",
+           "check_tiles", "shifted", "FIRST_TILE", "LAST_TILE"]

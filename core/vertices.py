@@ -1,0 +1,265 @@
+"""Ambient occlusion at mesh vertices: one value per face corner, as Cycles bakes into colour attributes.
+
+Cycles' AO bake into a colour attribute (``bake_targets_init_vertex_colors`` and
+``integrator_init_from_bake``, see ``/work/wt/notes/vertex_colors.md``) estimates one value per
+face corner: at the corner's vertex, nudged a little towards the centre of the first triangle that
+holds the corner, with the corner's shading normal (a flat face's corners have its face normal),
+over the same cosine-weighted hemisphere as a texel. A colour attribute on the point domain then
+holds the plain mean of the values of each vertex's corners, whatever the faces' sizes or angles;
+on the corner domain each corner keeps its own (:func:`vertex_means`).
+
+Here each sample point is a *unit* of the texel baker (:mod:`core.surface`) that is not a texel: a
+degenerate triangle whose position and normal are constant (Px = Py = Nx = Ny = 0), so the kernel,
+the sample patterns, the estimator, adaptive sampling and the error estimates are those of a texel's,
+unchanged (``_TileBaker.trace`` in :mod:`core.bake`); only the rasteriser is not involved. Corners
+that share their vertex and their normal (a smooth vertex's corners) share one unit: Cycles' values
+for them differ only by noise.
+"""
+
+import math
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._version import __version__
+from .bake import _cancelled, _normalized_scene, _Shared, _Stop, _TileBaker
+from .errors import BakeCancelled, MeshError, SettingsError
+from .kernel import Kernel
+from .mesh import Mesh
+from .patterns import POOL_POINTS, TexelPattern
+from .settings import BakeSettings, pattern_span
+from .surface import SQUARE, SurfaceTable, Units
+from .tracing import Tracer
+
+#: Cycles moves a sample that sits exactly on a vertex towards its triangle's centroid by at most
+#: 1e-4 object units ("empirically determined"); here 1e-4 of the mesh's size, the same in any unit.
+NUDGE = 1e-4
+#: Units one worker takes at a time (their keys depend on the unit alone: any split gives the same values).
+BLOCK = 4096
+
+
+@dataclass
+class VertexBakeResult:
+    """What :func:`bake_vertex_ao` returns; arrays are per corner (in the order given).
+
+    ao : float32 in [0, 1]; stderr : float32, the standard error of each corner's estimate;
+    samples : int32, samples taken; unit : int64, the sample point whose estimate the corner has
+    (corners with one vertex and one normal share one); rays, seconds, trace_seconds, threads,
+    trace_cpu_seconds, metadata : as :class:`core.BakeResult`; report : counts of the input
+    (corners, sample points, corners on triangles with no area).
+    bent : with ``bent_normals``, (C, 3) float32 unit bent normals in world space.
+    """
+
+    ao: np.ndarray
+    stderr: np.ndarray
+    samples: np.ndarray
+    unit: np.ndarray
+    rays: int
+    seconds: float
+    trace_seconds: float
+    threads: int
+    trace_cpu_seconds: float = 0.0
+    metadata: dict = field(default_factory=dict)
+    report: dict = field(default_factory=dict)
+    bent: np.ndarray = None
+
+    @property
+    def rays_per_second(self):
+        return self.rays / self.seconds if self.seconds > 0 else float("nan")
+
+
+def all_corners(mesh):
+    """Every triangle corner of ``mesh`` as a (T * 3, 2) array of (triangle, corner 0..2)."""
+    t = np.arange(mesh.triangle_count, dtype=np.int64)
+    return np.stack([np.repeat(t, 3), np.tile(np.arange(3, dtype=np.int64), len(t))], axis=1)
+
+
+def vertex_means(values, corner_vertex, vertex_count):
+    """Per vertex, the plain mean of its corners' ``values`` (Cycles' point domain); 0 for a vertex
+    without corners (a loose vertex). ``values`` (C,) or (C, k)."""
+    values = np.asarray(values, dtype=np.float64)
+    corner_vertex = np.asarray(corner_vertex, dtype=np.int64)
+    count = np.bincount(corner_vertex, minlength=vertex_count).astype(np.float64)
+    flat = values.reshape(len(values), -1)
+    sums = np.stack([np.bincount(corner_vertex, weights=flat[:, c], minlength=vertex_count)
+                     for c in range(flat.shape[1])], axis=1)
+    out = sums / np.maximum(count, 1.0)[:, None]
+    return out.reshape((vertex_count,) + values.shape[1:])
+
+
+def _check_corners(corners, mesh):
+    c = np.asarray(corners)
+    if c.ndim != 2 or c.shape[1] != 2 or not np.issubdtype(c.dtype, np.integer):
+        raise MeshError(f"mesh {mesh.name!r}: corners must be an integer array (C, 2) of (triangle, corner "
+                        f"0..2), got {c.dtype} {c.shape}")
+    if len(c) == 0:
+        raise MeshError(f"mesh {mesh.name!r}: no corners to bake")
+    bad = (c[:, 0] < 0) | (c[:, 0] >= mesh.triangle_count) | (c[:, 1] < 0) | (c[:, 1] > 2)
+    if bad.any():
+        raise MeshError(f"mesh {mesh.name!r}: {int(bad.sum())} corners name a triangle or corner that does not "
+                        f"exist (first: {tuple(int(v) for v in c[np.argmax(bad)])}; the mesh has "
+                        f"{mesh.triangle_count} triangles)")
+    return c.astype(np.int64)
+
+
+def sample_points(mesh, corners, merge=True):
+    """The sample units of ``corners`` of ``mesh`` (in its own frame): (unit of each corner, and per
+    unit: position, shading normal, geometric normal, its triangle's corners).
+
+    Corners with the same vertex and the same normal share a unit (``merge``). A unit's position is
+    its vertex moved towards the centroid of the first triangle of its corners by at most ``NUDGE``
+    times the mesh's size; its geometric normal is that triangle's face normal (the shading normal
+    where the triangle has no area).
+    """
+    tri, slot = corners[:, 0], corners[:, 1]
+    vert = mesh.triangles[tri, slot]
+    normal = mesh.normals[tri, slot]
+    if merge:
+        key = np.concatenate([vert[:, None], np.ascontiguousarray(normal, dtype=np.float64).view(np.int64)], axis=1)
+        _, first, unit = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        unit = unit.reshape(-1)
+        # Units numbered in the order of their first corner: the result does not depend on sorting.
+        order = np.argsort(first, kind="stable")
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        unit = rank[unit]
+        first = first[order]
+    else:
+        first = np.arange(len(corners))
+        unit = first.copy()
+    t = tri[first]
+    p = mesh.positions[vert[first]]
+    corners3 = mesh.positions[mesh.triangles[t]]
+    to_centre = corners3.mean(axis=1) - p
+    dist = np.linalg.norm(to_centre, axis=1)
+    size = float(np.max(mesh.positions.max(axis=0) - mesh.positions.min(axis=0)))
+    step = np.minimum(dist, NUDGE * size)
+    p = p + to_centre * (step / np.where(dist > 0, dist, 1.0))[:, None]
+    n = normal[first]
+    gn = mesh.face_normals[t]
+    flat = ~(np.linalg.norm(gn, axis=1) > 0)
+    gn = np.where(flat[:, None], n, gn)
+    return unit.astype(np.int64), p, n, gn, corners3, int(flat[unit].sum())
+
+
+def _point_table(p, n, gn, corners3):
+    """A :class:`SurfaceTable` with one constant 'triangle' per sample point."""
+    m = len(p)
+    zeros = np.zeros((m, 3))
+    smooth = np.any(np.abs(n - gn) > 1e-7, axis=1)
+    return SurfaceTable(origin=np.zeros((m, 2)), P0=p, Px=zeros, Py=zeros, N0=n, Nx=zeros, Ny=zeros, FN=gn,
+                        corners=corners3, smooth=smooth, corners_xy=np.zeros((m, 3, 2)))
+
+
+def _units(ids):
+    """The units of the points ``ids`` (global numbers): one square each, a translation of nothing."""
+    m = len(ids)
+    coef = np.zeros((m, 6))
+    coef[:, 1] = coef[:, 5] = 1.0
+    local = np.arange(m, dtype=np.int64)
+    return Units(kind=np.full(m, SQUARE, np.int8), texel=local, tri=np.asarray(ids, np.int64),
+                 first=np.arange(m + 1, dtype=np.int64), cdf=np.ones(m), coef=coef)
+
+
+def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_samples=16, target_error=0.0,
+                   max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
+                   ignore_backfaces=False, falloff=0.0, progress=None, cancel=None, chunk_rays=1 << 16,
+                   on_rays=None, merge=True, bent_normals=False):
+    """Bake ambient occlusion at the face corners of ``target`` (Cycles' colour-attribute bake).
+
+    Parameters
+    ----------
+    target : Mesh (UVs not needed). It always occludes itself.
+    occluders : Meshes that also block rays, in the same world space.
+    corners : (C, 2) integers, (triangle, corner 0..2) of each face corner to bake, e.g. Blender's
+        face corners each mapped to the first triangle that holds it; None: every triangle corner.
+    merge : corners with the same vertex and normal share one sample point (default).
+    bent_normals : also estimate each corner's bent normal (world space) from the same rays.
+    The other parameters are those of :func:`core.bake_ao`; progress is reported per chunk of
+    rays and ``on_rays`` batches name the sample point (``texels``) of each ray.
+
+    Returns
+    -------
+    VertexBakeResult
+
+    Raises
+    ------
+    MeshError, MeshTypeError, SettingsError, BakeCancelled.
+    """
+    t_start = time.perf_counter()
+    if not isinstance(target, Mesh):
+        raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
+    occluders = list(occluders or ())
+    for o in occluders:
+        if not isinstance(o, Mesh):
+            raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
+    corners = all_corners(target) if corners is None else _check_corners(corners, target)
+    s = BakeSettings.from_arguments(1, samples, min_samples, target_error, max_distance, distribution, source,
+                                    0, seed, threads, ignore_backfaces, falloff, None, chunk_rays)
+    target, occluders, scale = _normalized_scene(target, occluders)
+    unit, p, n, gn, corners3, flat = sample_points(target, corners, merge)
+    m = len(p)
+    if _cancelled(cancel):
+        raise BakeCancelled("the bake was cancelled before it started")
+    table = _point_table(p, n, gn, corners3)
+    tracer = Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / scale)
+    span = pattern_span(s.source, s.samples)
+    pool = max(span, min(POOL_POINTS, (1 << max(0, (m - 1).bit_length())) * span))
+    pattern = TexelPattern(s.source, s.seed, s.samples, pool_points=pool)
+    kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
+    shared = _Shared(m * s.samples, progress, cancel)
+    baker = _TileBaker(None, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals))
+
+    ao = np.zeros(m, np.float32)
+    se = np.zeros(m, np.float32)
+    count = np.zeros(m, np.int32)
+    bent = np.zeros((m, 3), np.float32) if bent_normals else None
+    blocks = [np.arange(b, min(b + BLOCK, m)) for b in range(0, m, BLOCK)]
+
+    def work(ids):
+        contact = np.zeros(len(ids), bool)
+        if tracer.contact_scene is not None:
+            contact = tracer.contact(p[ids], gn[ids])
+        est, sums = baker.trace(_units(ids), ids, contact)
+        ao[ids] = np.clip(est.mean, 0.0, 1.0)
+        se[ids] = est.stderr
+        count[ids] = est.n
+        if sums is not None:
+            length = np.linalg.norm(sums, axis=1)
+            v = np.where((length > 0)[:, None], sums, n[ids])
+            bent[ids] = v / np.linalg.norm(v, axis=1)[:, None]
+
+    def guarded(ids):
+        try:
+            work(ids)
+        except _Stop:
+            pass
+        except BaseException:
+            shared.stop.set()
+            raise
+
+    if s.threads == 1 or len(blocks) <= 1:
+        for ids in blocks:
+            guarded(ids)
+    else:
+        with ThreadPoolExecutor(max_workers=s.threads, thread_name_prefix="mc_ao") as pool_:
+            for f in [pool_.submit(guarded, ids) for ids in blocks]:
+                f.result()
+    if shared.stop.is_set():
+        raise BakeCancelled("the bake was cancelled; nothing was written")
+    if progress is not None:
+        progress(1.0)
+    metadata = dict(s.metadata(s.max_distance), version=__version__, rays=shared.rays)
+    for key in ("margin", "resolution"):
+        metadata.pop(key, None)
+    metadata["sample_points"] = m
+    report = {"corners": len(corners), "sample_points": m, "degenerate_corners": flat}
+    return VertexBakeResult(ao=ao[unit], stderr=se[unit], samples=count[unit], unit=unit, rays=shared.rays,
+                            seconds=time.perf_counter() - t_start, trace_seconds=shared.trace_seconds,
+                            threads=s.threads, trace_cpu_seconds=shared.trace_cpu_seconds, metadata=metadata,
+                            report=report, bent=None if bent is None else bent[unit])
+
+
+__all__ = ["VertexBakeResult", "bake_vertex_ao", "all_corners", "vertex_means", "sample_points", "NUDGE"]
