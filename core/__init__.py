@@ -16,9 +16,12 @@ from .stats import RunningStats
 from .mesh import Mesh
 from .bake import BakeResult, bake_ao
 from .imageio import ImageReadError
+from .udim import UdimResult, bake_udim
+from .vertices import VertexBakeResult, bake_vertex_ao
 
 __all__ = [
     "__version__", "Mesh", "bake_ao", "BakeResult", "integrate", "estimate", "Estimate", "RunningStats",
     "stats", "warps", "McAoError", "MeshError", "MeshTypeError", "SettingsError", "BakeMemoryError",
-    "BakeCancelled", "ImageWriteError", "ImageReadError",
+    "BakeCancelled", "ImageWriteError", "ImageReadError", "bake_udim", "UdimResult", "bake_vertex_ao",
+    "VertexBakeResult",
 ]

@@ -27,7 +27,7 @@ import numpy as np
 from .bake import bake_ao
 from .errors import MeshError, SettingsError
 from .mesh import Mesh
-from .raster import MIN_FRAGMENT_AREA, _clip, prepare
+from .raster import MIN_FRAGMENT_AREA, _clip, prepare, rasterize_tile
 from .settings import _resolution
 
 FIRST_TILE, LAST_TILE = 1001, 2000
@@ -76,9 +76,9 @@ class TileCoverage:
 def covered_tiles(mesh, resolution=None):
     """The UDIM tiles the UV triangles of ``mesh`` overlap with positive area (see the module docstring).
 
-    ``resolution`` (int or (W, H)): a tile counts when the overlap covers at least
-    :data:`core.raster.MIN_FRAGMENT_AREA` of a texel at that size, as the rasteriser counts a texel;
-    None: any positive area.
+    ``resolution`` (int or (W, H)): a tile counts when the rasteriser covers one of its texels at
+    that size (an overlap of at least :data:`core.raster.MIN_FRAGMENT_AREA` of a texel: a tile whose
+    overlap is smaller than a texel in all is rasterised to find out); None: any positive area.
     """
     if mesh.uvs is None:
         raise MeshError(f"mesh {mesh.name!r} has no UVs: the baker needs a UV map to know where each texel lies")
@@ -111,10 +111,26 @@ def covered_tiles(mesh, resolution=None):
     outside = int(np.count_nonzero(inside_total < full * (1.0 - 1e-9) - 1e-300))
     hit = area > threshold
     numbers = FIRST_TILE + tu[hit] + U_TILES * tv[hit]
-    per_tile = {}
-    for t, a in zip(numbers.tolist(), area[hit].tolist()):
+    per_tile, members = {}, {}
+    for t, a, i in zip(numbers.tolist(), area[hit].tolist(), idx[rep[hit]].tolist()):
         per_tile[t] = per_tile.get(t, 0.0) + a
+        members.setdefault(t, []).append(i)
+    if resolution is not None:
+        for t in [t for t, a in per_tile.items() if a * w * h < 1.0]:
+            if not _rasterises(mesh, t, np.array(members[t]), w, h):
+                del per_tile[t]
     return TileCoverage(tiles=sorted(per_tile), area=per_tile, outside=outside)
+
+
+def _rasterises(mesh, tile, tri_ids, w, h):
+    """Whether the rasteriser covers a texel of tile ``tile`` with the triangles ``tri_ids``."""
+    uvtris = prepare(shifted(mesh, tile), w, h)
+    xy = uvtris.xy[tri_ids]
+    x0, y0 = np.clip(np.floor(xy.min(axis=(0, 1))).astype(np.int64), 0, [w, h])
+    x1, y1 = np.clip(np.ceil(xy.max(axis=(0, 1))).astype(np.int64), 0, [w, h])
+    if x1 <= x0 or y1 <= y0:
+        return False
+    return len(rasterize_tile(uvtris, tri_ids, w, h, x0, y0, x1, y1).texels) > 0
 
 
 def _overlap(tri, tu, tv):
