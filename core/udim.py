@@ -175,6 +175,16 @@ class UdimResult:
     def rays(self):
         return sum(r.rays for r in self.tiles.values())
 
+    @property
+    def mask(self):
+        """Every tile's covered texels, one after another (flat): with :attr:`samples`, what
+        summaries of a bake read, as of a :class:`core.BakeResult`."""
+        return np.concatenate([r.mask.ravel() for r in self.tiles.values()]) if self.tiles else np.zeros(0, bool)
+
+    @property
+    def samples(self):
+        return np.concatenate([r.samples.ravel() for r in self.tiles.values()]) if self.tiles else np.zeros(0, np.int32)
+
 
 def shifted(mesh, tile):
     """``mesh`` with its UVs moved by minus tile ``tile``'s origin (the tile's square onto [0, 1])."""

@@ -66,6 +66,11 @@ class VertexBakeResult:
     bent: np.ndarray = None
 
     @property
+    def mask(self):
+        """All true: every corner is baked (summaries read ``samples[mask]`` as of a texture)."""
+        return np.ones(len(self.ao), bool)
+
+    @property
     def rays_per_second(self):
         return self.rays / self.seconds if self.seconds > 0 else float("nan")
 

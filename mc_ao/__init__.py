@@ -12,14 +12,16 @@ def register(addon_name="mc_ao"):
     global _classes
     import bpy
 
-    from . import operators, panel, properties
+    from . import operators, panel, preview, properties
 
     properties.McAoPreferences.bl_idname = addon_name
     _classes = (
         properties.McAoSettings,
         properties.McAoPreferences,
         operators.OBJECT_OT_mc_ao_bake,
+        preview.OBJECT_OT_mc_ao_preview,
         panel.VIEW3D_PT_mc_ao,
+        panel.VIEW3D_PT_mc_ao_target,
         panel.VIEW3D_PT_mc_ao_sampling,
         panel.VIEW3D_PT_mc_ao_occlusion,
         panel.VIEW3D_PT_mc_ao_image,

@@ -10,14 +10,15 @@ from . import corelink
 from .extract import GEOMETRY_TYPES, ExtractError, MeshArrays, object_arrays
 
 
-def can_be_target(obj):
-    """A target is a mesh object with a UV map (checked on its original data, cheaply, for poll)."""
-    return obj.type == "MESH" and len(obj.data.uv_layers) > 0
+def can_be_target(obj, needs_uvs=True):
+    """A target is a mesh object with a UV map (checked on its original data, cheaply, for poll);
+    a colour-attribute bake (``needs_uvs`` False) takes any mesh object."""
+    return obj.type == "MESH" and (not needs_uvs or len(obj.data.uv_layers) > 0)
 
 
-def targets_of(objects):
+def targets_of(objects, needs_uvs=True):
     """The objects among ``objects`` that bake_ao can bake, in name order (a stable bake order)."""
-    return sorted((obj for obj in objects if can_be_target(obj)), key=lambda obj: obj.name)
+    return sorted((obj for obj in objects if can_be_target(obj, needs_uvs)), key=lambda obj: obj.name)
 
 
 # Object.type -> what to call it in a message, where the identifier is not plain English.
@@ -33,28 +34,28 @@ def kind_of(obj):
     return ("an " if noun[0] in "aeiou" else "a ") + noun
 
 
-def skip_reason(obj):
+def skip_reason(obj, needs_uvs=True):
     """Why a selected object is not baked ("is a light, not a mesh", "has no UV map"), or None."""
     if obj.type != "MESH":
         return f"is {kind_of(obj)}, not a mesh"
-    if not can_be_target(obj):
+    if not can_be_target(obj, needs_uvs):
         return "has no UV map (unwrap it first: Edit Mode, U)"
     return None
 
 
-def skip_note(obj, occluders):
+def skip_note(obj, occluders, needs_uvs=True):
     """The warning for a selected object that is not baked, e.g. "Lamp: skipped, it is a light, not a mesh".
 
     ``occluders`` is the Occluders setting: a skipped object with a surface still occludes the others
     unless each object is baked alone.
     """
-    note = f"{obj.name}: skipped, it {skip_reason(obj)}"
+    note = f"{obj.name}: skipped, it {skip_reason(obj, needs_uvs)}"
     if obj.type in GEOMETRY_TYPES and occluders != "SELF":
         note += "; it still occludes the baked objects"
     return note
 
 
-def why_not_bakeable(objects):
+def why_not_bakeable(objects, needs_uvs=True):
     """None when something among ``objects`` (the selection) can be baked, else the reason, for the UI.
 
     The same text is the operator's poll message (the button's tooltip, and the error of a script
@@ -63,10 +64,10 @@ def why_not_bakeable(objects):
     objects = list(objects)
     if not objects:
         return "Nothing is selected: select a mesh object with a UV map"
-    if any(can_be_target(obj) for obj in objects):
+    if any(can_be_target(obj, needs_uvs) for obj in objects):
         return None
     if len(objects) == 1:
-        return f"{objects[0].name} {skip_reason(objects[0])}"
+        return f"{objects[0].name} {skip_reason(objects[0], needs_uvs)}"
     meshes = [obj for obj in objects if obj.type == "MESH"]
     if not meshes:
         return "None of the selected objects is a mesh"
@@ -89,6 +90,10 @@ class Job:
 
         Raises core.McAoError subclasses (core.BakeCancelled when ``cancel`` fires).
         """
+        if settings.vertex_colors or settings.use_udim or settings.bent_normals:
+            from . import targets  # issue 14: colour attributes, UDIM tiles, bent normals
+
+            return targets.run(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile)
         core = corelink.load()
 
         def mesh(arrays):
@@ -125,6 +130,16 @@ _INPUT_NOTES = {
     "degenerate_triangles": (
         "{n} triangle has no area in space and was skipped",
         "{n} triangles have no area in space and were skipped",
+    ),
+    # UDIM bakes (core.bake_udim): reported instead of uv_outside_triangles.
+    "uv_outside_udim_triangles": (
+        "{n} triangle reaches outside the UDIM tiles (u in [0, 10], v in [0, 100]); the part outside is not baked",
+        "{n} triangles reach outside the UDIM tiles (u in [0, 10], v in [0, 100]); the parts outside are not baked",
+    ),
+    # Colour-attribute bakes (core.bake_vertex_ao).
+    "degenerate_corners": (
+        "{n} face corner lies on a triangle with no area; its normal stands in for the face's",
+        "{n} face corners lie on triangles with no area; their normals stand in for the faces'",
     ),
 }
 
@@ -211,6 +226,14 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     image_names = {}
     for obj in targets:
         name = settings.image_name_for(obj.name, max_bytes)
+        if settings.bent_normals and not settings.vertex_colors:
+            bent = settings.bent_image_name_for(obj.name, max_bytes)
+            if bent in image_names or bent == name:
+                raise ExtractError(
+                    f"{image_names.get(bent, obj.name)} and {obj.name} would both bake into image {bent!r}; "
+                    "put {object} into the image name"
+                )
+            image_names[bent] = obj.name
         if name in image_names:
             raise ExtractError(
                 f"{image_names[name]} and {obj.name} would both bake into image {name!r}; "
@@ -225,13 +248,18 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     else:
         pool = []
 
+    from . import targets as issue14
+
+    extra = issue14.extra_for(settings)
     jobs = []
     for obj in targets:
         target = object_arrays(
-            obj.evaluated_get(depsgraph), uv_map=settings.uv_map, with_uvs=True, with_normals=True,
+            obj.evaluated_get(depsgraph), uv_map=settings.uv_map, with_uvs=issue14.needs_uvs(settings),
+            with_normals=True, extra=extra,
         )
         if target is None:
             raise ExtractError(f"{obj.name} has no faces to bake")
         occluders = [arrays for key, arrays in pool if key != obj.name]
         jobs.append(Job(obj.name, settings.image_name_for(obj.name, max_bytes), target, occluders))
+    issue14.check_plan(jobs, settings, {obj.name: obj for obj in targets})
     return jobs

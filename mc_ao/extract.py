@@ -29,6 +29,9 @@ class MeshArrays:
     triangles: np.ndarray
     uvs: np.ndarray | None = None
     normals: np.ndarray | None = None
+    loops: np.ndarray | None = None  # (T, 3) int32: the mesh's face corner (loop) of each triangle corner
+    extra: dict | None = None  # what object_arrays(extra=...) added (colour-attribute corners, tangents)
+    matrix: np.ndarray | None = None  # (4, 4) the object-to-world matrix the positions went through
 
 
 def default_uv_map(mesh):
@@ -118,12 +121,18 @@ def mesh_arrays(name, mesh, matrix, *, uv_map=None, with_uvs=False, with_normals
         triangles = triangles[:, order]
         uvs = None if uvs is None else uvs[:, order]
         normals = None if normals is None else normals[:, order]
+        corners = corners[:, order]
 
-    return MeshArrays(name=name, positions=positions, triangles=triangles, uvs=uvs, normals=normals)
+    return MeshArrays(name=name, positions=positions, triangles=triangles, uvs=uvs, normals=normals, loops=corners,
+                      matrix=m)
 
 
-def object_arrays(obj_eval, matrix=None, **kwargs):
+def object_arrays(obj_eval, matrix=None, extra=None, **kwargs):
     """:func:`mesh_arrays` of an evaluated object (modifiers applied), via a temporary mesh.
+
+    ``extra``: None, or a callable ``extra(mesh, arrays)`` returning a dict, called with the temporary
+    mesh before it is freed; its dict becomes ``arrays.extra`` (mc_ao.vertex_colors and mc_ao.bent
+    read face corners and tangents there).
 
     Returns None for an object without faces (an empty curve, a text with no characters, ...).
     """
@@ -132,6 +141,9 @@ def object_arrays(obj_eval, matrix=None, **kwargs):
         if mesh is None or len(mesh.polygons) == 0:
             return None
         name = obj_eval.original.name if obj_eval.original is not None else obj_eval.name
-        return mesh_arrays(name, mesh, obj_eval.matrix_world if matrix is None else matrix, **kwargs)
+        arrays = mesh_arrays(name, mesh, obj_eval.matrix_world if matrix is None else matrix, **kwargs)
+        if extra is not None:
+            arrays.extra = extra(mesh, arrays)
+        return arrays
     finally:
         obj_eval.to_mesh_clear()

@@ -20,6 +20,11 @@ def rgba(ao, channels=4):
     bake's coverage mask is in the result, not in the image. ``channels`` is the image's (4 for any
     image a bake creates; an image loaded from a file may have 1 to 4).
     """
+    if ao.ndim == 3:  # (H, W, 3) colours (a bent-normal map): RGB as given, or their first channel
+        out = np.ones(ao.shape[:2] + (channels,), dtype=np.float32)
+        colour = 1 if channels == 2 else min(channels, 3)
+        out[..., :colour] = ao[..., :colour]
+        return out
     out = np.ones(ao.shape + (channels,), dtype=np.float32)
     colour = 1 if channels == 2 else min(channels, 3)  # 2 channels = grey + alpha
     out[..., :colour] = ao[..., None]
@@ -190,7 +195,7 @@ def finish_image(name, ao, float_buffer):
     image = bpy.data.images.get(name)
     if image is None:
         raise ImageError(f"image {name!r} is gone")
-    h, w = ao.shape
+    h, w = ao.shape[:2]
     if image.colorspace_settings.name != "Non-Color":
         image.colorspace_settings.name = "Non-Color"
     if image.source == "GENERATED" and (

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import corelink
-from .settings import DISTRIBUTIONS, FILE_FORMATS, OCCLUDERS, SOURCES
+from .settings import BENT_SPACES, DISTRIBUTIONS, DOMAINS, FILE_FORMATS, OCCLUDERS, SOURCES, TARGETS
 
 # Bakes in flight (operators.is_running() and unregister() read it).
 RUNS = set()
@@ -149,9 +149,12 @@ def check_settings(settings):
         problems.append(("max_distance", f"must be a distance >= 0 (0 or inf = unlimited), "
                                          f"not {settings.max_distance!r}"))
     for field, allowed in (("source", SOURCES), ("distribution", DISTRIBUTIONS), ("occluders", OCCLUDERS),
-                           ("file_format", FILE_FORMATS)):
+                           ("file_format", FILE_FORMATS), ("target", TARGETS), ("attribute_domain", DOMAINS),
+                           ("bent_space", BENT_SPACES)):
         if getattr(settings, field) not in allowed:
             problems.append((field, f"must be one of {', '.join(allowed)}, not {getattr(settings, field)!r}"))
+    if settings.target == "VERTEX_COLORS" and not str(settings.attribute_name).strip():
+        problems.append(("attribute_name", "must name the color attribute to bake into, not be empty"))
     return problems
 
 
@@ -186,6 +189,11 @@ def settings_record(settings):
         "resolution": f"{w}x{h}",
         "occluders": settings.occluders.lower(),
         "uv_map": settings.uv_map,
+        # Issue 14, recorded only when on (a plain bake's record is as before).
+        **({"udim": True} if settings.use_udim else {}),
+        **({"target": "vertex_colors", "attribute": settings.attribute_name,
+            "domain": settings.attribute_domain.lower()} if settings.target == "VERTEX_COLORS" else {}),
+        **({"bent_normals": settings.bent_space.lower()} if settings.bent_normals else {}),
     }
 
 

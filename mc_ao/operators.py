@@ -35,7 +35,7 @@ import traceback
 import bpy
 import numpy as np
 
-from . import baking, corelink, images, jobs
+from . import baking, corelink, images, jobs, targets
 from .extract import ExtractError
 from .jobs import BakeRun
 from .properties import resolve_threads
@@ -202,21 +202,22 @@ class BakeSession:
             ) + "; nothing was baked")
             return False
         selected = list(context.selected_objects)
-        targets = baking.targets_of(selected)
-        if not targets:
+        needs_uvs = targets.needs_uvs(self.settings)
+        objects = baking.targets_of(selected, needs_uvs)
+        if not objects:
             # The poll refuses this already; a script that gets past it (or a changed selection)
             # hears the same reason.
-            self.report({"ERROR"}, baking.why_not_bakeable(selected) or "Nothing to bake")
+            self.report({"ERROR"}, baking.why_not_bakeable(selected, needs_uvs) or "Nothing to bake")
             return False
         try:
             self.output_dir = _output_dir(self.settings) if self.settings.save_to_file else None
             planned = baking.plan(
-                context.evaluated_depsgraph_get(), targets, self.settings,
+                context.evaluated_depsgraph_get(), objects, self.settings,
                 selected=selected, view_layer=context.view_layer,
             )
             for job in planned:
                 try:
-                    images.check_target(job.image_name)
+                    targets.check_images(job, self.settings)
                 except images.ImageError as exc:
                     raise images.ImageError(f"{job.object_name}: {exc}") from None
         except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
@@ -226,10 +227,11 @@ class BakeSession:
         self.unsummarised = 0  # warnings since the last summary line, counted in the next one
         self.unsummarised_errors = 0  # errors (a file not saved) since the last summary line
         for obj in selected:
-            if obj not in targets:
-                self._warn(baking.skip_note(obj, self.settings.occluders))
+            if obj not in objects:
+                self._warn(baking.skip_note(obj, self.settings.occluders, needs_uvs))
         w, h = self.settings.size
-        self.live = live and w * h <= LIVE_MAX_TEXELS
+        # UDIM tiles and colour attributes are written when their object's bake finishes.
+        self.live = live and w * h <= LIVE_MAX_TEXELS and not targets.custom(self.settings)
         self.errors = 0  # objects whose bake failed
         self.file_errors = 0  # files not saved (their objects are baked)
         self.finished = []
@@ -349,6 +351,8 @@ class BakeSession:
 
     def _finish_job(self, context, i, result):
         """A job's result into its image for good, its file saved; its warnings, then its summary."""
+        if targets.custom(self.settings):  # colour attributes, UDIM tiles (issue 14)
+            return targets.finish_job(self, context, i, result)
         job = self.run.jobs[i]
         self.pending.discard(i)
         self.buffers.pop(i, None)
@@ -361,11 +365,14 @@ class BakeSession:
             return
         self.finished.append(i)
         self.results.append(result)
+        if not targets.finish_bent(self, i, result):  # "<object>_BentNormal" beside the AO (issue 14)
+            self.unsummarised_errors += 1
         saved = None
         if self.output_dir is not None:
             saved = self._save(job, result)
             if saved is None:  # reported as an error; counted in the summary, which comes after it
                 self.unsummarised_errors += 1
+            targets.save_bent(self, job, result, saved)
         self._keep(job, result, saved)
         _redraw(context)
         for note in baking.input_notes(result):
@@ -417,8 +424,8 @@ class BakeSession:
     def _output_files(self):
         """image name -> its OutputFile list, over all of this bake's jobs (distinct, safe names)."""
         if getattr(self, "_files", None) is None:
-            self._files = jobs.output_files(
-                self.output_dir, [j.image_name for j in self.run.jobs],
+            self._files = targets.output_files(  # the AO images' files, and the bent-normal images'
+                self.settings, self.output_dir, self.run.jobs,
                 [(self.settings.file_format, self.settings.file_bits)],
             )
         return self._files
@@ -589,7 +596,9 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         # A running bake does not disable the button: Blender 4.3 keeps drawing a button that was
         # disabled under a resting mouse pointer as disabled, and ignores clicks on it, after it
         # is enabled again. start() refuses a second bake instead, and the panel says why.
-        reason = baking.why_not_bakeable(context.selected_objects)
+        settings = getattr(context.scene, "mc_ao", None)
+        needs_uvs = settings is None or settings.target != "VERTEX_COLORS"
+        reason = baking.why_not_bakeable(context.selected_objects, needs_uvs)
         if reason is not None:
             cls.poll_message_set(reason)
             return False

@@ -4,6 +4,7 @@ import bpy
 
 from . import baking
 from . import operators
+from . import preview
 from .operators import OBJECT_OT_mc_ao_bake, is_running
 from .extract import default_uv_map
 from .settings import BakeSettings
@@ -87,6 +88,9 @@ class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
         row = layout.row()
         row.scale_y = 1.5
         row.operator(OBJECT_OT_mc_ao_bake.bl_idname, icon="RENDER_STILL")
+        shown = preview.has_preview(context.active_object)
+        layout.operator(preview.OBJECT_OT_mc_ao_preview.bl_idname, icon="HIDE_ON" if shown else "SHADING_TEXTURE",
+                        text="Remove AO Preview" if shown else "Preview on Object", depress=shown)
         if is_running():
             layout.label(text="Baking, Esc cancels", icon="TIME")
             return
@@ -99,24 +103,59 @@ class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
 def draw_targets(layout, context):
     """What the button will bake, or why it cannot; the selected objects it will skip."""
     selected = context.selected_objects
+    settings = BakeSettings.from_properties(context.scene.mc_ao)
+    needs_uvs = not settings.vertex_colors
     # The button greys out when its poll fails; say why under it.
-    reason = baking.why_not_bakeable(selected)
+    reason = baking.why_not_bakeable(selected, needs_uvs)
     if reason is not None:
         wrapped_label(layout, context, reason, icon="INFO")
         return
-    targets = baking.targets_of(selected)
-    if len(targets) == 1:
-        image_name = BakeSettings.from_properties(context.scene.mc_ao).image_name_for(
-            targets[0].name, baking.id_name_max_bytes())
-        wrapped_label(layout, context, f"Into {image_name}", icon="IMAGE_DATA")
+    targets = baking.targets_of(selected, needs_uvs)
+    if settings.vertex_colors:
+        domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
+        what = f"color attribute {settings.attribute_name} ({domain})"
+        if len(targets) == 1:
+            wrapped_label(layout, context, f"Into {what}", icon="GROUP_VCOL")
+        else:
+            wrapped_label(layout, context, f"{len(targets)} objects, each into its {what}", icon="GROUP_VCOL")
+    elif len(targets) == 1:
+        image_name = settings.image_name_for(targets[0].name, baking.id_name_max_bytes())
+        extra = " (UDIM tiles)" if settings.use_udim else ""
+        if settings.bent_normals:
+            extra += f" and {settings.bent_image_name_for(targets[0].name, baking.id_name_max_bytes())}"
+        wrapped_label(layout, context, f"Into {image_name}{extra}", icon="IMAGE_DATA")
     else:
-        layout.label(text=f"{len(targets)} objects, one image each", icon="IMAGE_DATA")
+        each = "one tiled image each" if settings.use_udim else "one image each"
+        layout.label(text=f"{len(targets)} objects, {each}", icon="IMAGE_DATA")
     skipped = [obj for obj in selected if obj not in targets]
     for obj in skipped[:MAX_SKIPPED_LINES]:
         why = "no UV map" if obj.type == "MESH" else "not a mesh"
         wrapped_label(layout, context, f"Skipped: {obj.name} ({why})", icon="ERROR")
     if len(skipped) > MAX_SKIPPED_LINES:
         layout.label(text=f"... and {len(skipped) - MAX_SKIPPED_LINES} more skipped", icon="ERROR")
+
+
+class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):
+    """Where the AO goes (Cycles' Target), UDIM tiles, bent normals (issue 14)."""
+
+    bl_label = "Target"
+    bl_parent_id = "VIEW3D_PT_mc_ao"
+
+    def draw(self, context):
+        settings = context.scene.mc_ao
+        layout = self.split_layout()
+        layout.prop(settings, "target", expand=True)
+        col = layout.column()
+        if settings.target == "VERTEX_COLORS":
+            col.prop(settings, "attribute_name", icon="GROUP_VCOL")
+            col.prop(settings, "attribute_domain")
+            col.prop(settings, "float_buffer", text="Float Color")
+            return
+        col.prop(settings, "use_udim")
+        col.prop(settings, "bent_normals")
+        sub = col.column()
+        sub.active = settings.bent_normals
+        sub.prop(settings, "bent_space")
 
 
 class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
@@ -159,6 +198,7 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.mc_ao
         layout = self.split_layout()
+        layout.active = settings.target != "VERTEX_COLORS"  # a color attribute bake has no image
         col = layout.column(align=True)
         col.prop(settings, "resolution")
         col.prop(settings, "height")

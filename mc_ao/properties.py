@@ -146,6 +146,57 @@ class McAoSettings(bpy.types.PropertyGroup):
         name="Ignore Backfaces", description="Rays that hit the back of a face pass through it",
         default=_DEFAULTS.ignore_backfaces,
     )
+    # Issue 14: where the bake goes (Cycles' names), UDIM tiles, bent normals.
+    target: EnumProperty(
+        name="Target", description="Where the AO goes",
+        items=[
+            ("IMAGE_TEXTURES", "Image Textures", "Bake into an image per object, over its UV map"),
+            ("VERTEX_COLORS", "Color Attributes",
+             "Bake into a color attribute of each mesh, one value per vertex or face corner (no UV map needed)"),
+        ],
+        default=_DEFAULTS.target,
+    )
+    attribute_name: StringProperty(
+        name="Attribute",
+        description=(
+            "Color attribute to bake into, created if missing (as a float color with 32-bit Float on, "
+            "else a byte color); an existing one of another type or domain is refused"
+        ),
+        default=_DEFAULTS.attribute_name,
+    )
+    attribute_domain: EnumProperty(
+        name="Domain", description="Where the color attribute stores its values",
+        items=[
+            ("POINT", "Vertex", "One value per vertex: the mean of its face corners' values, as Cycles bakes it"),
+            ("CORNER", "Face Corner", "One value per face corner (hard edges keep their faces' shading apart)"),
+        ],
+        default=_DEFAULTS.attribute_domain,
+    )
+    use_udim: BoolProperty(
+        name="UDIM Tiles",
+        description=(
+            "Bake every UDIM tile the UV map touches (1001 for UVs in [0, 1], 1002 to the right, 1011 "
+            "above, ...) into one tiled image, each tile of the bake's size; an existing tiled image is "
+            "filled tile by tile, and saved files are named <image>.<tile>.<ext>"
+        ),
+        default=_DEFAULTS.use_udim,
+    )
+    bent_normals: BoolProperty(
+        name="Bent Normals",
+        description=(
+            'Also bake each texel\'s mean unoccluded direction into "<object>_BentNormal" (RGB = n / 2 + 1/2, '
+            "Blender's normal map convention), from the same rays"
+        ),
+        default=_DEFAULTS.bent_normals,
+    )
+    bent_space: EnumProperty(
+        name="Space", description="Space of the bent normal map",
+        items=[
+            ("TANGENT", "Tangent", "Tangent space of the bake's UV map (MikkTSpace, as Blender's normal bake)"),
+            ("OBJECT", "Object", "Object space"),
+        ],
+        default=_DEFAULTS.bent_space,
+    )
 
 
 class McAoPreferences(bpy.types.AddonPreferences):

@@ -7,11 +7,18 @@ from dataclasses import dataclass, fields
 SOURCES = {"SOBOL": "sobol", "STRATIFIED": "stratified", "INDEPENDENT": "independent", "HALTON": "halton"}
 DISTRIBUTIONS = {"COSINE": "cosine", "UNIFORM": "uniform"}
 OCCLUDERS = ("SELF", "SELECTED", "VISIBLE")
+# Bake targets, named as Cycles names them (scene.render.bake.target).
+TARGETS = ("IMAGE_TEXTURES", "VERTEX_COLORS")
+# Colour attribute domains a vertex bake writes (Cycles follows the attribute's own).
+DOMAINS = ("POINT", "CORNER")
+# Spaces of the bent-normal map.
+BENT_SPACES = ("TANGENT", "OBJECT")
 # file format -> (extension, bits for an 8-bit image, bits for a float image), as core.imageio takes them
 FILE_FORMATS = {
     "PNG": (".png", 8, 16),
     "OPEN_EXR": (".exr", "half", "float"),
     "TIFF": (".tif", 8, "float"),
+    "PLY": (".ply", None, None),  # per-vertex AO of a colour-attribute bake (core.plyio), no bit depth
 }
 
 
@@ -39,6 +46,13 @@ class BakeSettings:
     seed: int = 0
     threads: int = 0  # 0 = the add-on preferences' default (whose 0 = all cores)
     ignore_backfaces: bool = False
+    # Issue 14: UDIM tiles, colour attributes, bent normals (appended; the defaults bake as before).
+    use_udim: bool = False  # bake every UDIM tile the UVs touch into one tiled image
+    target: str = "IMAGE_TEXTURES"  # or "VERTEX_COLORS": into a colour attribute, no UV map needed
+    attribute_name: str = "AO"  # the colour attribute of a VERTEX_COLORS bake, created if missing
+    attribute_domain: str = "POINT"  # "POINT" (mean of a vertex's corners, as Cycles) or "CORNER"
+    bent_normals: bool = False  # also bake "<object>_BentNormal" from the same rays
+    bent_space: str = "TANGENT"  # or "OBJECT"
 
     @classmethod
     def from_properties(cls, props, **overrides):
@@ -75,6 +89,16 @@ class BakeSettings:
         return _clip_utf8(name, max_bytes - len(tag)) + tag  # the template's own text is too long
 
     @property
+    def vertex_colors(self):
+        """Whether the bake goes into colour attributes (no images, no UV map needed)."""
+        return self.target == "VERTEX_COLORS"
+
+    def bent_image_name_for(self, object_name, max_bytes=None):
+        """The image of ``object_name``'s bent normals: "<object>_BentNormal", made to fit as
+        image_name_for() makes the AO image's name fit."""
+        return BakeSettings(image_name="{object}_BentNormal").image_name_for(object_name, max_bytes)
+
+    @property
     def file_bits(self):
         """The bit depth core.imageio writes the chosen file format with, following the image's depth."""
         _, bits8, bits_float = FILE_FORMATS[self.file_format]
@@ -99,6 +123,7 @@ class BakeSettings:
             seed=self.seed,
             threads=threads,
             ignore_backfaces=self.ignore_backfaces,
+            **({"bent_normals": True} if self.bent_normals and not self.vertex_colors else {}),
         )
 
 
