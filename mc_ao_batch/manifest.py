@@ -46,6 +46,13 @@ _RUNNER_OPTIONS = {"output", "summary_json", "quiet", "blend"}
 # thread count): left out of a task's fingerprint.
 _NO_EFFECT = {"threads", "quiet", "output", "summary_json", "blend"}
 _ENTRY_KEYS = {"blend"}
+# bake_ao.py options a batch task cannot take, and why (issue 14: one --save path for every task
+# would have each task replace the last one's file).
+_NOT_IN_BATCH = {
+    "save": "every task would save its .blend file to that one path; a batch of --target vertex-colors "
+            "writes each object's .ply file into its task's folder",
+    "overwrite_input": "the batch never saves .blend files",
+}
 
 
 class ManifestError(Exception):
@@ -172,6 +179,8 @@ def _word(value):
 
 def _check_keys(where, table, spec, allowed_extra):
     for key in table:
+        if key in _NOT_IN_BATCH:
+            raise ManifestError(f"{where}: {key!r} cannot be set in a batch: {_NOT_IN_BATCH[key]}")
         if key in spec or key in allowed_extra:
             continue
         hint = ""

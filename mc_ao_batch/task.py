@@ -122,7 +122,12 @@ def why_not_done(task):
             if not os.path.isfile(path):
                 return f"{path} is missing"
             try:
-                _, metadata = read_image(path)
+                if path.lower().endswith(".ply"):  # --target vertex-colors (issue 14)
+                    from core.plyio import read_ply
+
+                    metadata = read_ply(path)[4]
+                else:
+                    _, metadata = read_image(path)
             except (ImageReadError, OSError, ValueError) as exc:
                 return f"{path} cannot be read: {exc}"
             if not metadata:

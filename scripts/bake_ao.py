@@ -58,7 +58,9 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 # --format choice -> Blender's file format name (mc_ao.settings.FILE_FORMATS)
-FORMATS = {"png": "PNG", "exr": "OPEN_EXR", "tif": "TIFF"}
+FORMATS = {"png": "PNG", "exr": "OPEN_EXR", "tif": "TIFF", "ply": "PLY"}
+# Issue 14: --target choice -> BakeSettings.target
+TARGETS = {"image-textures": "IMAGE_TEXTURES", "vertex-colors": "VERTEX_COLORS"}
 BITS = {"8": 8, "16": 16, "half": "half", "float": "float"}
 # BakeSettings field -> the option that sets it, for messages
 OPTIONS = {
@@ -66,7 +68,8 @@ OPTIONS = {
     "max_distance": "--max-distance",
     "source": "--source", "distribution": "--distribution", "occluders": "--occluders",
     "uv_map": "--uv-map", "margin": "--margin", "image_name": "--image-name", "seed": "--seed",
-    "threads": "--threads",
+    "threads": "--threads", "target": "--target", "attribute_name": "--attribute", "attribute_domain": "--domain",
+    "bent_space": "--bent-space",
 }
 
 
@@ -123,8 +126,9 @@ def make_parser(with_blend):
                              "else every mesh with a UV map in the view layer)")
     parser.add_argument("--output", "-o", type=Path, default=Path("out"),
                         help="output folder, created if missing (default: out)")
-    parser.add_argument("--format", nargs="+", choices=sorted(FORMATS), default=["png"],
-                        help="file formats to write, one file each (default: png)")
+    parser.add_argument("--format", nargs="+", choices=sorted(FORMATS), default=None,
+                        help="file formats to write, one file each (default: png; ply for --target "
+                             "vertex-colors)")
     parser.add_argument("--bits", choices=sorted(BITS),
                         help="sample type of the files: png 8|16, exr half|float, tif 8|16|float "
                              "(default: 8-bit PNG and TIFF, half EXR)")
@@ -153,6 +157,35 @@ def make_parser(with_blend):
     parser.add_argument("--seed", type=int, default=0, help="0 or more (default: 0)")
     parser.add_argument("--threads", type=int, default=0, help="worker threads; 0 = all cores")
     parser.add_argument("--ignore-backfaces", action="store_true")
+    # Issue 14: UDIM tiles, colour attributes, bent normals.
+    parser.add_argument("--udim", action="store_true",
+                        help="bake every UDIM tile the UVs touch, one file per tile: <image>.<tile>.<ext> "
+                             "(1001 for UVs in [0, 1], 1002 to its right, 1011 above, ...)")
+    parser.add_argument("--bent-normals", action="store_true",
+                        help="also write each object's bent normals to <object>_BentNormal.<ext> "
+                             "(RGB = n/2 + 1/2, from the same rays)")
+    parser.add_argument("--bent-space", choices=("tangent", "object"), default="tangent",
+                        help="space of the bent normals: tangent (MikkTSpace of the UV map, Blender's "
+                             "normal-map convention; meshes of triangles and quads) or object (default: tangent)")
+    parser.add_argument("--target", choices=sorted(TARGETS), default="image-textures",
+                        help="image-textures (default), or vertex-colors: AO per vertex (or face corner) of "
+                             "each mesh, written as <image>.ply (the mesh in object space with a float 'ao' "
+                             "and an sRGB grey colour per vertex) and, with --save, into a color attribute "
+                             "of a saved .blend file; no UV map needed")
+    parser.add_argument("--attribute", default="AO",
+                        help="color attribute of --target vertex-colors (default: AO), created if missing")
+    parser.add_argument("--domain", choices=("point", "corner"), default="point",
+                        help="color attribute domain: point (a vertex's value is the mean of its face "
+                             "corners', as Cycles) or corner (default: point)")
+    parser.add_argument("--attribute-type", choices=("float", "byte"), default="float",
+                        help="type of a new color attribute: float (linear) or byte (sRGB-encoded, as "
+                             "Blender stores byte colors) (default: float)")
+    parser.add_argument("--save", type=Path, metavar="PATH.blend",
+                        help="with --target vertex-colors: save the .blend file with the baked color "
+                             "attributes to PATH (atomically; never the input file unless "
+                             "--overwrite-input is given)")
+    parser.add_argument("--overwrite-input", action="store_true",
+                        help="allow --save to replace the .blend file the bake read")
     parser.add_argument("--summary-json", type=Path, metavar="PATH",
                         help="write a JSON record of the run (settings, each object's status, time, "
                              "rays and files) to PATH at the end, whatever the exit status")
@@ -257,10 +290,11 @@ class Summary:
         return True
 
 
-def pick_objects(bpy, names, baking):
+def pick_objects(bpy, names, baking, needs_uvs=True):
     """The objects to bake: the named ones, else the selected bakeable ones, else every bakeable one.
 
     Named objects that cannot be baked are an error (exit 2); selected ones are skipped with a note.
+    ``needs_uvs``: False for --target vertex-colors (any mesh can be baked).
     """
     layer_objects = bpy.context.view_layer.objects
     if names:
@@ -274,22 +308,23 @@ def pick_objects(bpy, names, baking):
             )
         objects = [layer_objects[n] for n in names]
         for obj in objects:
-            if not baking.can_be_target(obj):
-                raise UsageError(f"{obj.name} {baking.skip_reason(obj)}")
+            if not baking.can_be_target(obj, needs_uvs):
+                raise UsageError(f"{obj.name} {baking.skip_reason(obj, needs_uvs)}")
         return objects
     selected = [o for o in layer_objects if o.select_get()]
-    objects = baking.targets_of(selected)
+    objects = baking.targets_of(selected, needs_uvs)
     if objects:
         for obj in selected:
             if obj not in objects:
-                print(f"bake_ao: {obj.name}: skipped, it {baking.skip_reason(obj)}", file=sys.stderr)
+                print(f"bake_ao: {obj.name}: skipped, it {baking.skip_reason(obj, needs_uvs)}", file=sys.stderr)
         return objects
-    objects = baking.targets_of(layer_objects)
+    objects = baking.targets_of(layer_objects, needs_uvs)
+    what = "mesh with a UV map" if needs_uvs else "mesh"
     if not objects:
-        raise UsageError("the file has no mesh with a UV map to bake")
+        raise UsageError(f"the file has no {what} to bake")
     print(
-        f"bake_ao: {'no mesh with a UV map is selected' if selected else 'nothing is selected'}; "
-        f"baking every mesh with a UV map: {', '.join(o.name for o in objects)}",
+        f"bake_ao: {f'no {what} is selected' if selected else 'nothing is selected'}; "
+        f"baking every {what}: {', '.join(o.name for o in objects)}",
         file=sys.stderr,
     )
     return objects
@@ -309,6 +344,10 @@ def settings_from(args):
         occluders=args.occluders.upper(), uv_map=args.uv_map, margin=args.margin,
         image_name=args.image_name, seed=args.seed, threads=args.threads,
         ignore_backfaces=args.ignore_backfaces,
+        use_udim=getattr(args, "udim", False), target=TARGETS[getattr(args, "target", "image-textures")],
+        attribute_name=getattr(args, "attribute", "AO"), attribute_domain=getattr(args, "domain", "point").upper(),
+        float_buffer=getattr(args, "attribute_type", "float") == "float",
+        bent_normals=getattr(args, "bent_normals", False), bent_space=getattr(args, "bent_space", "tangent").upper(),
     )
     problems = []
     for field, message in jobs.check_settings(settings):
@@ -318,9 +357,12 @@ def settings_from(args):
                 problems.append(message)
             continue
         problems.append(f"{OPTIONS.get(field, field)} {message}")
+    problems += target_problems(args, settings)
     if args.bits is not None:
         bits = BITS[args.bits]
         for fmt in args.format:
+            if fmt == "ply":
+                continue
             allowed = imageio.FORMATS["." + fmt][0]
             if bits not in allowed:
                 problems.append(
@@ -332,6 +374,74 @@ def settings_from(args):
     if problems:
         raise UsageError("\n".join(problems))
     return settings
+
+
+def default_formats(args):
+    """--format's default: png for images, ply for --target vertex-colors."""
+    if getattr(args, "format", None) is None:
+        args.format = ["ply"] if getattr(args, "target", "") == "vertex-colors" else ["png"]
+    return args.format
+
+
+def target_problems(args, settings):
+    """What is wrong with the issue-14 options together (--target, --format, --save, ...)."""
+    problems = []
+    formats = default_formats(args)
+    vertex = settings.target == "VERTEX_COLORS"
+    if vertex:
+        wrong = [f for f in formats if f != "ply"]
+        if wrong:
+            problems.append(f"--format {' '.join(wrong)}: --target vertex-colors writes .ply files (--format ply)")
+        if args.stderr:
+            problems.append("--stderr: --target vertex-colors writes no error image")
+        for flag, on in (("--udim", settings.use_udim), ("--bent-normals", settings.bent_normals)):
+            if on:
+                problems.append(f"{flag} bakes images; --target vertex-colors bakes a color attribute")
+    elif "ply" in formats:
+        problems.append("--format ply is for --target vertex-colors; images are written as png, exr or tif")
+    save = getattr(args, "save", None)
+    if save is not None:
+        if not vertex:
+            problems.append("--save writes color attributes into a .blend file: it needs --target vertex-colors")
+        elif save.suffix.lower() != ".blend":
+            problems.append(f"--save {str(save)!r} must name a .blend file")
+    return problems
+
+
+def check_save(args, input_blend):
+    """--save may not replace the input .blend file unless --overwrite-input, and its folder must be writable."""
+    from mc_ao import jobs
+
+    save = getattr(args, "save", None)
+    if save is None:
+        return
+    if input_blend and os.path.abspath(save) == os.path.abspath(input_blend) and not args.overwrite_input:
+        raise UsageError(f"--save {str(save)!r} is the .blend file being baked; give another path, or "
+                         "--overwrite-input to replace it")
+    if save.is_dir():
+        raise UsageError(f"--save {str(save)!r} is a folder; give a .blend file path")
+    problem = jobs.folder_problem(save.parent if str(save.parent) else ".")
+    if problem is not None:
+        raise UsageError(f"cannot save {str(save)!r}: {problem}; nothing was baked")
+
+
+def save_blend(bpy, path):
+    """Save the open file (with its baked color attributes) to ``path`` atomically, as a copy."""
+    from core import atomicfile
+
+    def write(temp):
+        result = bpy.ops.wm.save_as_mainfile(filepath=os.fspath(temp), copy=True, check_existing=False)
+        if result != {"FINISHED"}:
+            raise RuntimeError(f"Blender did not save it ({result})")
+
+    def verify(temp):
+        with open(temp, "rb") as f:
+            head = f.read(7)
+        if head != b"BLENDER" and not head.startswith(b"\x28\xb5\x2f\xfd") and not head.startswith(b"\x1f\x8b"):
+            raise ValueError("it is not a .blend file")
+
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    atomicfile.write_file(path, write, verify=verify, ext=".blend")
 
 
 def check_paths(args, summary):
@@ -402,7 +512,7 @@ def early_summary_args(argv, in_blender):
 
 def run(argv, in_blender, summary):
     args = make_parser(with_blend=not in_blender).parse_args(argv)
-    args.format = list(dict.fromkeys(args.format))
+    args.format = list(dict.fromkeys(default_formats(args)))
     settings = settings_from(args)
     check_paths(args, summary)
     try:
@@ -430,14 +540,17 @@ def run(argv, in_blender, summary):
     if not jobs.oiio_available():
         print("bake_ao: no OpenImageIO in this Python; writing files with Blender's image writer", file=sys.stderr)
 
-    objects = pick_objects(bpy, args.objects, baking)
+    from mc_ao import targets
+
+    check_save(args, bpy.data.filepath)
+    objects = pick_objects(bpy, args.objects, baking, needs_uvs=targets.needs_uvs(settings))
     try:
         plan = baking.plan(
             bpy.context.evaluated_depsgraph_get(), objects, settings,
             selected=objects, view_layer=bpy.context.view_layer,
         )
         formats = [(FORMATS[f], BITS[args.bits] if args.bits else None) for f in args.format]
-        files = jobs.output_files(str(args.output), [j.image_name for j in plan], formats, stderr=args.stderr)
+        files = targets.output_files(settings, str(args.output), plan, formats, stderr=args.stderr)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
     summary.settings = record = jobs.settings_record(settings)
@@ -446,7 +559,7 @@ def run(argv, in_blender, summary):
 
 def bake(plan, files, settings, record, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
-    from mc_ao import baking, jobs
+    from mc_ao import baking, jobs, targets
 
     progress = Progress(enabled=not args.quiet)
     run = jobs.BakeRun(plan, settings, args.threads or None, live=False)
@@ -482,8 +595,14 @@ def bake(plan, files, settings, record, args, summary):
                 result = rest[1]
                 progress.end()
                 job = plan[i]
-                written, errors = jobs.write_outputs(result, files[job.image_name],
-                                                     dict(record, object=job.object_name))
+                if targets.custom(settings) or settings.bent_normals:  # issue 14: tiles, PLY, bent normals
+                    written, errors = targets.write_files(job, result, files, dict(record, object=job.object_name),
+                                                          settings)
+                else:
+                    written, errors = jobs.write_outputs(result, files[job.image_name],
+                                                         dict(record, object=job.object_name))
+                if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
+                    errors = attribute_errors(job, result, settings)
                 for note in baking.input_notes(result):
                     print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
                 per_texel, rate = baking.throughput(result)
@@ -492,7 +611,7 @@ def bake(plan, files, settings, record, args, summary):
                 else:
                     done.add(i)
                     summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written)
-                    rows.append((job.object_name, f"{width}x{height}", f"{result.seconds:.2f}",
+                    rows.append((job.object_name, size_text(result, settings), f"{result.seconds:.2f}",
                                  f"{per_texel:.0f}", f"{rate:.2f}", ", ".join(written)))
             elif kind == "error":
                 failed(i, [rest[1]])
@@ -511,6 +630,17 @@ def bake(plan, files, settings, record, args, summary):
                 summary.add(job.object_name, "failed", error=f"not baked: {why}")
         raise
     run.stop()
+    if getattr(args, "save", None) is not None and rows:
+        import bpy
+
+        try:
+            save_blend(bpy, args.save)
+            print(f"bake_ao: saved {args.save} with the color attribute {settings.attribute_name!r} of "
+                  f"{', '.join(r[0] for r in rows)}")
+        except (OSError, RuntimeError, ValueError) as exc:
+            failures += 1
+            print(f"bake_ao: error: {args.save} was not saved (any file there is unchanged): {exc}", file=sys.stderr)
+            summary.error = f"--save {args.save}: {exc}"
 
     header = ("object", "size", "seconds", "samples/texel", "Mrays/s", "files")
     if rows:
@@ -518,9 +648,36 @@ def bake(plan, files, settings, record, args, summary):
         for row in [header] + rows:
             print("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
     print(f"bake_ao: baked {len(rows)} of {len(plan)} objects" + (f", {failures} failed" if failures else ""))
-    if failures:
+    if failures and summary.error is None:
         summary.error = f"{failures} of {len(plan)} objects failed"
     return 1 if failures else 0
+
+
+def size_text(result, settings):
+    """The summary's size column: WxH, WxH x N tiles (UDIM), or the face corners (colour attributes)."""
+    w, h = settings.size
+    if settings.vertex_colors:
+        return f"{len(result.ao)} corners"
+    if settings.use_udim:
+        return f"{w}x{h} x{len(result.tiles)} tiles"
+    return f"{w}x{h}"
+
+
+def attribute_errors(job, result, settings):
+    """Store a finished colour-attribute bake in its object's mesh (for --save); [] or [(what, error)]."""
+    import bpy
+
+    from mc_ao import vertex_colors
+    from mc_ao.extract import ExtractError
+
+    obj = bpy.data.objects.get(job.object_name)
+    try:
+        if obj is None:
+            raise ExtractError("the object is gone")
+        vertex_colors.write_attribute(obj, settings, result, job.target.extra)
+    except (ExtractError, RuntimeError) as exc:
+        return [(job.object_name, exc)]
+    return []
 
 
 if __name__ == "__main__":
