@@ -131,7 +131,10 @@ _INPUT_NOTES = {
         "{n} triangle has no area in space and was skipped",
         "{n} triangles have no area in space and were skipped",
     ),
-    # UDIM bakes (core.bake_udim): reported instead of uv_outside_triangles.
+}
+# The same for the reports of core.bake_udim and core.bake_vertex_ao (issue 14).
+_TARGET_NOTES = {
+    # UDIM bakes: reported instead of uv_outside_triangles.
     "uv_outside_udim_triangles": (
         "{n} triangle reaches outside the UDIM tiles (u in [0, 10], v in [0, 100]); the part outside is not baked",
         "{n} triangles reach outside the UDIM tiles (u in [0, 10], v in [0, 100]); the parts outside are not baked",
@@ -160,7 +163,7 @@ def input_notes(result):
     """
     report = getattr(result, "report", None) or {}
     notes = []
-    for key, (one, several) in _INPUT_NOTES.items():
+    for key, (one, several) in {**_INPUT_NOTES, **_TARGET_NOTES}.items():
         n = report.get(key)
         if n:
             notes.append((one if n == 1 else several).format(n=n))

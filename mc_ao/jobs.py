@@ -30,6 +30,9 @@ import numpy as np
 from . import corelink
 from .settings import BENT_SPACES, DISTRIBUTIONS, DOMAINS, FILE_FORMATS, OCCLUDERS, SOURCES, TARGETS
 
+# The image file formats of the Format setting (PLY is a colour-attribute bake's own, chosen by its target).
+IMAGE_FORMATS = tuple(f for f in FILE_FORMATS if f != "PLY")
+
 # Bakes in flight (operators.is_running() and unregister() read it).
 RUNS = set()
 
@@ -149,7 +152,7 @@ def check_settings(settings):
         problems.append(("max_distance", f"must be a distance >= 0 (0 or inf = unlimited), "
                                          f"not {settings.max_distance!r}"))
     for field, allowed in (("source", SOURCES), ("distribution", DISTRIBUTIONS), ("occluders", OCCLUDERS),
-                           ("file_format", FILE_FORMATS), ("target", TARGETS), ("attribute_domain", DOMAINS),
+                           ("file_format", IMAGE_FORMATS), ("target", TARGETS), ("attribute_domain", DOMAINS),
                            ("bent_space", BENT_SPACES)):
         if getattr(settings, field) not in allowed:
             problems.append((field, f"must be one of {', '.join(allowed)}, not {getattr(settings, field)!r}"))
