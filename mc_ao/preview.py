@@ -86,11 +86,18 @@ def _principled_nodes(tree):
     return found
 
 
+def _uses_nodes(material):
+    """Whether the material shades with its node tree (always from Blender 5.0, whose
+    Material.use_nodes is deprecated and warns when read)."""
+    if material.node_tree is None:
+        return False
+    return True if bpy.app.version >= (5, 0, 0) else material.use_nodes
+
+
 def _own(material):
     """Whether the preview may edit ``material`` itself: local, used by one object slot, with nodes."""
     users = material.users - (1 if material.use_fake_user else 0)
-    return (material.library is None and users <= 1 and material.node_tree is not None and material.use_nodes
-            and _principled_nodes(material.node_tree))
+    return material.library is None and users <= 1 and _uses_nodes(material) and _principled_nodes(material.node_tree)
 
 
 def _insert(material, kind, source, uv_map):
@@ -201,7 +208,7 @@ def show(obj, settings, space=None):
             _insert(material, kind, source, uv_map)
             entry.update(mode="insert", material=material.name)
         else:
-            if material is not None and material.node_tree is not None and material.use_nodes:
+            if material is not None and _uses_nodes(material):
                 copy = material.copy()
                 copy.name = material.name + COPY_SUFFIX
                 if copy.library is None and _insert(copy, kind, source, uv_map):
@@ -311,9 +318,10 @@ class OBJECT_OT_mc_ao_preview(bpy.types.Operator):
                 shown.append(obj.name)
             else:
                 problems.append(f"{obj.name}: {why}")
+        if not shown:
+            self.report({"ERROR"}, "; ".join(problems))
+            return {"CANCELLED"}
         for problem in problems:
             self.report({"WARNING"}, problem)
-        if not shown:
-            return {"CANCELLED"}
         self.report({"INFO"}, f"AO preview on {', '.join(shown)}; click again to remove it")
         return {"FINISHED"}
