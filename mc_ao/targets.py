@@ -146,7 +146,7 @@ def write_files(job, result, files, metadata, settings):
         plyio = corelink.load("plyio")
         data = job.target.extra
         positions, sizes, verts, ao = vertex_colors.ply_data(result, data, settings.attribute_domain)
-        meta.update(domain=settings.attribute_domain.lower(), attribute=settings.attribute_name)
+        meta = dict(result.metadata, **meta, content="ao")
         for f in files[job.image_name]:
             try:
                 jobs.make_output_folder(os.path.dirname(f.path))
@@ -165,8 +165,9 @@ def write_files(job, result, files, metadata, settings):
         if settings.bent_normals:
             name = bent_name(job, settings)
             own = files[name] if tile is None else udim.tile_files(files[name], tile)
-            w, f = bent.write_files(bent.encoded(res, settings), own, dict(tile_meta, map="bent_normal",
-                                                                            bent_space=settings.bent_space.lower()))
+            w, f = bent.write_files(bent.encoded(res, settings), own,
+                                    dict(res.metadata, **tile_meta, content="bent_normal",
+                                         bent_space=settings.bent_space.lower()))
             written += w
             failures += f
     return written, failures
@@ -332,8 +333,9 @@ def save_bent(session, job, result, saved_ao):
     name = bent_name(job, settings)
     files = output_files(settings, session.output_dir, session.run.jobs,
                          [(settings.file_format, settings.file_bits)])[name]
-    metadata = dict(jobs.settings_record(settings), object=job.object_name, map="bent_normal",
-                    bent_space=settings.bent_space.lower(), blend=bpy.path.basename(bpy.data.filepath))
+    metadata = dict(result.metadata, **jobs.settings_record(settings), object=job.object_name,
+                    content="bent_normal", bent_space=settings.bent_space.lower(),
+                    blend=bpy.path.basename(bpy.data.filepath))
     written, failures = bent.write_files(bent.encoded(result, settings), files, metadata)
     for path, exc in failures:
         session.file_errors += 1

@@ -430,7 +430,12 @@ def save_blend(bpy, path):
     from core import atomicfile
 
     def write(temp):
-        result = bpy.ops.wm.save_as_mainfile(filepath=os.fspath(temp), copy=True, check_existing=False)
+        try:
+            result = bpy.ops.wm.save_as_mainfile(filepath=os.fspath(temp), copy=True, check_existing=False)
+        finally:
+            # The temporary file existed (empty) when Blender saved over it: Blender kept it as a
+            # backup version, "<temp>1".
+            atomicfile.remove_quietly(os.fspath(temp) + "1")
         if result != {"FINISHED"}:
             raise RuntimeError(f"Blender did not save it ({result})")
 
