@@ -8,8 +8,8 @@ is estimated without bias by (1/N) sum_i w_i V(w_i): the kernel sums each sample
 weighted by the sample's AO term (:meth:`core.kernel.Kernel.run`'s ``vectors``), so bent normals
 cost no extra ray. For uniform directions the term is 2 cos(theta) V, which is the same weight
 cos(theta) / (pi p). The bent normal is m / |m|; on an open plane m = (0, 0, 2/3) and the bent normal
-is n; beside an infinite wall it leans away from the wall by atan(2 / pi) (see the tests and
-``/work/wt/notes/bent_normals.md``). A texel whose every sample is occluded has no bent direction
+is n; beside an infinite wall it leans away from the wall by atan(2 / pi) (tests/test_bent.py has the
+closed forms for a wall, with and without an AO distance). A texel whose every sample is occluded has no bent direction
 and takes its shading normal.
 
 The texture stores it in one of three spaces (:func:`check_space`):

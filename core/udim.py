@@ -4,7 +4,7 @@ Numbering (Blender's ``BKE_image_get_tile_from_pos``): tile 1001 + u_tile + 10 v
 u in [u_tile, u_tile + 1), v in [v_tile, v_tile + 1), with u_tile in 0..9 and v_tile in 0..99 (tiles
 1001 to 2000). Cycles bakes every tile of the target image with the UVs shifted by the tile's origin
 and clipped to its square, and extends the margin per tile (``RE_bake_pixels_populate``,
-``write_internal_bake_pixels``; ``/work/wt/notes/udim.md``). :func:`bake_udim` does the same with
+``write_internal_bake_pixels`` in Blender's source). :func:`bake_udim` does the same with
 one :func:`core.bake_ao` per tile: the UVs minus the tile's origin, each tile its own image of the
 same size, margin and all.
 

@@ -1,9 +1,10 @@
 """Ambient occlusion at mesh vertices: one value per face corner, as Cycles bakes into colour attributes.
 
-Cycles' AO bake into a colour attribute (``bake_targets_init_vertex_colors`` and
-``integrator_init_from_bake``, see ``/work/wt/notes/vertex_colors.md``) estimates one value per
-face corner: at the corner's vertex, nudged a little towards the centre of the first triangle that
-holds the corner, with the corner's shading normal (a flat face's corners have its face normal),
+Cycles' AO bake into a colour attribute (``bake_targets_init_vertex_colors``,
+``integrator_init_from_bake`` and ``bake_targets_output_vertex_colors`` in Blender's source)
+estimates one value per face corner: at the corner's vertex, nudged a little towards the centre of
+the first triangle that holds the corner, with the corner's shading normal (a flat face's corners
+have its face normal),
 over the same cosine-weighted hemisphere as a texel. A colour attribute on the point domain then
 holds the plain mean of the values of each vertex's corners, whatever the faces' sizes or angles;
 on the corner domain each corner keeps its own (:func:`vertex_means`).
@@ -16,7 +17,6 @@ that share their vertex and their normal (a smooth vertex's corners) share one u
 for them differ only by noise.
 """
 
-import math
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field

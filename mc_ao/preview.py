@@ -1,7 +1,6 @@
 """Preview on Object: the baked AO shown on the object in the viewport with one click, removed by the next.
 
-How (``/work/wt/notes/preview.md`` compares the approaches; node sockets by identifier, checked on
-Blender 4.2 and 5.0):
+How (the Mix node's sockets looked up by identifier, the same on Blender 4.2 and 5.0):
 
 - a material of the object's that is its own (local, used by this object alone) and shades with a
   Principled BSDF: the AO is multiplied into the Base Color there. Between whatever fed Base Color

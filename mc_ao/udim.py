@@ -1,6 +1,6 @@
 """UDIM bakes in Blender (scene.mc_ao.use_udim): one tiled image per object, one file per tile.
 
-What the bpy API allows (``/work/wt/notes/udim.md``, checked on Blender 4.2 and 5.0): ``Image.pixels``
+What the bpy API allows (checked on Blender 4.2 and 5.0; ``rna_Image_pixels_get/set``): ``Image.pixels``
 reaches only a tiled image's first tile, and no API sets another tile's pixels. So a finished UDIM
 bake goes into its image through files: every tile (the baked ones, and an existing image's other
 tiles, kept as they were) is written to a temporary folder as ``tile.<number>.<ext>`` (float EXR for a

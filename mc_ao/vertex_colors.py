@@ -1,6 +1,7 @@
 """Colour attributes as a bake target (scene.mc_ao.target = 'VERTEX_COLORS'), Cycles' way.
 
-Cycles' AO bake into a colour attribute (``/work/wt/notes/vertex_colors.md``) estimates one value
+Cycles' AO bake into a colour attribute (``bake_targets_init_vertex_colors`` and
+``bake_targets_output_vertex_colors`` in Blender's object_bake_api.cc) estimates one value
 per face corner at the corner's vertex (a hair inside the first triangle holding it), with the
 corner's shading normal, and stores in the point domain the plain mean of a vertex's corners, in
 the corner domain each corner's own; float colours hold the linear value, byte colours its sRGB

@@ -1,5 +1,5 @@
 """Bent normals (issue 14): the mean unoccluded direction per texel from the AO bake's own rays,
-against the exact cosine-weighted means of /work/wt/notes/bent_normals.md section 4, and Blender's
+against the exact cosine-weighted means of the visible directions beside a wall, and Blender's
 tangent-space encoding (the exact inverse of Cycles' Normal Map node)."""
 
 import math

@@ -68,8 +68,8 @@ def test_vertex_colors_write_ply_files_and_save_the_attribute(blend_file, tmp_pa
     out = tmp_path / "out"
     saved = tmp_path / "baked.blend"
     before = blend_file.read_bytes()
-    proc = run_script(blend_file, "--objects", "Ground", "Block", "Bare", "--target", "vertex-colors", "--domain", "corner",
-                      "--save", saved, "--output", out, *FAST)
+    proc = run_script(blend_file, "--objects", "Ground", "Block", "Bare", "--target", "vertex-colors",
+                      "--domain", "corner", "--save", saved, "--output", out, *FAST)
     assert proc.returncode == 0, proc.stderr
     assert blend_file.read_bytes() == before  # the input is never written
     assert sorted(p.name for p in out.iterdir()) == ["Bare_AO.ply", "Block_AO.ply", "Ground_AO.ply"]
@@ -121,7 +121,8 @@ def test_a_manifest_passes_the_new_options_through(blend_file, tmp_path):
     (tmp_path / "b.blend").write_bytes(blend_file.read_bytes())
     manifest.write_text(
         '[defaults]\nsamples = 8\nresolution = 16\n\n'
-        '[[bake]]\nblend = "a.blend"\nobjects = ["Ground"]\nudim = true\nbent_normals = true\nbent_space = "object"\nformat = ["exr"]\n\n'
+        '[[bake]]\nblend = "a.blend"\nobjects = ["Ground"]\nudim = true\nbent_normals = true\n'
+        'bent_space = "object"\nformat = ["exr"]\n\n'
         '[[bake]]\nblend = "b.blend"\nobjects = ["Ground"]\ntarget = "vertex-colors"\ndomain = "corner"\n'
     )
     out = tmp_path / "out"

@@ -190,3 +190,18 @@ def test_esc_leaves_the_mesh_as_it_was_and_a_finished_bake_is_one_undo_step(bpy,
     assert bpy.data.objects["Grid"].data.color_attributes.get("AO") is None
     assert bpy.ops.ed.redo() == {"FINISHED"}
     np.testing.assert_array_equal(values(bpy.data.objects["Grid"], "AO"), baked)
+
+
+def test_save_to_file_writes_the_ply_of_each_object(bpy, scene, tmp_path):
+    from core.plyio import read_ply
+
+    obj = grid(bpy, subdivisions=3)
+    add_cube(bpy, "Block", size=1.0, location=(0, 0, 0.7))
+    select_only(bpy, obj)
+    scene.mc_ao.save_to_file = True
+    scene.mc_ao.output_dir = str(tmp_path / "out")
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    positions, sizes, verts, ao, meta = read_ply(tmp_path / "out" / "Grid_AO.ply")
+    assert len(positions) == len(obj.data.vertices) and len(sizes) == len(obj.data.polygons)
+    np.testing.assert_allclose(ao, values(obj, "AO")[:, 0], atol=1e-6)
+    assert meta["object"] == "Grid" and meta["domain"] == "point" and meta["attribute"] == "AO"
