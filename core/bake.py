@@ -32,11 +32,11 @@ import numpy as np
 
 from ._version import __version__
 from .errors import BakeCancelled, BakeMemoryError, MeshError, SettingsError
-from .estimators import SamplingPlan, TexelEstimates, interval_half_width
+from .estimators import ErrorModel, SamplingPlan, TexelEstimates, interval_half_width, replicate_samples
 from .kernel import Kernel, TileContext
 from .margin import dilate
 from .mesh import Mesh
-from .patterns import TexelPattern
+from .patterns import TexelPattern, hash64
 from . import raster as R
 from .raster import bin_triangles, prepare, rasterize_tile
 from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE, BakeSettings, auto_tile_size,
@@ -139,7 +139,11 @@ class _TileBaker:
         self.uvtris, self.table, self.kernel, self.tracer = uvtris, table, kernel, tracer
         self.pattern, self.s, self.shared = pattern, settings, shared
         self.plan = SamplingPlan(settings)
-        self.seed = np.uint64(settings.seed)
+        self.caps = replicate_samples(settings.samples, settings.replicates)
+        # Replicate 0 keeps the bake's seed (one replicate traces what a bake always traced); the
+        # others allocate split texels' samples from seeds of their own, independent of it.
+        self.seeds = [np.uint64(settings.seed)] + [hash64(np.uint64(settings.seed), np.uint64(r), np.uint64(31))
+                                                    for r in range(1, settings.replicates)]
 
     def bake(self, key, tri_ids):
         s, shared = self.s, self.shared
@@ -148,37 +152,44 @@ class _TileBaker:
         x1, y1 = min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height)
         frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1)
         n_tex = len(frag.texels)
-        est = TexelEstimates(n_tex)
+        est = TexelEstimates(n_tex, s.replicates)
         if n_tex == 0:
             return frag, est
         units = build_units(frag, self.table, s.width)
         contact = contact_texels(frag, self.table, s.width, self.tracer, s.samples)
         tile = TileContext(self.table, units, self.pattern.keys(frag.texels), frag.texels, contact, self.tracer.offset)
-        for start, count, texels in self.plan.rounds(est, np.arange(n_tex)):
-            unit, first, size = allocate(units, texels, start, count, self.seed, frag.texels)
-            # Equal pieces go through the kernel together, squares before triangles, in a fixed order
-            # (so every texel's sums are added in the same order however the pieces are chunked).
-            kind = units.kind[unit].astype(np.int64)
-            curved = self.table.smooth[units.tri[unit]]
-            group = (size * 2 + curved) * 2 + kind
-            order = np.argsort(group, kind="stable")
-            unit, first, size, group, kind = unit[order], first[order], size[order], group[order] // 2, kind[order]
-            bounds = np.flatnonzero(np.diff(group)) + 1
-            for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
-                k = int(size[lo])
-                curved = bool(self.table.smooth[units.tri[unit[lo]]])
-                step = max(1, s.chunk_rays // k)
-                for c0 in range(lo, hi, step):
-                    shared.check()
-                    c = slice(c0, min(c0 + step, hi))
-                    squares = int(np.count_nonzero(kind[c] == 0))
-                    s1, s2, rays, sec, cpu = self.kernel.run(tile, curved, unit[c], first[c], k, squares)
-                    est.add(units.texel[unit[c]], k, s1, s2)
-                    shared.advance(rays, rays, sec, cpu)
+        tiles = [tile] + [tile.for_replicate(self.pattern.keys(frag.texels, r), r) for r in range(1, s.replicates)]
+        x, y = frag.texels % s.width, frag.texels // s.width
+        for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
+            for r, (tile_r, cap) in enumerate(zip(tiles, self.caps)):
+                if start < cap:
+                    self._trace(tile_r, units, est, r, texels, start, min(count, cap - start))
         # Credit the work the adaptive stop saved, so progress reaches 1.
         shared.advance(n_tex * s.samples - int(est.n.sum()))
         return frag, est
 
+    def _trace(self, tile, units, est, replicate, texels, start, count):
+        s, shared = self.s, self.shared
+        unit, first, size = allocate(units, texels, start, count, self.seeds[replicate], tile.texel_ids)
+        # Equal pieces go through the kernel together, squares before triangles, in a fixed order
+        # (so every texel's sums are added in the same order however the pieces are chunked).
+        kind = units.kind[unit].astype(np.int64)
+        curved = self.table.smooth[units.tri[unit]]
+        group = (size * 2 + curved) * 2 + kind
+        order = np.argsort(group, kind="stable")
+        unit, first, size, group, kind = unit[order], first[order], size[order], group[order] // 2, kind[order]
+        bounds = np.flatnonzero(np.diff(group)) + 1
+        for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
+            k = int(size[lo])
+            curved = bool(self.table.smooth[units.tri[unit[lo]]])
+            step = max(1, s.chunk_rays // k)
+            for c0 in range(lo, hi, step):
+                shared.check()
+                c = slice(c0, min(c0 + step, hi))
+                squares = int(np.count_nonzero(kind[c] == 0))
+                s1, s2, rays, sec, cpu = self.kernel.run(tile, curved, unit[c], first[c], k, squares)
+                est.add(units.texel[unit[c]], k, s1, s2, replicate)
+                shared.advance(rays, rays, sec, cpu)
 
 
 #: Occluders farther than this many target sizes from the target are refused: float32 rays cannot
@@ -227,7 +238,7 @@ def _normalized_scene(target, occluders):
 
 def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
-            ignore_backfaces=False, falloff=0.0, progress=None, cancel=None, on_tile=None,
+            ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
@@ -286,11 +297,12 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         if not isinstance(o, Mesh):
             raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
-                                    source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays)
+                                    source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
+                                    replicates)
     target, occluders, unit = _normalized_scene(target, occluders)
     w, h = s.width, s.height
     tri_total = target.triangle_count + sum(o.triangle_count for o in occluders)
-    need = estimate_memory(w, h, tri_total, s.threads, s.chunk_rays, s.samples, s.source)
+    need = estimate_memory(w, h, tri_total, s.threads, s.chunk_rays, s.samples, s.source, s.replicates)
     avail = available_memory()
     if avail is not None and need > avail:
         raise BakeMemoryError(f"a {w} x {h} bake of {tri_total} triangles needs about {need / 2**30:.2f} GiB, "
@@ -302,7 +314,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     table = SurfaceTable.build(target, uvtris)
     bins = bin_triangles(uvtris, w, h, s.tile_size)
     tracer = Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / unit)
-    pattern = TexelPattern(s.source, s.seed, s.samples, pool_points=s.pool_points())
+    pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
     kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
     tile = s.tile_size
     # Planned work: texel-samples of every tile's bounding rectangle is unknown before rasterising,
@@ -310,6 +322,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     planned = sum(min(tile, w - kx * tile) * min(tile, h - ky * tile) for ky, kx in bins) * s.samples
     shared = _Shared(planned, progress, cancel)
     baker = _TileBaker(uvtris, table, kernel, tracer, pattern, s, shared)
+    errors = ErrorModel(s)
 
     ao = np.zeros((h, w), np.float32)
     se = np.zeros((h, w), np.float32)
@@ -327,7 +340,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         if len(frag.texels):
             rows, cols = frag.texels // w, frag.texels % w
             ao[rows, cols] = np.clip(est.mean, 0.0, 1.0)
-            se[rows, cols] = est.stderr
+            se[rows, cols] = errors.stderr(est, cols, rows)
             count[rows, cols] = est.n
             mask[rows, cols] = True
             with shared.lock:
