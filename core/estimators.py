@@ -55,8 +55,8 @@ def t_quantile(p, dof):
     """Student's t quantile for probability ``p`` and ``dof`` degrees of freedom (arrays broadcast).
 
     Exact for 1 and 2 degrees of freedom; the Cornish-Fisher expansion (Abramowitz and Stegun
-    26.7.5, four terms) above, accurate to 3e-3 at 3 degrees of freedom and 1e-5 from 10, against
-    scipy (tests/test_estimators.py). The core needs no scipy.
+    26.7.5, four terms) above: relative error at p = 0.975 1.2e-3 at 3 degrees of freedom, 1e-5 at
+    8, below 1e-7 from 50 (tests/test_estimators.py compares with scipy). The core needs no scipy.
     """
     dof = np.asarray(dof, dtype=np.float64)
     z = normal_quantile(p)
