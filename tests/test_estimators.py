@@ -174,3 +174,23 @@ def test_open_and_fully_occluded_texels_stop_at_the_minimum():
     assert inside.any() and far.any()
     assert np.all(r.ao[inside] == 0) and np.all(r.samples[inside] == 16)
     assert np.all(r.ao[far] == 1) and np.all(r.samples[far] == 16)
+
+
+@pytest.mark.slow
+def test_texels_beside_a_resting_box_get_their_own_error():
+    # Under the box AO is exactly 0 and every sample agrees. Beside it the AO drops steeply to the
+    # wall: a texel there must not take its variance from the agreeing texels under the box (which
+    # would understate its error by up to half): it pools over the texels whose samples vary.
+    occluders, distance, truth, _ = exact("box")
+    inside = truth < 1e-9
+    near = np.zeros_like(inside)
+    for dy in range(-2, 3):
+        for dx in range(-2, 3):
+            near |= np.roll(np.roll(inside, dy, 0), dx, 1)
+    rim = near & ~inside & (truth < 1)
+    z = []
+    for seed in range(8):
+        r = bake_ao(plane(), occluders, resolution=W, samples=64, margin=0, seed=seed, threads=2)
+        z.append(((r.ao - truth) / r.stderr)[rim])
+    z = np.concatenate(z)
+    assert z.size > 500 and z.std() < 1.22, z.std()  # pooled over every texel: 1.34

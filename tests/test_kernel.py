@@ -265,3 +265,16 @@ def test_smooth_split_and_adaptive_bakes_are_bit_identical_for_any_threads_tiles
     b = bake_ao(mesh, [lid], threads=2, tile_size=8, chunk_rays=333, **args)
     for name in ("ao", "stderr", "samples", "mask"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+
+def test_replicates_allocate_a_split_texels_samples_independently():
+    # Each replicate is an independent randomisation, the share of a split texel's samples between
+    # its pieces included: replicate 1 does not repeat replicate 0's allocation.
+    rays, _ = record(plane(), resolution=(16, 13), samples=8, seed=1)
+    x = (rays["origins"][:, 0] + 0.5) * 16
+    y = (rays["origins"][:, 1] + 0.5) * 13
+    in0 = y * 16 < x * 13
+    split = np.unique(rays["texels"][np.abs(x - y * 16 / 13) < 2])
+    counts = np.array([[int(in0[(rays["texels"] == t) & (rays["replicate"] == r)].sum()) for r in (0, 1)]
+                       for t in split])
+    assert len(split) > 10 and np.mean(counts[:, 0] != counts[:, 1]) > 0.1
