@@ -111,7 +111,13 @@ class BakeSettings:
         seed = _positive_int(seed, "seed", lo=0)
         threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
         chunk_rays = _positive_int(chunk_rays, "chunk_rays")
-        tile_size = auto_tile_size(w, h, samples, threads) if tile_size is None else _positive_int(tile_size, "tile_size")
+        if tile_size is None:
+            # Adaptive bakes rarely reach their cap: size tiles for a typical texel's samples (the
+            # geometric mean of the minimum and the cap), or they come out tiny and costly.
+            typical = samples if target_error == 0 else max(min(min_samples, samples),
+                                                            int(math.sqrt(min(min_samples, samples) * samples)))
+            tile_size = auto_tile_size(w, h, typical, threads)
+        tile_size = _positive_int(tile_size, "tile_size")
         tile_size = -(-tile_size // TILE_MULTIPLE) * TILE_MULTIPLE
         replicates = _positive_int(replicates, "replicates")
         if replicates > MAX_REPLICATES:
