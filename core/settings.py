@@ -160,6 +160,8 @@ class BakeSettings:
                 "sample_source": self.source, "distribution": self.distribution, "seed": self.seed,
                 "max_distance": max_distance_world, "falloff": self.falloff,
                 "ignore_backfaces": self.ignore_backfaces, "margin": self.margin, "replicates": self.replicates,
+                "error_estimate": ("replicates" if self.replicates > 1
+                                   else "independent" if self.source == "independent" else "bound"),
                 "resolution": f"{self.width}x{self.height}"}
 
 
