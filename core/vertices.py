@@ -26,6 +26,7 @@ import numpy as np
 from ._version import __version__
 from .bake import _cancelled, _normalized_scene, _Shared, _Stop, _TileBaker
 from .errors import BakeCancelled, MeshError, SettingsError
+from .estimators import ErrorModel
 from .kernel import Kernel
 from .mesh import Mesh
 from .patterns import POOL_POINTS, TexelPattern
@@ -149,6 +150,59 @@ def sample_points(mesh, corners, merge=True):
     return unit.astype(np.int64), p, n, gn, corners3, int(flat[unit].sum())
 
 
+class Neighbours:
+    """Where the error model pools a sample point's variance (:func:`core.estimators.window_sums`
+    with ``y`` None): the point itself and the points whose vertex is its own or shares an edge
+    with it (a vertex's 1-ring, the mesh's analogue of a texel's window), among the points of one
+    block (so that a point's estimate never depends on how blocks go to threads). ``a``, ``b``:
+    pairs of distinct points of the block (local numbers); ``m``: points in the block."""
+
+    def __init__(self, a, b, m):
+        self.a, self.b, self.m = a, b, m
+
+    def sums(self, values):
+        values = np.asarray(values, dtype=np.float64)
+        out = values.copy()
+        for row in range(len(values)):
+            out[row] += np.bincount(self.a, weights=values[row, self.b], minlength=self.m)
+        return out
+
+
+def unit_pairs(mesh, unit_vertex):
+    """(a, b), sorted by a then b: every pair of distinct sample points whose vertices (``unit_vertex``
+    per point) are the same vertex or share an edge of ``mesh``."""
+    unit_vertex = np.asarray(unit_vertex, dtype=np.int64)
+    v_count = len(mesh.positions)
+    tri = np.asarray(mesh.triangles, dtype=np.int64)
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    same = np.repeat(np.unique(unit_vertex), 2).reshape(-1, 2)
+    e = np.unique(np.concatenate([e, e[:, ::-1], same]), axis=0)
+    order = np.argsort(unit_vertex, kind="stable")
+    count = np.bincount(unit_vertex, minlength=v_count)
+    start = np.concatenate([[0], np.cumsum(count)])
+    ca, cb = count[e[:, 0]], count[e[:, 1]]
+    keep = (ca > 0) & (cb > 0)
+    e, ca, cb = e[keep], ca[keep], cb[keep]
+    pairs = ca * cb
+    edge = np.repeat(np.arange(len(e)), pairs)
+    offset = np.arange(int(pairs.sum())) - np.repeat(np.cumsum(pairs) - pairs, pairs)
+    a = order[start[e[edge, 0]] + offset // cb[edge]]
+    b = order[start[e[edge, 1]] + offset % cb[edge]]
+    keep = a != b
+    a, b = a[keep], b[keep]
+    o = np.lexsort((b, a))
+    return a[o], b[o]
+
+
+def _block_neighbours(pairs, lo, hi):
+    """The :class:`Neighbours` of the points ``lo`` .. ``hi`` - 1 among ``pairs`` (:func:`unit_pairs`)."""
+    a, b = pairs
+    i, j = np.searchsorted(a, [lo, hi])
+    a, b = a[i:j], b[i:j]
+    inside = (b >= lo) & (b < hi)
+    return Neighbours(a[inside] - lo, b[inside] - lo, hi - lo)
+
+
 def _point_table(p, n, gn, corners3):
     """A :class:`SurfaceTable` with one constant 'triangle' per sample point."""
     m = len(p)
@@ -170,8 +224,8 @@ def _units(ids):
 
 def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_samples=16, target_error=0.0,
                    max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
-                   ignore_backfaces=False, falloff=0.0, progress=None, cancel=None, chunk_rays=1 << 16,
-                   on_rays=None, merge=True, bent_normals=False):
+                   ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None,
+                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False):
     """Bake ambient occlusion at the face corners of ``target`` (Cycles' colour-attribute bake).
 
     Parameters
@@ -181,7 +235,12 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     corners : (C, 2) integers, (triangle, corner 0..2) of each face corner to bake, e.g. Blender's
         face corners each mapped to the first triangle that holds it; None: every triangle corner.
     merge : corners with the same vertex and normal share one sample point (default).
-    bent_normals : also estimate each corner's bent normal (world space) from the same rays.
+    bent_normals : also estimate each corner's bent normal (world space) from the same rays
+        (summed over all replicates).
+    replicates : as for :func:`core.bake_ao`: with 2 or more, ``stderr`` and adaptive sampling use
+        the spread between replicates, pooled over each sample point's neighbourhood on the mesh
+        (its vertex and the vertices that share an edge with it: :class:`Neighbours`), as a
+        texel's is pooled over the texels around it.
     The other parameters are those of :func:`core.bake_ao`; progress is reported per chunk of
     rays and ``on_rays`` batches name the sample point (``texels``) of each ray.
 
@@ -202,7 +261,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
             raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
     corners = all_corners(target) if corners is None else _check_corners(corners, target)
     s = BakeSettings.from_arguments(1, samples, min_samples, target_error, max_distance, distribution, source,
-                                    0, seed, threads, ignore_backfaces, falloff, None, chunk_rays)
+                                    0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates)
     target, occluders, scale = _normalized_scene(target, occluders)
     unit, p, n, gn, corners3, flat = sample_points(target, corners, merge)
     m = len(p)
@@ -210,12 +269,16 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         raise BakeCancelled("the bake was cancelled before it started")
     table = _point_table(p, n, gn, corners3)
     tracer = Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / scale)
-    span = pattern_span(s.source, s.samples)
-    pool = max(span, min(POOL_POINTS, (1 << max(0, (m - 1).bit_length())) * span))
-    pattern = TexelPattern(s.source, s.seed, s.samples, pool_points=pool)
+    span = pattern_span(s.source, s.replicate_samples)
+    pool = max(span * s.replicates, min(POOL_POINTS, (1 << max(0, (m * s.replicates - 1).bit_length())) * span))
+    pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=pool)
     kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
     shared = _Shared(m * s.samples, progress, cancel)
     baker = _TileBaker(None, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals))
+    errors = ErrorModel(s)
+    unit_vertex = np.empty(m, np.int64)
+    unit_vertex[unit] = target.triangles[corners[:, 0], corners[:, 1]]
+    pairs = unit_pairs(target, unit_vertex) if s.replicates > 1 else None
 
     ao = np.zeros(m, np.float32)
     se = np.zeros(m, np.float32)
@@ -227,9 +290,10 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         contact = np.zeros(len(ids), bool)
         if tracer.contact_scene is not None:
             contact = tracer.contact(p[ids], gn[ids])
-        est, sums = baker.trace(_units(ids), ids, contact)
+        near = None if pairs is None else _block_neighbours(pairs, int(ids[0]), int(ids[-1]) + 1)
+        est, sums = baker.trace(_units(ids), ids, contact, near, None)
         ao[ids] = np.clip(est.mean, 0.0, 1.0)
-        se[ids] = est.stderr
+        se[ids] = errors.stderr(est, near, None)
         count[ids] = est.n
         if sums is not None:
             length = np.linalg.norm(sums, axis=1)
@@ -267,4 +331,5 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
                             report=report, bent=None if bent is None else bent[unit])
 
 
-__all__ = ["VertexBakeResult", "bake_vertex_ao", "all_corners", "vertex_means", "sample_points", "NUDGE"]
+__all__ = ["VertexBakeResult", "bake_vertex_ao", "all_corners", "vertex_means", "sample_points", "NUDGE",
+           "Neighbours", "unit_pairs"]

@@ -228,21 +228,18 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     max_bytes = id_name_max_bytes()
     image_names = {}
     for obj in targets:
-        name = settings.image_name_for(obj.name, max_bytes)
+        names = [settings.image_name_for(obj.name, max_bytes)]
+        if settings.error_map and not settings.vertex_colors:
+            names.append(settings.stderr_image_name_for(obj.name, max_bytes))
         if settings.bent_normals and not settings.vertex_colors:
-            bent = settings.bent_image_name_for(obj.name, max_bytes)
-            if bent in image_names or bent == name:
+            names.append(settings.bent_image_name_for(obj.name, max_bytes))
+        for name in names:
+            if name in image_names:
                 raise ExtractError(
-                    f"{image_names.get(bent, obj.name)} and {obj.name} would both bake into image {bent!r}; "
+                    f"{image_names[name]} and {obj.name} would both bake into image {name!r}; "
                     "put {object} into the image name"
                 )
-            image_names[bent] = obj.name
-        if name in image_names:
-            raise ExtractError(
-                f"{image_names[name]} and {obj.name} would both bake into image {name!r}; "
-                "put {object} into the image name"
-            )
-        image_names[name] = obj.name
+            image_names[name] = obj.name
 
     if settings.occluders == "VISIBLE":
         pool = list(_visible_geometry(depsgraph, view_layer or depsgraph.view_layer))

@@ -158,6 +158,9 @@ def check_settings(settings):
             problems.append((field, f"must be one of {', '.join(allowed)}, not {getattr(settings, field)!r}"))
     if settings.target == "VERTEX_COLORS" and not str(settings.attribute_name).strip():
         problems.append(("attribute_name", "must name the color attribute to bake into, not be empty"))
+    if settings.target == "VERTEX_COLORS" and settings.error_map:
+        problems.append(("error_map", "is for image textures: a color-attribute bake has no image to hold the "
+                                      "standard error; turn it off (adaptive sampling still uses the error)"))
     return problems
 
 
@@ -197,6 +200,7 @@ def settings_record(settings):
         **({"target": "vertex_colors", "attribute": settings.attribute_name,
             "domain": settings.attribute_domain.lower()} if settings.target == "VERTEX_COLORS" else {}),
         **({"bent_normals": settings.bent_space.lower()} if settings.bent_normals else {}),
+        "replicates": int(kw["replicates"]),
     }
 
 

@@ -53,6 +53,7 @@ class BakeSettings:
     attribute_domain: str = "POINT"  # "POINT" (mean of a vertex's corners, as Cycles) or "CORNER"
     bent_normals: bool = False  # also bake "<object>_BentNormal" from the same rays
     bent_space: str = "TANGENT"  # or "OBJECT"
+    error_map: bool = False  # also keep each texel's standard error: image "<image>_stderr", file "<stem>_stderr.exr"
 
     @classmethod
     def from_properties(cls, props, **overrides):
@@ -66,7 +67,12 @@ class BakeSettings:
         """(width, height) of the image in pixels."""
         return self.resolution, self.height or self.resolution
 
-    def image_name_for(self, object_name, max_bytes=None):
+    def stderr_image_name_for(self, object_name, max_bytes=None):
+        """The name of the image the standard error of ``object_name``'s bake goes into (with
+        ``error_map``): its AO image's name + "_stderr", fitted to ``max_bytes`` the same way."""
+        return self.image_name_for(object_name, max_bytes, suffix="_stderr")
+
+    def image_name_for(self, object_name, max_bytes=None, suffix=""):
         """The name of the image that ``object_name`` bakes into: "<object>_AO" or the Image setting.
 
         max_bytes: the longest name the image can have, in bytes of UTF-8 (Blender's ID names: 63
@@ -77,7 +83,7 @@ class BakeSettings:
         object always gets the same image, different objects different ones. This is not a file
         name: files get theirs from mc_ao.jobs.output_files().
         """
-        template = self.image_name or "{object}_AO"
+        template = (self.image_name or "{object}_AO") + suffix
         name = template.replace("{object}", object_name)
         if max_bytes is None or len(name.encode("utf-8", "surrogatepass")) <= max_bytes:
             return name
@@ -97,6 +103,14 @@ class BakeSettings:
         """The image of ``object_name``'s bent normals: "<object>_BentNormal", made to fit as
         image_name_for() makes the AO image's name fit."""
         return BakeSettings(image_name="{object}_BentNormal").image_name_for(object_name, max_bytes)
+
+    @property
+    def replicates(self):
+        """Independent randomisations per texel (core.bake_ao's ``replicates``): 2 where the bake's
+        error is used (adaptive sampling stops on it, the error map shows it), for an error estimate
+        that holds for every sample source; else 1, the least noise for the rays (measured: Sobol'
+        1.16-1.20 times the RMSE at equal rays with 2)."""
+        return 2 if self.error_map or self.target_error > 0 else 1
 
     @property
     def file_bits(self):
@@ -124,6 +138,7 @@ class BakeSettings:
             threads=threads,
             ignore_backfaces=self.ignore_backfaces,
             **({"bent_normals": True} if self.bent_normals and not self.vertex_colors else {}),
+            replicates=self.replicates,
         )
 
 

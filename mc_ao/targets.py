@@ -76,6 +76,8 @@ def check_images(job, settings):
     if settings.vertex_colors:
         return
     names = [job.image_name] + ([bent_name(job, settings)] if settings.bent_normals else [])
+    if settings.use_udim and settings.error_map:  # the tiled "<image>_stderr" (a plain one: the operator's)
+        names.append(stderr_name(job, settings))
     w, h = settings.size
     for name in names:
         if settings.use_udim:
@@ -88,6 +90,12 @@ def bent_name(job, settings):
     from .baking import id_name_max_bytes
 
     return settings.bent_image_name_for(job.object_name, id_name_max_bytes())
+
+
+def stderr_name(job, settings):
+    from .baking import id_name_max_bytes
+
+    return settings.stderr_image_name_for(job.object_name, id_name_max_bytes())
 
 
 def run(job, settings, threads, progress=None, cancel=None, on_tile=None):
@@ -213,14 +221,18 @@ def finish_job(session, context, i, result):
                 raise ExtractError("the object is gone")
             vertex_colors.write_attribute(obj, settings, result, job.target.extra)
         else:
-            images_ = {job.image_name: {t: images.rgba(r.ao) for t, r in result.tiles.items()}}
+            images_ = {job.image_name: ({t: images.rgba(r.ao) for t, r in result.tiles.items()},
+                                        settings.float_buffer)}
             if settings.bent_normals:
                 from . import bent
 
-                images_[bent_name(job, settings)] = {t: bent.rgba(bent.encoded(r, settings))
-                                                     for t, r in result.tiles.items()}
-            for name, tiles in images_.items():
-                udim.fill(name, tiles, settings.float_buffer)
+                images_[bent_name(job, settings)] = ({t: bent.rgba(bent.encoded(r, settings))
+                                                      for t, r in result.tiles.items()}, settings.float_buffer)
+            if settings.error_map:  # the tiled "<image>_stderr", float, the same tiles as the AO
+                images_[stderr_name(job, settings)] = ({t: images.rgba(r.stderr) for t, r in result.tiles.items()},
+                                                       True)
+            for name, (tiles, float_buffer) in images_.items():
+                udim.fill(name, tiles, float_buffer)
     except (ExtractError, images.ImageError, RuntimeError) as exc:
         session.errors += 1
         session.report({"ERROR"}, f"{job.object_name}: {exc}")
@@ -252,7 +264,7 @@ def _save(session, job, result):
                     blend=bpy.path.basename(bpy.data.filepath))
     try:
         files = output_files(settings, session.output_dir, session.run.jobs,
-                             [(settings.file_format, settings.file_bits)])
+                             [(settings.file_format, settings.file_bits)], stderr=settings.error_map)
         written, failures = write_files(job, result, files, metadata, settings)
     except corelink.load().McAoError as exc:
         written, failures = [], [(session.output_dir, exc)]
@@ -276,9 +288,14 @@ def _link_udim(session, job, result):
     from . import images, udim
 
     settings = session.settings
-    files = output_files(settings, session.output_dir, session.run.jobs, [(settings.file_format, settings.file_bits)])
-    names = [job.image_name] + ([bent_name(job, settings)] if settings.bent_normals else [])
-    for name in names:
+    files = output_files(settings, session.output_dir, session.run.jobs, [(settings.file_format, settings.file_bits)],
+                         stderr=settings.error_map)
+    paths = {job.image_name: files[job.image_name][0].path}
+    if settings.bent_normals:
+        paths[bent_name(job, settings)] = files[bent_name(job, settings)][0].path
+    if settings.error_map:  # "<image>_stderr" onto <stem>_stderr.<UDIM>.exr
+        paths[stderr_name(job, settings)] = files[job.image_name][0].stderr_path
+    for name, path in paths.items():
         image = bpy.data.images.get(name)
         if image is None:
             continue
@@ -287,7 +304,7 @@ def _link_udim(session, job, result):
                           "packed into the .blend file instead of loading from the saved files")
             continue
         try:
-            udim.link_files(name, files[name][0].path, settings.output_dir.startswith("//"))
+            udim.link_files(name, path, settings.output_dir.startswith("//"))
         except (images.ImageError, RuntimeError) as exc:
             session._warn(f"{job.object_name}: {exc}; its pixels are packed into the .blend file instead")
 
