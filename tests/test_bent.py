@@ -195,3 +195,28 @@ def test_margin_texels_hold_unit_vectors_and_the_rest_the_unbaked_fill():
     rgb = encode(r.bent, filled, tangent=True)
     np.testing.assert_array_equal(rgb[~filled], np.broadcast_to([0.5, 0.5, 1.0], rgb[~filled].shape))
     assert np.all(encode(r.bent, filled, tangent=False)[~filled] == 0)
+
+
+def test_every_ray_of_every_replicate_and_round_counts_in_the_bent_normal():
+    """With replicates and adaptive rounds (texels stopping at different counts), a texel's bent
+    normal is the normalised sum of the unit directions of all its unoccluded rays, over every
+    replicate and every round: rebuilt here from the rays the bake reports (world space, a flat
+    plane, so no interpolation of normals). Fails if a replicate's or a round's sums are dropped."""
+    rays = []
+
+    def on_rays(b):
+        rays.append((b.texels.copy(), b.directions.astype(np.float64), ~b.occluded & (b.tfar > 0), b.replicate))
+
+    W = 16
+    r = bake_ao(plane(-1, -0.5, 0, 0.5), [wall(x=0.05)], resolution=W, samples=512, min_samples=32,
+                target_error=0.02, replicates=2, margin=0, bent_normals=True, threads=2, on_rays=on_rays)
+    counts = np.unique(r.samples[r.mask])
+    assert len(counts) >= 2 and counts.min() > 32 and counts.max() < 512  # two rounds or more, stopped early
+    assert {rep for *_, rep in rays} == {0, 1}
+    sums = np.zeros((W * W, 3))
+    for texels, d, open_, _ in rays:
+        d = d / np.linalg.norm(d, axis=1)[:, None]
+        np.add.at(sums, texels, d * open_[:, None])
+    want = sums / np.linalg.norm(sums, axis=1)[:, None]
+    got = r.bent.reshape(-1, 3)
+    np.testing.assert_allclose(got, want, atol=2e-6)
