@@ -92,6 +92,7 @@ def test_vertex_colors_write_ply_files_and_save_the_attribute(blend_file, tmp_pa
     (["--save", "x.blend"], "--save writes color attributes into a .blend file: it needs --target vertex-colors"),
     (["--target", "vertex-colors", "--udim"], "--udim bakes images"),
     (["--target", "vertex-colors", "--attribute", " "], "--attribute must name the color attribute"),
+    (["--target", "vertex-colors", "--stderr"], "--stderr is for image textures"),
 ])
 def test_bad_combinations_exit_2(blend_file, tmp_path, args, message):
     proc = run_script(blend_file, "--output", tmp_path / "out", *args, *FAST)

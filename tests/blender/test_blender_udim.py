@@ -196,3 +196,48 @@ def test_report_keys_of_the_new_bakes_are_the_cores(addon):
     assert set(baking._TARGET_NOTES) <= set(udim.report) | set(vertex.report)
     assert baking.input_notes(udim) == [
         "2 triangles reach outside the UDIM tiles (u in [0, 10], v in [0, 100]); the parts outside are not baked"]
+
+
+def test_the_error_map_of_a_udim_bake_is_a_tiled_image_and_one_file_per_tile(bpy, udim_scene, tmp_path):
+    """Error Map with UDIM tiles: "<image>_stderr" is a tiled float image with the AO's tiles, each
+    the core's standard error of that tile (two replicates); Save to File writes
+    <image>_stderr.<tile>.exr beside the AO's tiles and links the image to them."""
+    import core.imageio
+    from mc_ao import udim
+
+    ground_over_two_tiles(bpy)
+    udim_scene.mc_ao.error_map = True
+    udim_scene.mc_ao.save_to_file = True
+    udim_scene.mc_ao.output_dir = str(tmp_path / "out")
+    udim_scene.mc_ao.file_format = "OPEN_EXR"
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    assert sorted(os.listdir(tmp_path / "out")) == [
+        "Ground_AO.1001.exr", "Ground_AO.1002.exr", "Ground_AO_stderr.1001.exr", "Ground_AO_stderr.1002.exr"]
+    image = bpy.data.images["Ground_AO_stderr"]
+    assert image.source == "TILED" and [t.number for t in image.tiles] == [1001, 1002] and image.is_float
+    assert image.filepath == str(tmp_path / "out" / "Ground_AO_stderr.<UDIM>.exr")
+    want = core_tiles(bpy, udim_scene)
+    assert want.tiles[1001].metadata["replicates"] == 2
+    tiles = udim.tile_pixels(image)
+    for number in (1001, 1002):
+        # The files are half-float EXRs (the AO's EXR depth), and the image loads them.
+        pixels, meta = core.imageio.read_image(tmp_path / "out" / f"Ground_AO_stderr.{number}.exr")
+        np.testing.assert_allclose(pixels, want.tiles[number].stderr, rtol=2.0 ** -11, atol=1e-7)
+        np.testing.assert_array_equal(tiles[number][..., 0], pixels)
+        assert meta["content"] == "stderr" and meta["udim_tile"] == number
+    shaded = want.tiles[1002].mask & (want.tiles[1002].ao < 0.95)
+    assert shaded.any() and np.all(want.tiles[1002].stderr[shaded] > 0)
+
+
+def test_the_error_map_of_a_udim_bake_is_packed_without_save_to_file(bpy, udim_scene):
+    from mc_ao import udim
+
+    ground_over_two_tiles(bpy)
+    udim_scene.mc_ao.error_map = True
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    image = bpy.data.images["Ground_AO_stderr"]
+    assert image.source == "TILED" and len(image.packed_files) == 2 and image.use_fake_user
+    assert image.colorspace_settings.name == "Non-Color" and image.is_float
+    tiles, want = udim.tile_pixels(image), core_tiles(bpy, udim_scene)
+    for number in (1001, 1002):
+        np.testing.assert_array_equal(tiles[number][..., 0], want.tiles[number].stderr)  # float, exact

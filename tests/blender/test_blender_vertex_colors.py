@@ -205,3 +205,39 @@ def test_save_to_file_writes_the_ply_of_each_object(bpy, scene, tmp_path):
     assert len(positions) == len(obj.data.vertices) and len(sizes) == len(obj.data.polygons)
     np.testing.assert_allclose(ao, values(obj, "AO")[:, 0], atol=1e-6)
     assert meta["object"] == "Grid" and meta["domain"] == "point" and meta["attribute"] == "AO"
+
+
+def test_adaptive_sampling_of_color_attributes_uses_the_error_model(bpy, scene):
+    """Noise Threshold on a colour-attribute bake: two replicates, corners far from the cube stop at
+    Min Samples, shaded ones go on; the attribute holds the core's values for the job."""
+    from mc_ao import baking, vertex_colors
+    from mc_ao.settings import BakeSettings
+
+    obj = grid(bpy)
+    add_cube(bpy, "Hovering", size=0.8, location=(-1.1, -0.9, 0.7))
+    scene.mc_ao.samples, scene.mc_ao.min_samples, scene.mc_ao.target_error = 512, 32, 0.02
+    scene.mc_ao.max_distance = 1.0
+    scene.mc_ao.attribute_domain = "CORNER"
+    select_only(bpy, obj)
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    got = values(obj, "AO")[:, 0].astype(float)
+    settings = BakeSettings.from_properties(scene.mc_ao)
+    assert settings.replicates == 2 and settings.bake_kwargs()["replicates"] == 2
+    (job,) = baking.plan(bpy.context.evaluated_depsgraph_get(), [obj], settings, selected=[obj])
+    r = job.run(settings, threads=2)
+    assert r.metadata["replicates"] == 2
+    np.testing.assert_allclose(got, vertex_colors.values(r, job.target.extra, "CORNER"), atol=1e-6)
+    assert r.samples.min() == 32 and r.samples.max() > 64
+    assert np.all(r.samples[r.ao < 0.9] > 32)
+
+
+def test_the_error_map_is_refused_for_color_attributes(bpy, scene):
+    """A colour attribute has no room for the standard error: Error Map is refused before baking."""
+    obj = grid(bpy, subdivisions=2)
+    scene.mc_ao.error_map = True
+    select_only(bpy, obj)
+    session, reports = new_session()
+    assert not session.start(bpy.context, live=False)
+    assert reports[-1][0] == "ERROR", reports
+    assert "Error Map is for image textures" in reports[-1][1] and "nothing was baked" in reports[-1][1]
+    assert obj.data.color_attributes.get("AO") is None
