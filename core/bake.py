@@ -186,8 +186,13 @@ class _TileBaker:
         tiles = [tile] + [tile.for_replicate(self.pattern.keys(texel_ids, r), r) for r in range(1, s.replicates)]
         for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
             for r, (tile_r, cap) in enumerate(zip(tiles, self.caps)):
-                if start < cap:
-                    self._trace(tile_r, units, est, sums, r, texels, start, min(count, cap - start))
+                c = np.minimum(count, cap - start)  # replicate r's own share of the samples
+                if np.ndim(c):
+                    some = c > 0
+                    if np.any(some):
+                        self._trace(tile_r, units, est, sums, r, texels[some], start[some], c[some])
+                elif c > 0:
+                    self._trace(tile_r, units, est, sums, r, texels, start, c)
         # Credit the work the adaptive stop saved, so progress reaches 1.
         shared.advance(n_tex * s.samples - int(est.n.sum()))
         return est, sums

@@ -268,7 +268,8 @@ def replicate_samples(samples, replicates):
 
 class SamplingPlan:
     """Rounds of samples, per replicate: ``rounds(est, texels, x, y)`` yields (start, count, texels),
-    sample indices of each replicate's own sequence, for the baker to trace in every replicate.
+    sample indices of each replicate's own sequence, for the baker to trace in every replicate
+    (``start`` and ``count`` one number for all the texels, or one per texel in adaptive rounds).
 
     Without adaptive sampling, one round of all samples. With it, ``min_samples`` first (shared
     among the replicates); then each texel whose interval (:class:`ErrorModel`) is still wider than
@@ -319,16 +320,12 @@ class SamplingPlan:
             nxt = self.next_counts(est, texels, n, x, y)
             grow = nxt > n
             texels, n, nxt = texels[grow], n[grow], nxt[grow]
-            # Texels with the same count and the same next count go through together.
-            keys = n * (self.cap + 1) + nxt
-            order = np.argsort(keys, kind="stable")
-            bounds = np.flatnonzero(np.diff(keys[order])) + 1
-            for group in np.split(order, bounds):
-                if not len(group):
-                    continue
-                start, stop = int(n[group[0]]), int(nxt[group[0]])
-                for s in range(start, stop, SAMPLE_PIECE):
-                    yield s, min(SAMPLE_PIECE, stop - s), texels[np.sort(group)]
+            # One pass for the round: each texel from its own count to its own next count (pieces of
+            # at most SAMPLE_PIECE samples; a pass per group of equal counts cost a pass's overhead
+            # for every group).
+            for s in range(0, int((nxt - n).max(initial=0)), SAMPLE_PIECE):
+                more = nxt - n > s
+                yield n[more] + s, np.minimum(SAMPLE_PIECE, nxt[more] - n[more] - s), texels[more]
             n = nxt
             keep = n < self.cap
             texels, n = texels[keep], n[keep]

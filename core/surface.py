@@ -134,29 +134,34 @@ def build_units(frag, table, width):
 def allocate(units, texels, start, count, seed, texel_ids):
     """Pieces of samples [start, start + count) of the tile's ``texels`` (indices into its texel
     list; ``texel_ids`` the global texel numbers of the whole list): which unit takes which samples.
+    ``start`` and ``count`` are one number for all the texels or one per texel (an adaptive round,
+    where each texel goes from its own count to its own next count).
 
     Returns (unit, piece start, piece size) arrays: every unit's share of the block, cut into pieces
     whose sizes are powers of two (the kernel traces equal pieces together).
     """
     texels = np.asarray(texels, dtype=np.int64)
+    start = np.broadcast_to(np.asarray(start, dtype=np.int64), texels.shape)
+    count = np.broadcast_to(np.asarray(count, dtype=np.int64), texels.shape)
     lo, hi = units.first[texels], units.first[texels + 1]
     per = hi - lo
     unit = np.repeat(lo, per) + (np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per))
     owner = np.repeat(texels, per)
     multi = np.repeat(per > 1, per)
+    first, count = np.repeat(start, per), np.repeat(count, per)
     # Systematic sampling among a split texel's units: the first sample past each unit's cumulative share.
-    phi = hash_uniform(seed, texel_ids[owner], np.uint64(start), _TAG_ALLOCATE)
+    phi = hash_uniform(seed, texel_ids[owner], first.astype(np.uint64), _TAG_ALLOCATE)
     edge = np.clip(np.ceil(units.cdf[unit] * count - phi), 0, count).astype(np.int64)
     last = np.ones(len(unit), bool)
     last[:-1] = owner[1:] != owner[:-1]
-    edge[last] = count
+    edge[last] = count[last]
     before = np.zeros(len(unit), np.int64)
     before[1:] = edge[:-1]
     before[np.concatenate([[True], owner[1:] != owner[:-1]])] = 0
     size = np.where(multi, edge - before, count)
     offset = np.where(multi, before, 0)
     keep = size > 0
-    unit, size, offset = unit[keep], size[keep], offset[keep] + start
+    unit, size, offset = unit[keep], size[keep], offset[keep] + first[keep]
     # Power-of-two pieces, each aligned to its own size (the kernel gathers an aligned block of a
     # xor-ordered pattern as whole rows; an unaligned one row by row): from each piece's start, the
     # largest power of two that divides it and still fits. From 0 that is largest first (120 samples

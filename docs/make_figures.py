@@ -9,6 +9,9 @@ convergence  docs/convergence.png: RMSE against samples per texel for each sampl
              with the Monte Carlo N^-1/2 slope drawn for reference.
 gallery      docs/gallery.png: the baked AO of every sample scene's objects, through
              scripts/bake_ao.py (the add-on's own geometry gathering).
+adaptive     docs/adaptive.png: an adaptive bake's AO, its standard-error map and how many samples each
+             texel took (a plane with a box resting on it and a disk hovering over it, AO distance
+             0.25: open floor stops at the minimum, the contact shadow and the disk's shade take more).
 cycles       docs/cycles_vs_mc_ao.png: Suzanne of suzanne.blend baked by Cycles' AO bake and by this
              add-on's operator at the same resolution, samples and threads, with the times and the
              difference (bench/cycles.py runs Cycles as the benchmark does).
@@ -137,8 +140,41 @@ def cycles_side_by_side(res=256, samples=128, threads=2):
     print(f"Cycles {cyc_s:.2f} s, mc_ao {mc_s:.2f} s, mean difference {mean:+.5f} +- {se:.5f} over {both.sum()} texels")
 
 
+def adaptive_maps(res=256, target=0.01, cap=2048):
+    P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    quad = np.array([[0, 1, 2], [0, 2, 3]])
+    ground = Mesh(P, quad, uvs=P[quad][:, :, :2], name="Ground")
+    lo, hi = (0.2, 0.25, 0.0), (0.45, 0.55, 0.2)
+    B = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])], float)
+    box = Mesh(B, np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4], [2, 6, 7],
+                            [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]]), name="Box")
+    poly = regular_polygon(0.15, 0.12, 48, centre=(0.72, 0.45))
+    disk = Mesh(poly, np.array([[0, i, i + 1] for i in range(1, 47)]), name="Disk")
+    r = bake_ao(ground, [box, disk], resolution=res, samples=cap, min_samples=16, target_error=target,
+                max_distance=0.25, seed=1)
+    fig, axes = plt.subplots(1, 3, figsize=(10.5, 3.6), dpi=90)
+    n = r.samples.astype(float)
+    for ax, img, title, kw in [
+            (axes[0], r.ao, "AO", dict(cmap="gray", vmin=0, vmax=1)),
+            (axes[1], r.stderr, f"standard error (target {target} is the 95% half-width)",
+             dict(cmap="magma", vmin=0, vmax=target / 1.5)),
+            (axes[2], np.log2(n), f"samples per texel (log2; mean {n.mean():.0f}, {np.mean(n == 16):.0%} at 16)",
+             dict(cmap="viridis", vmin=4, vmax=np.log2(cap)))]:
+        im = ax.imshow(img, origin="lower", interpolation="nearest", **kw)
+        ax.set_title(title, fontsize=9)
+        ax.axis("off")
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02)
+    fig.suptitle(f"Adaptive bake, {res}x{res}, noise threshold {target}, {r.seconds:.1f} s, "
+                 f"{r.rays / 1e6:.1f} M rays (fixed {cap} samples: {res * res * cap / 1e6:.0f} M)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "adaptive.png")
+    print(f"adaptive: mean {n.mean():.1f} samples, {np.mean(n == 16):.0%} at the minimum, {r.seconds:.2f} s")
+
+
 if __name__ == "__main__":
-    which = sys.argv[1:] or ["convergence", "gallery", "cycles"]
+    which = sys.argv[1:] or ["convergence", "gallery", "cycles", "adaptive"]
+    if "adaptive" in which:
+        adaptive_maps()
     if "convergence" in which:
         convergence()
     if "gallery" in which:

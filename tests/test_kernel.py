@@ -278,3 +278,34 @@ def test_replicates_allocate_a_split_texels_samples_independently():
     counts = np.array([[int(in0[(rays["texels"] == t) & (rays["replicate"] == r)].sum()) for r in (0, 1)]
                        for t in split])
     assert len(split) > 10 and np.mean(counts[:, 0] != counts[:, 1]) > 0.1
+
+
+
+def test_an_adaptive_rounds_per_texel_counts_allocate_as_each_texel_alone():
+    """One pass per adaptive round: allocating every texel's own [start, start + count) at once gives
+    each texel exactly the pieces it gets alone (split texels, whose units share by hash, included)."""
+    from core.raster import prepare, rasterize_tile
+    from core.surface import SurfaceTable, allocate, build_units
+
+    mesh = plane()
+    uvtris = prepare(mesh, 8, 8)
+    units = build_units(rasterize_tile(uvtris, np.arange(len(mesh.triangles)), 8, 8, 0, 0, 8, 8),
+                        SurfaceTable.build(mesh, uvtris), 8)
+    n_tex = len(units.first) - 1
+    assert np.any(np.diff(units.first) > 1)  # the diagonal splits texels
+    rng = np.random.default_rng(4)
+    texels = np.sort(rng.choice(n_tex, n_tex // 2 + 4, replace=False))
+    start = rng.integers(0, 1000, len(texels))
+    count = rng.integers(1, 200, len(texels))  # odd counts: a split texel's share depends on its hash
+    ids = np.arange(n_tex, dtype=np.uint64) * np.uint64(7) + np.uint64(3)
+    together = allocate(units, texels, start, count, np.uint64(11), ids)
+    alone = [allocate(units, texels[i:i + 1], int(start[i]), int(count[i]), np.uint64(11), ids)
+             for i in range(len(texels))]
+    key = lambda u, f, z: sorted(zip(u.tolist(), f.tolist(), z.tolist()))  # noqa: E731
+    assert key(*together) == key(*(np.concatenate(c) for c in zip(*alone)))
+    # And each texel's pieces cover exactly its own samples [start, start + count).
+    owner = units.texel[together[0]]
+    for i, t in enumerate(texels):
+        mine = owner == t
+        assert together[2][mine].sum() == count[i]
+        assert together[1][mine].min() == start[i] and (together[1] + together[2])[mine].max() == start[i] + count[i]
