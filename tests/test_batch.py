@@ -281,6 +281,10 @@ def test_blender_command_line_bakes_the_same_files(library, local_run, tmp_path)
     assert f"{blender} --background {library.parent / 'chair.blend'} --python-exit-code 1 --python" in log
 
 
+def _default_sigint():
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_interrupt_stops_the_running_bakes(library, tmp_path):
     """Ctrl-C while a bake runs: the batch exits 130 and that bake never finishes.
 
@@ -289,7 +293,10 @@ def test_interrupt_stops_the_running_bakes(library, tmp_path):
     """
     proc = subprocess.Popen(
         [sys.executable, str(BATCH), str(library), "--output", str(tmp_path), "--workers", "1",
-         "--blender", "bpy", "--verbose"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+         "--blender", "bpy", "--verbose"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        # SIGINT at its default in the batch: a process started in the background by a non-interactive
+        # shell (`pytest &`, some CI runners) inherits it *ignored*, and keeps it so across exec.
+        preexec_fn=_default_sigint)
     watchdog = threading.Timer(300, proc.kill)
     watchdog.start()
     try:
