@@ -43,6 +43,7 @@ from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE,
                        available_memory, estimate_memory)
 from .surface import SurfaceTable, allocate, build_units, contact_texels
 from .tracing import Tracer
+from . import highpoly as _highpoly
 
 
 @dataclass
@@ -59,6 +60,11 @@ class BakeResult:
     seconds : wall time of the bake; trace_seconds : time inside embreex, summed over threads;
     trace_cpu_seconds : the same in thread CPU time (steadier on a shared machine).
     metadata : settings and version, for image files.
+    miss : selected to active only (else None): bool, texels a UV triangle covers where no sample
+        point's matching ray found the high-poly surface; they are not in ``mask`` (the margin
+        fills them). See :mod:`core.highpoly`.
+    missed : selected to active only: sample points whose matching ray missed (each point carries a
+        block of samples, ``report['directions_per_point']``; none of them is traced).
     report : counts of what the input held: degenerate UV triangles skipped, triangles of zero area
         in space skipped (they have no surface), triangles with UVs
         outside [0, 1] (only their part inside the image is baked), texels covered by more than one
@@ -76,6 +82,8 @@ class BakeResult:
     trace_cpu_seconds: float = 0.0
     metadata: dict = field(default_factory=dict)
     report: dict = field(default_factory=dict)
+    miss: np.ndarray = None
+    missed: int = 0
 
     @property
     def rays_per_second(self):
@@ -186,6 +194,18 @@ class _TileBaker:
 MAX_SCENE_SPAN = 1e15
 
 
+def _frame(target):
+    """(centre, unit) of the frame :func:`_normalized_scene` moves a bake into."""
+    lo, hi = target.positions.min(axis=0), target.positions.max(axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        unit = float(np.max(hi - lo))
+    if not math.isfinite(unit):
+        raise MeshError(f"mesh {target.name!r} spans more than the largest float ({unit}); scale it down")
+    if unit <= 0 or unit < np.finfo(np.float64).tiny * 1e3:
+        unit = 1.0  # a point: every triangle is degenerate and skipped anyway
+    return (lo + hi) / 2.0, unit
+
+
 def _normalized_scene(target, occluders):
     """The target and its occluders in a frame centred on the target and scaled to its size.
 
@@ -202,14 +222,7 @@ def _normalized_scene(target, occluders):
         if o is target or target.same_geometry(o) or any(o is k or k.same_geometry(o) for k in kept):
             continue
         kept.append(o)
-    lo, hi = target.positions.min(axis=0), target.positions.max(axis=0)
-    with np.errstate(over="ignore", invalid="ignore"):
-        unit = float(np.max(hi - lo))
-    if not math.isfinite(unit):
-        raise MeshError(f"mesh {target.name!r} spans more than the largest float ({unit}); scale it down")
-    if unit <= 0 or unit < np.finfo(np.float64).tiny * 1e3:
-        unit = 1.0  # a point: every triangle is degenerate and skipped anyway
-    centre = (lo + hi) / 2.0
+    centre, unit = _frame(target)
     scene = []
     for o in kept:
         m = o.transformed(centre, unit)
@@ -228,8 +241,13 @@ def _normalized_scene(target, occluders):
 def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, progress=None, cancel=None, on_tile=None,
-            tile_size=None, chunk_rays=1 << 16, on_rays=None):
+            tile_size=None, chunk_rays=1 << 16, on_rays=None, highpoly=None, extrusion=0.0, max_ray_distance=0.0,
+            cage=None):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
+
+    With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
+    "Selected to Active"): each sample point of the target is moved to the high-poly surface by
+    Cycles' rules and AO is evaluated there (:mod:`core.highpoly` says exactly how).
 
     Parameters
     ----------
@@ -267,6 +285,16 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     on_rays : called as on_rays(batch) from worker threads after every call into Embree, with a
         :class:`core.tracing.RayBatch` (origins, directions, lengths, Embree's answer, the texel and
         sample index of every ray, the call's time). Its arrays are valid during the call only.
+    highpoly : None, or a Mesh or a list of Meshes (corner normals used, UVs not needed) whose AO is
+        baked into the target's UVs. The high-poly meshes occlude, as do the ``occluders``; the target
+        and the cage never do (left out of the occluders if they are among them).
+    extrusion : with ``highpoly``, the distance (world units, >= 0) the matching rays start out from the
+        target's surface along its interpolated normal, pointing back along it (Cycles' Extrusion).
+    max_ray_distance : with ``highpoly``, the longest matching ray (world units, measured from where it
+        starts), 0 for no limit.
+    cage : with ``highpoly``, None or a Mesh of the target's topology (same vertex count and triangles,
+        vertices moved): the matching rays go from the cage's points towards the target's (the
+        extrusion is then not used).
 
     Returns
     -------
@@ -275,6 +303,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     Raises
     ------
     MeshError, MeshTypeError, SettingsError, BakeMemoryError (before any heavy work), BakeCancelled.
+    With ``highpoly``, also MeshError when no matching ray finds the high-poly surface (it says what
+    to change), before any AO ray is traced.
     """
     t_start = time.perf_counter()
     if not isinstance(target, Mesh):
@@ -287,9 +317,14 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays)
+    s2a = None
+    if highpoly is not None:  # selected to active: checked here, before any work
+        s2a = _highpoly.SelectedToActive.check(target, highpoly, extrusion, max_ray_distance, cage)
+        occluders = s2a.occluders_of(occluders)
+        s2a = s2a.normalized(*_frame(target))
     target, occluders, unit = _normalized_scene(target, occluders)
     w, h = s.width, s.height
-    tri_total = target.triangle_count + sum(o.triangle_count for o in occluders)
+    tri_total = target.triangle_count + sum(o.triangle_count for o in occluders) + (s2a.triangle_count if s2a else 0)
     need = estimate_memory(w, h, tri_total, s.threads, s.chunk_rays, s.samples, s.source)
     avail = available_memory()
     if avail is not None and need > avail:
@@ -301,7 +336,10 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     uvtris = prepare(target, w, h)
     table = SurfaceTable.build(target, uvtris)
     bins = bin_triangles(uvtris, w, h, s.tile_size)
-    tracer = Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / unit)
+    stage = None if s2a is None else _highpoly.HighPolyStage(s2a, target, occluders, uvtris, table, bins, s, unit,
+                                                              lambda: _cancelled(cancel))
+    tracer = (Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / unit) if stage is None
+              else stage.scene.tracer)
     pattern = TexelPattern(s.source, s.seed, s.samples, pool_points=s.pool_points())
     kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
     tile = s.tile_size
@@ -309,7 +347,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     # so count each tile's texels times samples as it is rasterised, against an upper bound.
     planned = sum(min(tile, w - kx * tile) * min(tile, h - ky * tile) for ky, kx in bins) * s.samples
     shared = _Shared(planned, progress, cancel)
-    baker = _TileBaker(uvtris, table, kernel, tracer, pattern, s, shared)
+    baker = (_TileBaker(uvtris, table, kernel, tracer, pattern, s, shared) if stage is None
+             else stage.baker(pattern, shared, on_rays))
 
     ao = np.zeros((h, w), np.float32)
     se = np.zeros((h, w), np.float32)
@@ -330,6 +369,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             se[rows, cols] = est.stderr
             count[rows, cols] = est.n
             mask[rows, cols] = True
+            if stage is not None:
+                baker.settle(est, rows, cols, mask)
             with shared.lock:
                 coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
             if on_tile is not None:
@@ -359,6 +400,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     if progress is not None:
         progress(1.0)
 
+    miss, missed, extra = baker.finish(mask) if stage is not None else (None, 0, {})
     if s.margin > 0:
         ao = dilate(ao, mask, s.margin)
     seconds = time.perf_counter() - t_start
@@ -366,9 +408,12 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
               "degenerate_triangles": uvtris.degenerate_space,
               "uv_outside_triangles": uvtris.outside, "overlapping_texels": coverage_over}
+    if stage is not None:
+        metadata.update(s2a.metadata())
+        report.update(extra)
     return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=shared.rays, seconds=seconds,
                       trace_seconds=shared.trace_seconds, threads=s.threads, metadata=metadata, report=report,
-                      trace_cpu_seconds=shared.trace_cpu_seconds)
+                      trace_cpu_seconds=shared.trace_cpu_seconds, miss=miss, missed=missed)
 
 
 __all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "MAX_RESOLUTION", "SAMPLE_PIECE",
