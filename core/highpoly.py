@@ -54,6 +54,12 @@ low-poly's object space (the same for a uniformly scaled object, whose scale the
 in: :mod:`mc_ao.baking` does). Texels: mc_ao covers every texel a UV triangle touches, Cycles those
 whose centre a triangle covers. Material normal maps and transparency of the high-poly are not seen.
 
+The standard error (``stderr``) is that of the directions, from the spread of the samples; the
+positions of a texel's P = samples / g sample points add the variance of the AO over the part of the
+high-poly surface the texel maps to, divided by P, which the samples cannot show. Where the AO
+changes within a texel (detail finer than a texel) the error is larger than ``stderr`` says; more
+samples bring more points (tests/test_highpoly.py checks both parts against the exact values).
+
 Everything here runs in the bake's normalised frame (:func:`core.bake._normalized_scene`): the
 extrusion and the distance scale with it. A sample point draws its position from its index in the
 texel's pattern and its directions from the indices of its block, so bakes stay bit-identical for

@@ -4,6 +4,7 @@ import bpy
 
 from . import baking
 from . import operators
+from . import selected_to_active
 from .operators import OBJECT_OT_mc_ao_bake, is_running
 from .extract import default_uv_map
 from .settings import BakeSettings
@@ -100,9 +101,12 @@ def draw_targets(layout, context):
     """What the button will bake, or why it cannot; the selected objects it will skip."""
     selected = context.selected_objects
     # The button greys out when its poll fails; say why under it.
-    reason = baking.why_not_bakeable(selected)
+    reason = operators.why_not(context)
     if reason is not None:
         wrapped_label(layout, context, reason, icon="INFO")
+        return
+    if context.scene.mc_ao.use_selected_to_active:
+        draw_selected_to_active(layout, context)
         return
     targets = baking.targets_of(selected)
     if len(targets) == 1:
@@ -117,6 +121,45 @@ def draw_targets(layout, context):
         wrapped_label(layout, context, f"Skipped: {obj.name} ({why})", icon="ERROR")
     if len(skipped) > MAX_SKIPPED_LINES:
         layout.label(text=f"... and {len(skipped) - MAX_SKIPPED_LINES} more skipped", icon="ERROR")
+
+
+def draw_selected_to_active(layout, context):
+    """Selected to Active: which objects bake onto which, into which image."""
+    settings = context.scene.mc_ao
+    active, cage = context.active_object, selected_to_active.cage_of(settings)
+    highs = selected_to_active.high_objects(context.selected_objects, active, cage)
+    names = ", ".join(o.name for o in highs[:MAX_SKIPPED_LINES])
+    if len(highs) > MAX_SKIPPED_LINES:
+        names += f" and {len(highs) - MAX_SKIPPED_LINES} more"
+    image_name = BakeSettings.from_properties(settings).image_name_for(active.name, baking.id_name_max_bytes())
+    wrapped_label(layout, context, f"From {names} onto {active.name}", icon="MOD_SHRINKWRAP")
+    wrapped_label(layout, context, f"Into {image_name}", icon="IMAGE_DATA")
+
+
+class VIEW3D_PT_mc_ao_selected_to_active(_McAoPanel, bpy.types.Panel):
+    """Cycles' Bake panel's "Selected to Active", with the same settings and layout."""
+
+    bl_label = "Selected to Active"
+    bl_parent_id = "VIEW3D_PT_mc_ao"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.mc_ao, "use_selected_to_active", text="")
+
+    def draw(self, context):
+        settings = context.scene.mc_ao
+        layout = self.split_layout()
+        layout.active = settings.use_selected_to_active
+        col = layout.column()
+        col.prop(settings, "use_cage", text="Cage")
+        if settings.use_cage:
+            col.prop(settings, "cage_object")
+            sub = col.column()
+            sub.active = settings.cage_object is None  # a cage object replaces the extrusion
+            sub.prop(settings, "cage_extrusion")
+        else:
+            col.prop(settings, "cage_extrusion", text="Extrusion")
+        col.prop(settings, "max_ray_distance")
 
 
 class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):

@@ -39,11 +39,28 @@ class BakeSettings:
     seed: int = 0
     threads: int = 0  # 0 = the add-on preferences' default (whose 0 = all cores)
     ignore_backfaces: bool = False
+    # Selected to Active (mc_ao.selected_to_active), named as Cycles' bake settings: bake the selected
+    # objects onto the active one; extrusion and max ray distance in the active object's units (0 =
+    # no limit); a cage: the active object extruded without its Edge Split modifiers' splits (use_cage
+    # alone) or the object named cage_object.
+    use_selected_to_active: bool = False
+    cage_extrusion: float = 0.0
+    max_ray_distance: float = 0.0
+    use_cage: bool = False
+    cage_object: str = ""  # an object's name ("" = none); scene.mc_ao holds a pointer
 
     @classmethod
     def from_properties(cls, props, **overrides):
-        """Copy the values of a property group (scene.mc_ao) or any object with the same attributes."""
+        """Copy the values of a property group (scene.mc_ao) or any object with the same attributes.
+
+        An object pointer (``cage_object``) becomes the object's name ("" for none).
+        """
         values = {f.name: getattr(props, f.name) for f in fields(cls)}
+        cage = values.get("cage_object")
+        if cage is None:
+            values["cage_object"] = ""
+        elif not isinstance(cage, str):
+            values["cage_object"] = cage.name
         values.update(overrides)
         return cls(**values)
 
