@@ -10,7 +10,20 @@ or by a Python that has the bpy module (then the .blend file is the first argume
     python scripts/bake_ao.py scene.blend --objects A B --samples 128 --resolution 1024 --output out/
 
 Writes <image>_AO.png (and/or .exr, .tif, per --format) for each object into the output folder
-and prints a summary. Every setting is checked before anything is baked. File names come from
+and prints a summary.
+
+Selected to Active (as Cycles' bake, see core.highpoly for the exact rules): the AO of high-poly
+objects baked into a low-poly's UVs, into <low>_AO:
+
+    ... --selected-to-active --active Chair_low --objects Chair_high Bolts --extrusion 0.05
+    ... --match-suffix _high _low [--objects Chair_low Table_low]
+
+--active is the low-poly (default: the file's active object) and --objects the high-poly objects
+(default: the file's other selected objects); --extrusion, --max-ray-distance (0 = no limit) and
+--cage NAME (an object of the low-poly's topology) are Cycles' settings. --match-suffix HIGH LOW
+bakes every object named <base>LOW that has a <base>HIGH onto it, one image each (--objects names
+the low-poly objects to bake, default all of them; a <base>LOW without its <base>HIGH is skipped
+with a note, or is an error when named). Every setting is checked before anything is baked. File names come from
 the image names ("<object>_AO"), made safe: a name never chooses where a file goes (no folders,
 no "..", no names Windows refuses; a name that had to change gets a short hash of the original,
 and two objects never share a file, also on filesystems that ignore case). Every file lands in
@@ -66,7 +79,7 @@ OPTIONS = {
     "max_distance": "--max-distance",
     "source": "--source", "distribution": "--distribution", "occluders": "--occluders",
     "uv_map": "--uv-map", "margin": "--margin", "image_name": "--image-name", "seed": "--seed",
-    "threads": "--threads",
+    "threads": "--threads", "cage_extrusion": "--extrusion", "max_ray_distance": "--max-ray-distance",
 }
 
 
@@ -153,6 +166,23 @@ def make_parser(with_blend):
     parser.add_argument("--seed", type=int, default=0, help="0 or more (default: 0)")
     parser.add_argument("--threads", type=int, default=0, help="worker threads; 0 = all cores")
     parser.add_argument("--ignore-backfaces", action="store_true")
+    s2a = parser.add_argument_group(
+        "selected to active", "bake the AO of high-poly objects into a low-poly's UVs (Cycles' Selected to Active)")
+    s2a.add_argument("--selected-to-active", action="store_true",
+                     help="bake the --objects (the high-poly; default: the file's other selected objects) "
+                          "onto --active, into <active>_AO")
+    s2a.add_argument("--active", metavar="NAME",
+                     help="the low-poly to bake onto (default: the file's active object)")
+    s2a.add_argument("--extrusion", type=float, default=0.0, metavar="D",
+                     help="distance the matching rays start out from the low-poly's surface (default: 0)")
+    s2a.add_argument("--max-ray-distance", type=float, default=0.0, metavar="D",
+                     help="longest matching ray, from where it starts; 0 = no limit (default)")
+    s2a.add_argument("--cage", metavar="NAME",
+                     help="cage object: a copy of the low-poly with its vertices moved outwards; the rays "
+                          "go from it towards the low-poly (the extrusion is then not used)")
+    s2a.add_argument("--match-suffix", nargs=2, metavar=("HIGH", "LOW"),
+                     help="bake each object named <base>HIGH onto <base>LOW (e.g. _high _low: Chair_high "
+                          "onto Chair_low), one image per low-poly; implies --selected-to-active")
     parser.add_argument("--summary-json", type=Path, metavar="PATH",
                         help="write a JSON record of the run (settings, each object's status, time, "
                              "rays and files) to PATH at the end, whatever the exit status")
@@ -222,11 +252,11 @@ class Summary:
         self.objects = []
         self.error = None
 
-    def add(self, name, status, seconds=0.0, rays=0, samples_per_texel=0.0, files=(), error=None):
+    def add(self, name, status, seconds=0.0, rays=0, samples_per_texel=0.0, files=(), error=None, **extra):
         self.objects.append({
             "object": name, "status": status, "seconds": float(seconds), "rays": int(rays),
             "samples_per_texel": float(samples_per_texel), "files": [str(f) for f in files],
-            "error": None if error is None else str(error),
+            "error": None if error is None else str(error), **extra,
         })
 
     def write(self, exit_code):
@@ -295,6 +325,94 @@ def pick_objects(bpy, names, baking):
     return objects
 
 
+def _objects_named(bpy, names, what):
+    """The view layer's objects of these names (UsageError naming the missing ones)."""
+    layer = bpy.context.view_layer.objects
+    missing = [n for n in names if n not in layer]
+    if missing:
+        raise UsageError(f"no {what} {', '.join(map(repr, missing))} in the view layer; its objects: "
+                         f"{', '.join(sorted(o.name for o in layer)) or 'none'}")
+    return [layer[n] for n in names]
+
+
+def selected_to_active_pairs(bpy, args):
+    """[(low-poly object, [high-poly objects])] of the Selected to Active options; UsageError when the
+    objects are not there or not usable (before baking)."""
+    from mc_ao import baking
+
+    layer = bpy.context.view_layer.objects
+    if args.match_suffix:
+        high_suffix, low_suffix = args.match_suffix
+        if args.objects:
+            lows = _objects_named(bpy, list(dict.fromkeys(args.objects)), "object")
+            for obj in lows:
+                if not obj.name.endswith(low_suffix):
+                    raise UsageError(f"{obj.name} does not end with the low-poly suffix {low_suffix!r}")
+        else:
+            lows = sorted((o for o in layer if o.name.endswith(low_suffix) and len(o.name) > len(low_suffix)),
+                          key=lambda o: o.name)
+        pairs = []
+        for low in lows:
+            name = low.name[:-len(low_suffix)] + high_suffix
+            high = layer.get(name)
+            if high is None:
+                if args.objects:
+                    raise UsageError(f"{low.name} has no high-poly {name!r} in the view layer")
+                print(f"bake_ao: {low.name}: skipped, there is no {name}", file=sys.stderr)
+                continue
+            pairs.append((low, [high]))
+        if not pairs:
+            raise UsageError(f"no pair of objects named <base>{high_suffix} and <base>{low_suffix} in the view layer")
+        return pairs
+    if args.active is not None:
+        low = _objects_named(bpy, [args.active], "object")[0]
+    else:
+        low = layer.active
+        if low is None:
+            raise UsageError("--selected-to-active needs --active NAME: the file has no active object")
+    cage = _objects_named(bpy, [args.cage], "cage object")[0] if args.cage else None
+    if args.objects:
+        highs = _objects_named(bpy, list(dict.fromkeys(args.objects)), "object")
+    else:
+        highs = [o for o in layer if o.select_get() and o is not low and o is not cage]
+        if highs:
+            print(f"bake_ao: baking the selected {', '.join(o.name for o in highs)} onto {low.name}",
+                  file=sys.stderr)
+    if not highs:
+        raise UsageError(f"no high-poly objects to bake onto {low.name}: name them with --objects, or select "
+                         "them in the file")
+    for obj in highs:
+        if obj.type not in baking.GEOMETRY_TYPES:
+            raise UsageError(f"{obj.name} is {baking.kind_of(obj)}, not an object with a surface to bake from")
+    return [(low, highs)]
+
+
+def plan_selected_to_active(bpy, args, settings):
+    """The Jobs of a Selected to Active run, one per low-poly (UsageError for unusable objects)."""
+    from mc_ao import selected_to_active
+    from mc_ao.extract import ExtractError
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    plan = []
+    for low, highs in selected_to_active_pairs(bpy, args):
+        reason = selected_to_active.why_not([low, *highs], low, selected_to_active.cage_of(settings))
+        if reason is not None:
+            raise UsageError(reason.replace("Selected to Active: ", "").replace("the active object ", ""))
+        try:
+            plan.append(selected_to_active.plan(depsgraph, low, [low, *highs], settings,
+                                                view_layer=bpy.context.view_layer))
+        except ExtractError as exc:
+            raise UsageError(str(exc)) from None
+    names = [job.image_name for job in plan]
+    for name in set(names):
+        if names.count(name) > 1:
+            raise UsageError(f"several low-poly objects would bake into image {name!r}; put {{object}} into --image-name")
+    for job in plan:
+        for note in job.notes:
+            print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
+    return plan
+
+
 def settings_from(args):
     """The BakeSettings of the arguments, after checking every value (UsageError lists what is wrong)."""
     from core import imageio
@@ -309,8 +427,11 @@ def settings_from(args):
         occluders=args.occluders.upper(), uv_map=args.uv_map, margin=args.margin,
         image_name=args.image_name, seed=args.seed, threads=args.threads,
         ignore_backfaces=args.ignore_backfaces,
+        use_selected_to_active=bool(args.selected_to_active or args.match_suffix),
+        cage_extrusion=args.extrusion, max_ray_distance=args.max_ray_distance,
+        use_cage=bool(args.cage), cage_object=args.cage or "",
     )
-    problems = []
+    problems = selected_to_active_problems(args)
     for field, message in jobs.check_settings(settings):
         if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
             message = f"--resolution must be at most {corelink.load('bake').MAX_RESOLUTION} a side, not {width}x{height}"
@@ -332,6 +453,32 @@ def settings_from(args):
     if problems:
         raise UsageError("\n".join(problems))
     return settings
+
+
+def selected_to_active_problems(args):
+    """What is wrong with the Selected to Active options together (their values: jobs.check_settings)."""
+    problems = []
+    on = args.selected_to_active or args.match_suffix
+    if not on:
+        for option, given in (("--active", args.active is not None), ("--cage", args.cage is not None),
+                              ("--extrusion", args.extrusion != 0.0),
+                              ("--max-ray-distance", args.max_ray_distance != 0.0)):
+            if given:
+                problems.append(f"{option} is a setting of --selected-to-active (or --match-suffix), which is off")
+        return problems
+    if args.match_suffix:
+        high, low = args.match_suffix
+        if not high or not low or high == low:
+            problems.append(f"--match-suffix needs two different, non-empty suffixes, not {high!r} and {low!r}")
+        if args.active is not None:
+            problems.append("--active names one low-poly; with --match-suffix, --objects names the low-poly objects")
+        if args.cage is not None:
+            problems.append("--cage names one cage for one low-poly; bake a pair with a cage with --active")
+    elif args.cage is not None and (args.cage == args.active or args.cage in (args.objects or [])):
+        problems.append(f"--cage {args.cage!r} is also the low-poly or one of the high-poly objects")
+    if args.active is not None and args.active in (args.objects or []):
+        problems.append(f"--active {args.active!r} is also among --objects (the high-poly objects)")
+    return problems
 
 
 def check_paths(args, summary):
@@ -430,23 +577,47 @@ def run(argv, in_blender, summary):
     if not jobs.oiio_available():
         print("bake_ao: no OpenImageIO in this Python; writing files with Blender's image writer", file=sys.stderr)
 
-    objects = pick_objects(bpy, args.objects, baking)
     try:
-        plan = baking.plan(
-            bpy.context.evaluated_depsgraph_get(), objects, settings,
-            selected=objects, view_layer=bpy.context.view_layer,
-        )
+        if settings.use_selected_to_active:
+            plan = plan_selected_to_active(bpy, args, settings)
+        else:
+            objects = pick_objects(bpy, args.objects, baking)
+            plan = baking.plan(
+                bpy.context.evaluated_depsgraph_get(), objects, settings,
+                selected=objects, view_layer=bpy.context.view_layer,
+            )
         formats = [(FORMATS[f], BITS[args.bits] if args.bits else None) for f in args.format]
         files = jobs.output_files(str(args.output), [j.image_name for j in plan], formats, stderr=args.stderr)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
     summary.settings = record = jobs.settings_record(settings)
+    if args.match_suffix:  # the summary's record only: file metadata holds plain values
+        summary.settings = dict(record, match_suffix=list(args.match_suffix))
     return bake(plan, files, settings, record, args, summary)
+
+
+def s2a_record(job, result=None):
+    """A Selected to Active job's entries in the summary's object record ({} for another job): its
+    high-poly objects, and the sample points and texels that missed them."""
+    if not job.selected_to_active:
+        return {}
+    report = getattr(result, "report", None) or {}
+    return {"highpoly": [h.name for h in job.highpoly], "cage": job.cage.name if job.cage is not None else None,
+            "matching_rays": int(report.get("matching_rays", 0)),
+            "missed_sample_points": int(getattr(result, "missed", 0) or 0),
+            "missed_texels": int(report.get("missed_texels", 0))}
+
+
+def s2a_metadata(job):
+    """What a Selected to Active job adds to its files' metadata: the high-poly objects and the cage."""
+    if not job.selected_to_active:
+        return {}
+    return {"highpoly": ", ".join(h.name for h in job.highpoly), "cage": job.cage.name if job.cage is not None else ""}
 
 
 def bake(plan, files, settings, record, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
-    from mc_ao import baking, jobs
+    from mc_ao import baking, jobs, selected_to_active
 
     progress = Progress(enabled=not args.quiet)
     run = jobs.BakeRun(plan, settings, args.threads or None, live=False)
@@ -457,7 +628,7 @@ def bake(plan, files, settings, record, args, summary):
         print(f"bake_ao: [{i + 1}/{len(plan)}] baking {plan[i].object_name}", flush=True)
         progress.begin(f"[{i + 1}/{len(plan)}] {plan[i].object_name}")
 
-    def failed(i, errors, seconds=None, files=(), rays=0, per_texel=0.0):
+    def failed(i, errors, seconds=None, files=(), rays=0, per_texel=0.0, result=None):
         nonlocal failures
         progress.end()
         failures += 1
@@ -466,7 +637,8 @@ def bake(plan, files, settings, record, args, summary):
             print(f"bake_ao: {plan[i].object_name}: {error}", file=sys.stderr)
         if seconds is None:
             seconds = time.monotonic() - run.started.get(i, time.monotonic())
-        summary.add(plan[i].object_name, "failed", seconds, rays, per_texel, files, "; ".join(map(str, errors)))
+        summary.add(plan[i].object_name, "failed", seconds, rays, per_texel, files, "; ".join(map(str, errors)),
+                    **s2a_record(plan[i], result))
 
     begin(0)
     run.start()
@@ -483,15 +655,20 @@ def bake(plan, files, settings, record, args, summary):
                 progress.end()
                 job = plan[i]
                 written, errors = jobs.write_outputs(result, files[job.image_name],
-                                                     dict(record, object=job.object_name))
+                                                     dict(record, object=job.object_name, **s2a_metadata(job)))
                 for note in baking.input_notes(result):
                     print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
+                if job.selected_to_active:
+                    print(f"bake_ao: {job.object_name}: from {', '.join(h.name for h in job.highpoly)}"
+                          f"{selected_to_active.miss_summary(result)}", file=sys.stderr)
                 per_texel, rate = baking.throughput(result)
                 if errors:
-                    failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel)
+                    failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
+                           result=result)
                 else:
                     done.add(i)
-                    summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written)
+                    summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
+                                **s2a_record(job, result))
                     rows.append((job.object_name, f"{width}x{height}", f"{result.seconds:.2f}",
                                  f"{per_texel:.0f}", f"{rate:.2f}", ", ".join(written)))
             elif kind == "error":
