@@ -20,7 +20,8 @@ objects baked into a low-poly's UVs, into <low>_AO:
 
 --active is the low-poly (default: the file's active object) and --objects the high-poly objects
 (default: the file's other selected objects); --extrusion, --max-ray-distance (0 = no limit) and
---cage NAME (an object of the low-poly's topology) are Cycles' settings. --match-suffix HIGH LOW
+--cage [NAME] (Cycles' Cage: alone, the low-poly extruded along its vertex normals; with NAME, an
+object of the low-poly's topology) are Cycles' settings. --match-suffix HIGH LOW
 bakes every object named <base>LOW that has a <base>HIGH onto it, one image each (--objects names
 the low-poly objects to bake, default all of them; a <base>LOW without its <base>HIGH is skipped
 with a note, or is an error when named). Every setting is checked before anything is baked. File names come from
@@ -177,9 +178,10 @@ def make_parser(with_blend):
                      help="distance the matching rays start out from the low-poly's surface (default: 0)")
     s2a.add_argument("--max-ray-distance", type=float, default=0.0, metavar="D",
                      help="longest matching ray, from where it starts; 0 = no limit (default)")
-    s2a.add_argument("--cage", metavar="NAME",
-                     help="cage object: a copy of the low-poly with its vertices moved outwards; the rays "
-                          "go from it towards the low-poly (the extrusion is then not used)")
+    s2a.add_argument("--cage", metavar="NAME", nargs="?", const="",
+                     help="cast the rays from a cage (Cycles' Cage): alone, the low-poly extruded along its "
+                          "smooth vertex normals; with NAME, that object, a copy of the low-poly with its "
+                          "vertices moved outwards (the extrusion is then not used)")
     s2a.add_argument("--match-suffix", nargs=2, metavar=("HIGH", "LOW"),
                      help="bake each object named <base>HIGH onto <base>LOW (e.g. _high _low: Chair_high "
                           "onto Chair_low), one image per low-poly; implies --selected-to-active")
@@ -429,7 +431,7 @@ def settings_from(args):
         ignore_backfaces=args.ignore_backfaces,
         use_selected_to_active=bool(args.selected_to_active or args.match_suffix),
         cage_extrusion=args.extrusion, max_ray_distance=args.max_ray_distance,
-        use_cage=bool(args.cage), cage_object=args.cage or "",
+        use_cage=args.cage is not None, cage_object=args.cage or "",
     )
     problems = selected_to_active_problems(args)
     for field, message in jobs.check_settings(settings):
@@ -472,9 +474,10 @@ def selected_to_active_problems(args):
             problems.append(f"--match-suffix needs two different, non-empty suffixes, not {high!r} and {low!r}")
         if args.active is not None:
             problems.append("--active names one low-poly; with --match-suffix, --objects names the low-poly objects")
-        if args.cage is not None:
-            problems.append("--cage names one cage for one low-poly; bake a pair with a cage with --active")
-    elif args.cage is not None and (args.cage == args.active or args.cage in (args.objects or [])):
+        if args.cage:
+            problems.append("--cage NAME names one cage for one low-poly; bake a pair with a cage object with "
+                            "--active (--cage alone extrudes each low-poly along its vertex normals)")
+    elif args.cage and (args.cage == args.active or args.cage in (args.objects or [])):
         problems.append(f"--cage {args.cage!r} is also the low-poly or one of the high-poly objects")
     if args.active is not None and args.active in (args.objects or []):
         problems.append(f"--active {args.active!r} is also among --objects (the high-poly objects)")

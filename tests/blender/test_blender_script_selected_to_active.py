@@ -145,7 +145,7 @@ def test_misses_are_reported(blends, tmp_path):
     (["--match-suffix", "_x", "_x"], "--match-suffix needs two different, non-empty suffixes, not '_x' and '_x'"),
     (["--match-suffix", "_high", "_low", "--active", "Chair_low"],
      "--active names one low-poly; with --match-suffix, --objects names the low-poly objects"),
-    (["--match-suffix", "_high", "_low", "--cage", "Chair_cage"], "--cage names one cage for one low-poly"),
+    (["--match-suffix", "_high", "_low", "--cage", "Chair_cage"], "--cage NAME names one cage for one low-poly"),
     (["--selected-to-active", "--active", "Chair_low", "--objects", "Chair_low"],
      "--active 'Chair_low' is also among --objects (the high-poly objects)"),
     (["--selected-to-active", "--active", "Nope"], "no object 'Nope' in the view layer; its objects: Box, "),
