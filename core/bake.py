@@ -321,7 +321,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     if highpoly is not None:  # selected to active: checked here, before any work
         s2a = _highpoly.SelectedToActive.check(target, highpoly, extrusion, max_ray_distance, cage)
         occluders = s2a.occluders_of(occluders)
-        s2a = s2a.normalized(*_frame(target))
+        s2a = s2a.normalized(*_frame(target), MAX_SCENE_SPAN)
     target, occluders, unit = _normalized_scene(target, occluders)
     w, h = s.width, s.height
     tri_total = target.triangle_count + sum(o.triangle_count for o in occluders) + (s2a.triangle_count if s2a else 0)

@@ -82,9 +82,10 @@ from .tracing import FAR, Clock, RayBatch, Tracer, embree_scene
 #: Directions traced per sample point (the most: fewer when the sample counts are not multiples).
 DIRECTIONS_PER_POINT = 64
 #: Points spread over the low-poly surface (by area) that the check before a bake casts matching rays from.
-PRECHECK_POINTS = 1 << 15
+PRECHECK_POINTS = 1 << 12
 _TAG_PRECHECK = 31
 _TWO_M32 = 2.0 ** -32
+_POSITION_COLUMNS = np.array([[2, 3]])  # u2, u3 of a pattern point: its position in the texel
 
 
 def directions_per_point(samples, min_samples, adaptive):
@@ -171,11 +172,22 @@ class SelectedToActive:
     def triangle_count(self):
         return sum(h.triangle_count for h in self.highs) + (self.cage.triangle_count if self.cage is not None else 0)
 
-    def normalized(self, centre, unit):
-        """The same input in the bake's frame: positions (p - centre) / unit, distances / unit."""
-        out = SelectedToActive(self.target, [h.transformed(centre, unit) for h in self.highs],
-                               self.extrusion / unit, self.max_ray_distance / unit,
-                               None if self.cage is None else self.cage.transformed(centre, unit))
+    def normalized(self, centre, unit, max_span=float("inf")):
+        """The same input in the bake's frame: positions (p - centre) / unit, distances / unit.
+
+        A high-poly mesh or cage reaching ``max_span`` target sizes or farther is refused (single
+        precision rays cannot hold both), as :func:`core.bake._normalized_scene` refuses occluders.
+        """
+        highs = [h.transformed(centre, unit) for h in self.highs]
+        cage = None if self.cage is None else self.cage.transformed(centre, unit)
+        for what, original, m in [("high-poly mesh", h, n) for h, n in zip(self.highs, highs)] + (
+                [("cage", self.cage, cage)] if cage is not None else []):
+            far = float(np.abs(m.positions).max())
+            if not far < max_span:
+                raise MeshError(f"{what} {original.name!r} reaches {far:.3g} times the size of {self.target.name!r} "
+                                "away from it; ray tracing in single precision cannot hold both: move it onto "
+                                f"{self.target.name!r}")
+        out = SelectedToActive(self.target, highs, self.extrusion / unit, self.max_ray_distance / unit, cage)
         out.unit = unit
         out.world = self
         return out
@@ -235,14 +247,13 @@ class HighPolyScene:
         prim = out["primID"]
         hit = prim >= 0
         tri = prim[hit].astype(np.int64)
-        u = out["u"][hit].astype(np.float64)[:, None]
-        v = out["v"][hit].astype(np.float64)[:, None]
-        w = 1.0 - u - v
-        c = self.corners[tri]
-        q = w * c[:, 0] + u * c[:, 1] + v * c[:, 2]
-        nc = self.normals[tri]
-        n = w * nc[:, 0] + u * nc[:, 1] + v * nc[:, 2]
-        ln = np.linalg.norm(n, axis=1)
+        weights = np.empty((len(tri), 3))
+        weights[:, 1] = out["u"][hit]
+        weights[:, 2] = out["v"][hit]
+        weights[:, 0] = 1.0 - weights[:, 1] - weights[:, 2]
+        q = np.einsum("ij,ijk->ik", weights, self.corners[tri])
+        n = np.einsum("ij,ijk->ik", weights, self.normals[tri])
+        ln = np.sqrt(np.einsum("ij,ij->i", n, n))
         fn = self.face_normals[tri]
         good = (ln > 1e-12) & np.any(fn != 0, axis=1)  # a hit on a triangle of no area has no normal
         if not good.all():
@@ -327,6 +338,13 @@ class LowPoints:
 
     def __init__(self, s2a, table, cage_table):
         self.s2a, self.table, self.cage_table = s2a, table, cage_table
+        # Per triangle, [P0, Px, Py] and [N0, Nx, Ny] (or the cage's positions) as one (T, 3, 3) map each:
+        # a point is [1, a, b] times its triangle's map.
+        self.position = np.stack([table.P0, table.Px, table.Py], axis=1)
+        if cage_table is None:
+            self.second = np.stack([table.N0, table.Nx, table.Ny], axis=1)
+        else:
+            self.second = np.stack([cage_table.P0, cage_table.Px, cage_table.Py], axis=1)
 
     def rays(self, tri, a, b):
         """Matching rays of the points at texel-space offsets (a, b) from their triangles' first corners.
@@ -334,22 +352,26 @@ class LowPoints:
         Returns (p, origins, unit directions, usable): ``usable`` is False where a cage point lies on
         its low-poly point (no direction: a miss, as in Cycles).
         """
-        t = self.table
-        p = t.P0[tri] + a[:, None] * t.Px[tri] + b[:, None] * t.Py[tri]
+        x = np.empty((len(tri), 3))
+        x[:, 0] = 1.0
+        x[:, 1] = a
+        x[:, 2] = b
+        p = np.einsum("ij,ijk->ik", x, self.position[tri])
+        other = np.einsum("ij,ijk->ik", x, self.second[tri])
         if self.cage_table is None:
-            n = t.N0[tri] + a[:, None] * t.Nx[tri] + b[:, None] * t.Ny[tri]
-            return (p,) + extruded(p, n, t.FN[tri], self.s2a.extrusion)
-        c = self.cage_table
-        origin = c.P0[tri] + a[:, None] * c.Px[tri] + b[:, None] * c.Py[tri]
-        return (p,) + towards(origin, p)
+            return (p,) + extruded(p, other, self.table.FN[tri], self.s2a.extrusion)
+        return (p,) + towards(other, p)
 
 
 def extruded(p, n, fn, extrusion):
     """Extrusion rays: origin p + e n, direction -n, n the normalised interpolated normal (``fn`` where
     it vanishes); all usable."""
-    ln = np.linalg.norm(n, axis=1)
+    ln = np.sqrt(np.einsum("ij,ij->i", n, n))
     ok = ln > 1e-12
-    n = np.where(ok[:, None], n / np.where(ok, ln, 1.0)[:, None], fn)
+    if ok.all():
+        n /= ln[:, None]
+    else:
+        n = np.where(ok[:, None], n / np.where(ok, ln, 1.0)[:, None], fn)
     return p + extrusion * n, -n, np.ones(len(p), bool)
 
 
@@ -383,8 +405,9 @@ class HighPolyBaker:
         self.matching_rays = 0
         self.missed = 0
         self.partial = 0
-        self.match_seconds = 0.0
-        self.match_cpu_seconds = 0.0
+        # The check before the bake (HighPolyStage) counts as matching too.
+        self.match_seconds = stage.check_seconds
+        self.match_cpu_seconds = stage.check_cpu_seconds
         self.miss = np.zeros((settings.height, settings.width), bool)
 
     # -- one tile ------------------------------------------------------------------------------------
@@ -451,7 +474,7 @@ class HighPolyBaker:
             # The sample points: position coordinates of pattern points start .. start + k - 1 of
             # each piece's texel, with the texel's shift, through the unit's map.
             rows = pattern.rows_of(e, o, start[:, None] + np.arange(k, dtype=np.int64)[None, :])
-            q = pattern.q[rows.reshape(-1)][:, 2:4].reshape(npieces, k, 2)
+            q = pattern.q[rows.reshape(-1, 1), _POSITION_COLUMNS].reshape(npieces, k, 2)
             pattern.shift_positions(q, keys.shift[tex][:, None, :])
             uu = q[:, :, 0] * _TWO_M32
             vv = q[:, :, 1] * _TWO_M32
@@ -584,7 +607,11 @@ class HighPolyStage:
             cage_table = SurfaceTable.build(cage, uvtris)
         self.points = LowPoints(s2a, table, cage_table)
         self._probe = None
-        if not self._any_match(bins, cancelled):
+        clock = Clock()
+        with clock:
+            found = self._any_match(bins, cancelled)
+        self.check_seconds, self.check_cpu_seconds = clock.wall, clock.cpu
+        if not found:
             raise MeshError(self.nothing_matched())
 
     def baker(self, pattern, shared, on_rays=None):

@@ -293,6 +293,12 @@ def test_bad_settings_are_refused_by_name(kw, error, message):
         bake_ao(plane(name="low"), resolution=8, samples=4, **args)
 
 
+def test_a_high_poly_mesh_too_far_for_single_precision_is_refused_by_name():
+    far = plane(1e16, 0, 1e16 + 1, 1, uv=False, name="far away")
+    with pytest.raises(MeshError, match=r"high-poly mesh 'far away' reaches 1e\+16 times the size of 'low' away"):
+        bake_ao(plane(name="low"), resolution=8, samples=4, highpoly=[high_plane(), far])
+
+
 def test_the_target_cannot_be_its_own_high_poly_nor_its_own_cage():
     low = plane(name="low")
     with pytest.raises(SettingsError, match=r"'low' is the low-poly target and cannot also be a high-poly mesh"):

@@ -96,8 +96,13 @@ def test_bakes_the_high_poly_onto_the_active_low_poly(blends, tmp_path):
     assert "bake_ao: baking the selected Chair_high onto Chair_low" in same.stderr
     cage = run_script(blends, "--selected-to-active", "--cage", "Chair_cage", "--output", tmp_path / "cage", *FAST)
     assert cage.returncode == 0, cage.stderr
-    assert np.array_equal(read(tmp_path / "same" / "Chair_low_AO.exr")[0], ao)
-    assert np.array_equal(read(tmp_path / "cage" / "Chair_low_AO.exr")[0], ao)
+    # --cage alone: the low-poly extruded along its vertex normals, which on a plane are its normal.
+    generated = run_script(blends, "--selected-to-active", "--cage", "--extrusion", "0.2", "--output",
+                           tmp_path / "generated", "--summary-json", tmp_path / "g.json", *FAST)
+    assert generated.returncode == 0, generated.stderr
+    assert json.loads((tmp_path / "g.json").read_text())["settings"]["use_cage"] is True
+    for folder in ("same", "cage", "generated"):
+        assert np.array_equal(read(tmp_path / folder / "Chair_low_AO.exr")[0], ao), folder
 
 
 def test_pairs_matched_by_name(blends, tmp_path):
