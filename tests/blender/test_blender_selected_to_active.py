@@ -118,6 +118,31 @@ def test_misses_are_counted_and_their_texels_left_to_the_margin(bpy, scene, capf
     assert np.all(ao[6:18, :12] == 1.0) and np.all(ao[:, 12:] == 0.0)
 
 
+def test_several_selected_objects_bake_onto_the_active_one(bpy, scene, capfd):
+    # Two halves of a plane at 0.05 (a box is no high-poly: lights and empties are skipped with a
+    # warning, meshes and curves are sources), onto the low plane: every point finds one of them.
+    low = add_plane(bpy, "Low", size=2)
+    left = add_plane(bpy, "Left", size=1, location=(-0.5, 0, 0.05))
+    left.scale.y = 2
+    right = add_plane(bpy, "Right", size=1, location=(0.5, 0, 0.05))
+    right.scale.y = 2
+    bpy.ops.object.light_add(type="POINT", location=(0, 0, 3))
+    lamp = bpy.context.active_object
+    lamp.name = "Lamp"
+    s2a_scene(scene, cage_extrusion=0.1, margin=0)
+    select_only(bpy, low, left, right, lamp)
+    bpy.context.view_layer.objects.active = low
+    assert panel_labels(bpy)[-2:] == ["From Left, Right onto Low", "Into Low_AO"]
+    result, error, reports = run(bpy, capfd)
+    assert (result, error) == ({"FINISHED"}, None)
+    assert ("WARNING", "Lamp: skipped, it is a light, not a mesh") in reports
+    kind, text = reports[-1]
+    assert text.startswith("Low: 24x24 from Left, Right into 'Low_AO' in ")
+    assert text.endswith("; no sample point missed the high-poly; 1 warning before this, in the Info editor")
+    ao, _ = image_ao(bpy.data.images["Low_AO"])
+    assert np.all(ao == 1.0)  # open planes
+
+
 def test_cage_object_of_the_extruded_low_poly_bakes_as_the_extrusion(bpy, scene, capfd):
     low = add_plane(bpy, "Low", size=2)
     high = sculpt(bpy)
