@@ -54,11 +54,22 @@ low-poly's object space (the same for a uniformly scaled object, whose scale the
 in: :mod:`mc_ao.baking` does). Texels: mc_ao covers every texel a UV triangle touches, Cycles those
 whose centre a triangle covers. Material normal maps and transparency of the high-poly are not seen.
 
-The standard error (``stderr``) is that of the directions, from the spread of the samples; the
-positions of a texel's P = samples / g sample points add the variance of the AO over the part of the
-high-poly surface the texel maps to, divided by P, which the samples cannot show. Where the AO
-changes within a texel (detail finer than a texel) the error is larger than ``stderr`` says; more
-samples bring more points (tests/test_highpoly.py checks both parts against the exact values).
+The standard error (``stderr``). A texel's error has two parts: its directions, and the positions of
+its P = samples / g sample points (the variance of the AO over the part of the high-poly surface the
+texel maps to, over P). With replicates (``replicates`` >= 2, the default; the add-on's with an error
+map or adaptive sampling) each replicate draws its own points, positions and directions, from its own
+keys (:meth:`core.patterns.TexelPattern.keys`), and ``stderr`` is the spread of the replicates
+(:class:`core.estimators.ErrorModel`, ``grouped``: for every source, since a point's block of
+directions shares its position and the samples are not independent): both parts, pooled over the
+texel's window like every error map. A replicate whose points all missed gives its texel no degrees
+of freedom (it takes its neighbours' pooled error). Adaptive rounds stop on that interval; the
+misses' texels take no round after the first. With one replicate ``stderr`` is the samples' spread,
+the directions' part alone: where the AO changes within a texel (detail finer than a texel) the error
+is larger than it says. tests/test_highpoly.py checks both against the exact values. The pooling
+assumes the error varies smoothly over the image; it does not where the high-poly's AO jumps inside
+single texels (a box resting on the high-poly, its footprint's edge cutting texels at 64 spp: there
+the position part dominates and the pooled ``stderr`` is about 1.7 times too small, and 2-3 times
+too large on the texels around them; measured, not tested).
 
 Everything here runs in the bake's normalised frame (:func:`core.bake._normalized_scene`): the
 extrusion and the distance scale with it. A sample point draws its position from its index in the
@@ -73,7 +84,7 @@ import numpy as np
 
 from . import warps
 from .errors import MeshError, SettingsError
-from .estimators import SamplingPlan, TexelEstimates
+from .estimators import SamplingPlan, TexelEstimates, replicate_samples
 from .mesh import Mesh
 from .raster import rasterize_tile
 from .surface import SurfaceTable, allocate, build_units
@@ -88,13 +99,17 @@ _TWO_M32 = 2.0 ** -32
 _POSITION_COLUMNS = np.array([[2, 3]])  # u2, u3 of a pattern point: its position in the texel
 
 
-def directions_per_point(samples, min_samples, adaptive):
+def directions_per_point(samples, min_samples, adaptive, replicates=1):
     """Directions per sample point: the largest power of two up to :data:`DIRECTIONS_PER_POINT` that
-    divides the sample count (and, with adaptive sampling, the minimum: every round is then whole
-    points)."""
-    g = math.gcd(DIRECTIONS_PER_POINT, int(samples))
+    divides each replicate's share of the sample count (:func:`core.estimators.replicate_samples`)
+    and, with adaptive sampling, each replicate's share of the minimum (the first round): every round
+    of every replicate is then whole points (the later rounds' counts are powers of two at least
+    twice the first, or the share: :class:`core.estimators.SamplingPlan`)."""
+    g = DIRECTIONS_PER_POINT
+    for cap in replicate_samples(samples, replicates):
+        g = math.gcd(g, int(cap))
     if adaptive:
-        g = math.gcd(g, int(min_samples))
+        g = math.gcd(g, max(1, -(-int(min(min_samples, samples)) // int(replicates))))
     return g
 
 
@@ -391,13 +406,15 @@ class HighPolyBaker:
     directions (u0, u1) of its points j g .. j g + g - 1.
     """
 
-    def __init__(self, stage, pattern, settings, shared, on_rays=None):
+    def __init__(self, stage, pattern, settings, shared, on_rays=None, seeds=None):
         self.stage, self.uvtris, self.table = stage, stage.uvtris, stage.table
         self.points, self.scene = stage.points, stage.scene
         self.pattern, self.s, self.shared, self.on_rays = pattern, settings, shared, on_rays
         self.g = stage.g
-        self.plan = SamplingPlan(settings)
-        self.seed = np.uint64(settings.seed)
+        self.plan = SamplingPlan(settings, grouped=True)
+        self.caps = replicate_samples(settings.samples, settings.replicates)
+        # Per replicate, the seed that splits texels' points among their units (core.bake.allocation_seeds).
+        self.seeds = [np.uint64(settings.seed)] * settings.replicates if seeds is None else list(seeds)
         self.uniform = settings.distribution == "uniform"
         self.features = pattern.features("uniform" if self.uniform else "cosine")
         self.reach = np.float32(self.scene.tracer.tfar)
@@ -419,44 +436,59 @@ class HighPolyBaker:
         x1, y1 = min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height)
         frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1)
         n_tex = len(frag.texels)
-        est = TexelEstimates(n_tex)
-        est.points = np.zeros(n_tex, np.int64)   # sample points cast per texel
+        est = TexelEstimates(n_tex, s.replicates)
+        est.points = np.zeros(n_tex, np.int64)   # sample points cast per texel (all replicates)
         est.missed = np.zeros(n_tex, np.int64)   # of which found no high-poly surface
         if n_tex == 0:
             return frag, est
         units = build_units(frag, self.table, s.width)
-        tile = (units, self.pattern.keys(frag.texels), frag.texels)
+        # Each replicate draws its points (positions and directions) from its own keys: an independent
+        # randomisation of the whole texel, so the error model (core.estimators) sees the spread of
+        # the positions too.
+        tiles = [(units, self.pattern.keys(frag.texels, r), frag.texels) for r in range(s.replicates)]
+        x, y = frag.texels % s.width, frag.texels // s.width
         done = 0
-        for start, count, texels in self.plan.rounds(est, np.arange(n_tex)):
+        for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
             # A texel none of whose points found the high-poly surface takes no further rounds.
             texels = texels[~((est.points[texels] > 0) & (est.n[texels] == 0))]
             if not len(texels):
                 continue
-            unit, first, size = allocate(units, texels, start // g, count // g, self.seed, frag.texels)
-            kind = units.kind[unit].astype(np.int64)
-            group = size * 2 + kind
-            order = np.argsort(group, kind="stable")
-            unit, first, size, group, kind = unit[order], first[order], size[order], group[order], kind[order]
-            bounds = np.flatnonzero(np.diff(group)) + 1
-            for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
-                k = int(size[lo])
-                step = max(1, s.chunk_rays // (k * g))
-                for c0 in range(lo, hi, step):
-                    shared.check()
-                    c = slice(c0, min(c0 + step, hi))
-                    squares = int(np.count_nonzero(kind[c] == 0))
-                    rows = units.texel[unit[c]]
-                    hits, s1, s2, rays, sec, cpu = self.run(tile, unit[c], first[c], k, squares)
-                    est.add(rows, hits * g, s1, s2)
-                    np.add.at(est.points, rows, k)
-                    np.add.at(est.missed, rows, k - hits)
-                    work = (c.stop - c.start) * k * g
-                    done += work
-                    shared.advance(work, rays, sec, cpu)
+            for r, (tile, cap) in enumerate(zip(tiles, self.caps)):
+                if start < cap:
+                    done += self._trace(tile, est, r, texels, start, min(count, cap - start))
         shared.advance(n_tex * s.samples - done)  # what the adaptive stop and the misses saved
         return frag, est
 
-    def run(self, tile, unit, start, k, squares):
+    def _trace(self, tile, est, replicate, texels, start, count):
+        """Samples ``start`` .. ``start + count - 1`` of replicate ``replicate`` of ``texels`` (whole
+        points: ``g`` divides both); returns the samples' work (points times ``g``)."""
+        s, shared, g = self.s, self.shared, self.g
+        done = 0
+        units, _, texel_ids = tile
+        unit, first, size = allocate(units, texels, start // g, count // g, self.seeds[replicate], texel_ids)
+        kind = units.kind[unit].astype(np.int64)
+        group = size * 2 + kind
+        order = np.argsort(group, kind="stable")
+        unit, first, size, group, kind = unit[order], first[order], size[order], group[order], kind[order]
+        bounds = np.flatnonzero(np.diff(group)) + 1
+        for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
+            k = int(size[lo])
+            step = max(1, s.chunk_rays // (k * g))
+            for c0 in range(lo, hi, step):
+                shared.check()
+                c = slice(c0, min(c0 + step, hi))
+                squares = int(np.count_nonzero(kind[c] == 0))
+                rows = units.texel[unit[c]]
+                hits, s1, s2, rays, sec, cpu = self.run(tile, unit[c], first[c], k, squares, replicate)
+                est.add(rows, hits * g, s1, s2, replicate)
+                np.add.at(est.points, rows, k)
+                np.add.at(est.missed, rows, k - hits)
+                work = (c.stop - c.start) * k * g
+                done += work
+                shared.advance(work, rays, sec, cpu)
+        return done
+
+    def run(self, tile, unit, start, k, squares, replicate=0):
         """Trace pieces of ``k`` sample points from ``start`` of each piece's unit (the first ``squares``
         pieces texel squares, the rest pieces of triangles): their matching rays, then ``g`` AO rays
         for each point that found the high-poly surface.
@@ -549,7 +581,7 @@ class HighPolyBaker:
         if self.on_rays is not None:
             self.on_rays(RayBatch(origins=origins_ao, directions=dirs, tfar=traced_tfar, occluded=occluded,
                                   texels=np.repeat(texel_ids[tex[piece]], g), samples=samples.reshape(n),
-                                  seconds=inside.wall, cpu_seconds=inside.cpu))
+                                  seconds=inside.wall, cpu_seconds=inside.cpu, replicate=replicate))
         if value.dtype == bool and not self.uniform:
             per_point = value.reshape(nh, g).sum(axis=1, dtype=np.int64).astype(np.float64)
             s1 = np.bincount(piece, weights=per_point, minlength=npieces)
@@ -563,10 +595,13 @@ class HighPolyBaker:
 
     # -- the whole bake --------------------------------------------------------------------------------
 
-    def settle(self, est, rows, cols, mask):
-        """After a tile: texels none of whose points matched are uncovered (``mask`` False, ``miss`` True)."""
+    def settle(self, est, rows, cols, mask, stderr=None):
+        """After a tile: texels none of whose points matched are uncovered (``mask`` False, ``miss`` True,
+        ``stderr`` 0)."""
         lost = est.n == 0
         mask[rows[lost], cols[lost]] = False
+        if stderr is not None:
+            stderr[rows[lost], cols[lost]] = 0.0
         self.miss[rows[lost], cols[lost]] = True
         with self.lock:
             self.partial += int(np.count_nonzero((est.missed > 0) & ~lost))
@@ -598,7 +633,8 @@ class HighPolyStage:
     def __init__(self, s2a, target, occluders, uvtris, table, bins, settings, unit, cancelled=lambda: False):
         self.s2a, self.target, self.uvtris, self.table, self.unit = s2a, target, uvtris, table, unit
         self.s = settings
-        self.g = directions_per_point(settings.samples, settings.min_samples, settings.adaptive)
+        self.g = directions_per_point(settings.samples, settings.min_samples, settings.adaptive,
+                                      settings.replicates)
         self.scene = HighPolyScene(s2a, occluders, settings.ignore_backfaces, settings.falloff,
                                    settings.max_distance / unit)
         cage_table = None
@@ -614,8 +650,8 @@ class HighPolyStage:
         if not found:
             raise MeshError(self.nothing_matched())
 
-    def baker(self, pattern, shared, on_rays=None):
-        return HighPolyBaker(self, pattern, self.s, shared, on_rays)
+    def baker(self, pattern, shared, on_rays=None, seeds=None):
+        return HighPolyBaker(self, pattern, self.s, shared, on_rays, seeds)
 
     # -- the check before baking -----------------------------------------------------------------------
 

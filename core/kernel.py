@@ -32,6 +32,7 @@ the same rays. Independent randomisations of a texel for an error estimate are
 ``TexelPattern.keys(texels, replicate=r)``.
 """
 
+import copy
 import threading
 
 import numpy as np
@@ -102,6 +103,13 @@ class TileContext:
         pos = np.searchsorted(tris, units.tri)
         self.unit_gn, self.unit_eps = gn[pos], eps[pos]
         self.coef = units.coef.astype(np.float32)
+        self.replicate = 0
+
+    def for_replicate(self, keys, replicate):
+        """The same tile with the keys of another replicate (everything else is shared)."""
+        other = copy.copy(self)
+        other.keys, other.replicate = keys, replicate
+        return other
 
 
 def _per_piece(values, k):
@@ -281,7 +289,7 @@ class Kernel:
                                   texels=np.repeat(tile.texel_ids[tex], k),
                                   samples=(self.pattern.block_samples(e, o, first, k) if aligned or not self.pattern.xor
                                            else start[:, None] + ws.ramp[None, :k]).ravel(),
-                                  seconds=clock.wall, cpu_seconds=clock.cpu))
+                                  seconds=clock.wall, cpu_seconds=clock.cpu, replicate=tile.replicate))
         if value.dtype == bool and weight is None:
             s1 = value.view(np.uint8).reshape(g, k).sum(axis=1, dtype=np.int64).astype(np.float64)
             return s1, s1, n, clock.wall, clock.cpu

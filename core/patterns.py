@@ -155,7 +155,10 @@ class TexelPattern:
         t = np.asarray(texels, dtype=np.uint64)
         r = np.uint64(replicate)
         s = self.seed
-        pattern = _below(hash64(s, t, r, _TAG_PATTERN), self.patterns).astype(np.int64)
+        # A texel's replicates take distinct patterns (consecutive ones from its first: each pattern
+        # is an independent randomisation), so that replicates are independent of each other.
+        pattern = (_below(hash64(s, t, np.uint64(0), _TAG_PATTERN), self.patterns).astype(np.int64)
+                   + int(replicate)) % self.patterns
         h = hash64(s, t, r, _TAG_ORDER)
         order = (h >> np.uint64(40)) & np.uint64(self.length - 1) if self.xor else _below(h, self.length)
         shift = np.stack([(hash64(s, t, r, _TAG_SHIFT2) >> np.uint64(32)).astype(np.uint32),

@@ -195,6 +195,7 @@ def settings_record(settings):
         "resolution": f"{w}x{h}",
         "occluders": settings.occluders.lower(),
         "uv_map": settings.uv_map,
+        "replicates": int(kw["replicates"]),
     }
     if getattr(settings, "use_selected_to_active", False):
         record.update({"selected_to_active": True, "cage_extrusion": float(settings.cage_extrusion),

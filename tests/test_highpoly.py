@@ -18,6 +18,7 @@ from core.bake import interval_half_width
 from core.highpoly import DIRECTIONS_PER_POINT, PRECHECK_POINTS, directions_per_point
 from core.stats import normal_quantile
 from chi2 import SUITE_ALPHA, chi2_test, sidak
+from core.analytic import regular_polygon
 from scenes import QUAD, plane, polygon_form_factor, texel_mean
 
 LID = np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]])
@@ -56,8 +57,11 @@ def check_z(r, truth, what=""):
     variance of AO over the texel's square, over P), both exact from the analytic field. The baker's
     ``stderr`` estimates the first from the samples (core.highpoly: it does not see the second).
     The far-off check uses each texel's Agresti-Coull interval (core.estimators) widened by the
-    positions' part, at the Sidak level over all texels.
+    positions' part, at the Sidak level over all texels. The bakes it checks take one replicate: with
+    two or more, ``stderr`` is the replicates' spread and holds both parts
+    (test_the_error_map_holds_both_parts_with_replicates).
     """
+    assert r.metadata["replicates"] == 1
     mean, var = truth
     points = r.samples / r.report["directions_per_point"]
     directions = (mean - mean * mean - var) / r.samples
@@ -80,7 +84,7 @@ def check_z(r, truth, what=""):
 @pytest.mark.parametrize("distribution", ["cosine", "uniform"])
 def test_high_plane_under_a_polygon_matches_lamberts_formula_at_the_projected_points(truth, distribution):
     r = bake_ao(plane(name="low"), [lid()], resolution=W, samples=256, source="independent", margin=0, seed=3,
-                distribution=distribution, highpoly=[high_plane()], extrusion=0.1)
+                distribution=distribution, highpoly=[high_plane()], extrusion=0.1, replicates=1)
     assert r.mask.all() and not r.miss.any() and r.missed == 0
     if distribution == "cosine":
         check_z(r, truth)
@@ -105,14 +109,15 @@ def test_the_low_plane_above_at_or_below_the_high_surface_bakes_the_same(truth, 
     assert r.missed == 0 and r.mask.all()
     assert np.array_equal(r.ao, base.ao)
     check_z(bake_ao(plane(z=low_z, name="low"), [lid()], resolution=W, samples=256, margin=0, seed=1,
-                    source="independent", highpoly=[high_plane()], extrusion=extrusion), truth, (low_z, extrusion))
+                    source="independent", highpoly=[high_plane()], extrusion=extrusion, replicates=1), truth,
+            (low_z, extrusion))
 
 
 def test_the_low_poly_and_the_cage_never_occlude_even_among_the_occluders(truth):
     low = plane(z=0.1, name="low")      # above the high plane: it would hide the lid
     cage = plane(z=0.2, name="cage")
     r = bake_ao(low, [lid(), low, cage], resolution=W, samples=256, margin=0, seed=2, source="independent",
-                highpoly=[high_plane()], cage=cage)
+                highpoly=[high_plane()], cage=cage, replicates=1)
     check_z(r, truth)
 
 
@@ -168,7 +173,7 @@ def test_a_high_poly_with_flipped_normals_gets_the_ao_of_its_other_side(truth):
     # from (back faces are matched). Flipped, the high plane faces down: the AO of its underside,
     # under the lid mirrored below it, is Lambert's value again, and the lid above no longer matters.
     below = Mesh(LID * [1, 1, -1] + [0, 0, 2 * GAP], QUAD, name="lid below")
-    kw = dict(resolution=W, samples=256, margin=0, seed=6, source="independent", extrusion=0.1)
+    kw = dict(resolution=W, samples=256, margin=0, seed=6, source="independent", extrusion=0.1, replicates=1)
     r = bake_ao(plane(name="low"), [lid(), below], highpoly=[high_plane(flip=True)], **kw)
     assert r.missed == 0
     check_z(r, truth)
@@ -181,7 +186,7 @@ def test_several_high_poly_meshes_are_one_surface_and_the_nearest_hit_wins(truth
     # the ray's origin) is never matched, and occludes nothing above the first.
     left = plane(-0.5, -0.5, 0.5, 1.5, z=GAP, uv=False, name="left")
     right = plane(0.5, -0.5, 1.5, 1.5, z=GAP, uv=False, name="right")
-    kw = dict(resolution=W, samples=256, margin=0, seed=5, source="independent", extrusion=0.1)
+    kw = dict(resolution=W, samples=256, margin=0, seed=5, source="independent", extrusion=0.1, replicates=1)
     whole = bake_ao(plane(name="low"), [lid()], highpoly=[high_plane()], **kw)
     halves = bake_ao(plane(name="low"), [lid()], highpoly=[left, right], **kw)
     check_z(halves, truth)
@@ -235,6 +240,108 @@ def test_a_texel_that_matches_in_part_averages_the_part_it_found():
     assert np.all(r.ao[:, 8] == 1.0)  # open: the mean of what was found, not diluted by the misses
     share = r.samples[:, 8] / samples
     assert np.all(r.samples[:, 8] % g == 0) and abs(share.mean() - 0.25) < 4 * math.sqrt(0.25 * 0.75 / (16 * samples / g))
+
+
+# -- the error map and adaptive sampling (replicates) ------------------------------------------------------
+
+NEAR_LID = regular_polygon(0.3, GAP + 0.05, 64, centre=(0.5, 0.5))  # 0.05 above the high plane
+NEAR_W = 32
+
+
+def near_lid():
+    return Mesh(NEAR_LID, np.array([[0, i, i + 1] for i in range(1, 63)]), name="lid")
+
+
+@pytest.fixture(scope="module")
+def near_truth():
+    """The exact texel AO of the high plane under the near lid, and its variance over each texel."""
+    f = lambda p: 1.0 - polygon_form_factor(p + [0.0, 0.0, GAP], NEAR_LID)  # noqa: E731
+    mean = texel_mean(f, NEAR_W, NEAR_W, order=8)
+    return mean, texel_mean(lambda p: f(p) ** 2, NEAR_W, NEAR_W, order=8) - mean * mean
+
+
+@pytest.mark.parametrize("source", ["independent", "sobol"])
+@pytest.mark.parametrize("samples", [64, 256])
+def test_the_error_map_holds_both_parts_with_replicates(near_truth, source, samples):
+    # Each replicate draws its own sample points (positions and directions), so the spread of the
+    # replicates holds the positions' part of the error too, which the spread of a texel's samples
+    # cannot show (its points' blocks of directions share a position: not independent samples, even
+    # from the independent source). A lid 0.05 above the high plane makes the AO change within a
+    # texel: the positions' part is 20-50% of the error here.
+    mean, var = near_truth
+    z, err2, se2 = [], 0.0, 0.0
+    for seed in range(4):
+        r = bake_ao(plane(name="low"), [near_lid()], resolution=NEAR_W, samples=samples, source=source, margin=0,
+                    seed=seed, highpoly=[high_plane()], extrusion=0.1, replicates=2, threads=2)
+        assert r.mask.all() and r.metadata["error_estimate"] == "replicates"
+        points = samples / r.report["directions_per_point"]
+        # Texels whose whole window saw only open samples have no error estimate (core.estimators):
+        # nearly open ones only.
+        assert np.all(mean[r.stderr == 0] > 0.98)
+        some = r.stderr > 0
+        z.append((r.ao - mean)[some] / r.stderr[some])
+        err2 += np.mean((r.ao - mean)[some] ** 2)
+        se2 += np.mean(r.stderr[some].astype(float) ** 2)
+    directions = (mean - mean * mean - var) / samples
+    assert np.mean(var / points) / np.mean(var / points + directions) > 0.2  # the positions' part matters
+    z = np.concatenate(z)
+    # As the error map's own test (test_estimators): over about 4000 values the z-scores' standard
+    # deviation and mean carry about 0.02-0.04 of noise; the mean squared error against the mean
+    # squared stderr, about 0.05 each.
+    assert 0.85 <= z.std() <= 1.15 and abs(z.mean()) < 0.1, (z.std(), z.mean())
+    assert 0.8 < err2 / se2 < 1.25, err2 / se2
+
+
+def test_adaptive_sampling_keeps_its_promise_on_the_high_poly_and_leaves_misses_out(near_truth):
+    # Adaptive rounds (replicates' intervals) over the high plane under the near lid, which covers only
+    # x < 0.75 of the low plane (on a texel boundary): at most 5% of the covered texels end farther
+    # than the target from the exact AO, the open ones stop early, and the texels that missed take
+    # no rounds after the first, no error and no samples.
+    mean, _ = near_truth
+    part = plane(-0.5, -0.5, 0.75, 1.5, z=GAP, uv=False, name="part")
+    target, cap = 0.02, 4096
+    far, counts = [], []
+    for seed in range(2):
+        r = bake_ao(plane(name="low"), [near_lid()], resolution=NEAR_W, samples=cap, min_samples=16,
+                    target_error=target, margin=0, seed=seed, highpoly=[part], extrusion=0.1, threads=2)
+        g = r.report["directions_per_point"]
+        assert r.metadata["replicates"] == 2 and g == 8  # the first round: 8 samples per replicate
+        covered = np.zeros((NEAR_W, NEAR_W), bool)
+        covered[:, :24] = True
+        assert np.array_equal(r.mask, covered) and np.array_equal(r.miss, ~covered)
+        assert np.all(r.stderr[~covered] == 0) and np.all(r.samples[~covered] == 0) and np.all(r.ao[~covered] == 0)
+        # The missed texels cast their first round's points only: 2 replicates x 1 point.
+        assert r.missed == r.report["missed_matching_rays"] == (~covered).sum() * 2
+        assert np.all(r.samples[covered] % g == 0) and np.all(r.samples[covered] >= 16)
+        far.append(np.mean(np.abs(r.ao - mean)[covered] > target))
+        counts.append(r.samples[covered])
+    m = 2 * covered.sum()
+    assert np.mean(far) <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / m), far
+    counts = np.concatenate(counts)
+    assert np.mean(counts == 16) > 0.05 and counts.max() > 256 and np.mean(counts == cap) < 0.01
+
+
+def test_a_texel_with_a_replicate_that_missed_borrows_its_error_and_lends_none():
+    # A texel of which every point of one replicate missed the high-poly surface has no spread of its
+    # own: it takes its neighbours' pooled variance and gives them nothing (were its zero counted with
+    # a degree of freedom, its neighbours' error would shrink).
+    from types import SimpleNamespace
+
+    from core.estimators import ErrorModel, TexelEstimates
+
+    side = 16
+    x, y = np.meshgrid(np.arange(side), np.arange(side))
+    x, y = x.ravel(), y.ravel()
+    est = TexelEstimates(side * side, 2)
+    rows = np.arange(side * side)
+    n = np.full(side * side, 8)
+    est.add(rows, n, n * 0.4, n * 0.4, 0)   # replicate means 0.4 and 0.6: variance 0.01 everywhere
+    lost = 5 * side + 7
+    est.add(rows[rows != lost], n[:-1], n[:-1] * 0.6, n[:-1] * 0.6, 1)
+    model = ErrorModel(SimpleNamespace(replicates=2, source="sobol", binary=False, bound=1.0), grouped=True)
+    var, dof = model.variance(est, x, y)
+    assert est.rn[1, lost] == 0 and dof[lost] == 24
+    assert np.allclose(var[rows != lost], 0.01) and var[lost] > 0
 
 
 def test_a_high_poly_over_a_small_part_of_the_low_poly_is_found():
@@ -328,6 +435,7 @@ def record(low, **kw):
     def keep(b):
         batches.append({k: np.array(getattr(b, k)) for k in ("origins", "directions", "tfar", "occluded",
                                                               "texels", "samples")})
+        batches[-1]["replicate"] = np.full(len(b.texels), b.replicate)
 
     r = bake_ao(low, threads=1, margin=0, on_rays=keep, **kw)
     return {k: np.concatenate([b[k] for b in batches]) for k in batches[0]}, r
@@ -338,7 +446,10 @@ def test_every_sample_of_a_texel_is_traced_once_from_its_points_on_the_high_surf
     g = directions_per_point(samples, 16, False)
     assert g == DIRECTIONS_PER_POINT
     rays, r = record(plane(name="low"), resolution=16, samples=samples, highpoly=[high_plane()], extrusion=0.1)
-    key = rays["texels"] * samples + rays["samples"]
+    # Each replicate (two by default) traces its own half of the samples, indices 0 .. samples / 2 - 1.
+    assert r.metadata["replicates"] == 2 and set(np.unique(rays["replicate"])) == {0, 1}
+    assert rays["samples"].max() == samples // 2 - 1
+    key = (rays["texels"] * 2 + rays["replicate"]) * samples + rays["samples"]
     assert np.unique(key).size == key.size == 16 * 16 * samples == r.rays - r.report["matching_rays"]
     # In the baker's frame (centred on the low plane, unit size) the high plane lies at z = GAP:
     # every AO ray leaves from it (pushed off by a hair), the points of a block share their origin,
@@ -476,12 +587,19 @@ def test_directions_per_point():
     assert directions_per_point(256, 16, True) == 16
     assert directions_per_point(100, 16, False) == 4
     assert directions_per_point(1, 1, False) == 1
+    # Replicates: whole points in each replicate's share of the samples and of the first round.
+    assert directions_per_point(64, 16, False, 2) == 32
+    assert directions_per_point(256, 16, True, 2) == 8
+    assert directions_per_point(65, 16, False, 2) == 1      # shares 33 and 32
+    assert directions_per_point(1024, 48, True, 4) == 4     # first round 12 per replicate
 
 
 def test_the_result_records_the_settings():
     r = bake_ao(plane(name="low"), resolution=8, samples=64, highpoly=[high_plane()], extrusion=0.1)
     assert r.metadata["selected_to_active"] is True and r.metadata["highpoly"] == "high"
     assert r.metadata["extrusion"] == 0.1 and r.metadata["max_ray_distance"] == 0.0
-    assert r.report["directions_per_point"] == 64
+    assert r.metadata["replicates"] == 2 and r.report["directions_per_point"] == 32
+    assert bake_ao(plane(name="low"), resolution=8, samples=64, highpoly=[high_plane()], extrusion=0.1,
+                   replicates=1).report["directions_per_point"] == 64
     plain = bake_ao(plane(name="low"), resolution=8, samples=4)
     assert plain.miss is None and plain.missed == 0 and "selected_to_active" not in plain.metadata

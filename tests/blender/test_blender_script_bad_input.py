@@ -274,7 +274,7 @@ def test_the_summary_records_the_settings_every_file_carries(blends, tmp_path):
     assert record["settings"] == {
         "samples": 4, "min_samples": 4, "target_error": 0.05, "sample_source": "sobol", "distribution": "cosine",
         "seed": 7, "max_distance": 2.5, "margin": 16, "ignore_backfaces": False, "resolution": "16x16",
-        "occluders": "visible", "uv_map": "UVMap",
+        "occluders": "visible", "uv_map": "UVMap", "replicates": 2,
     }
     assert [o["object"] for o in record["objects"]] == ["Block", "Ground"]
     for obj in record["objects"]:
