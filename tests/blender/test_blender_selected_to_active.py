@@ -118,6 +118,37 @@ def test_misses_are_counted_and_their_texels_left_to_the_margin(bpy, scene, capf
     assert np.all(ao[6:18, :12] == 1.0) and np.all(ao[:, 12:] == 0.0)
 
 
+def test_the_error_map_and_adaptive_sampling_bake_selected_to_active(bpy, scene, capfd):
+    # Error Map and Noise Threshold on (two replicates, adaptive rounds): "<active>_AO_stderr" holds the
+    # core's standard error of the same job, 0 where the texels missed the high-poly, > 0 where the box
+    # shades the high plane; the rounds stop open texels at Min Samples.
+    from mc_ao import selected_to_active
+    from mc_ao.settings import BakeSettings
+
+    low = add_plane(bpy, "Low", size=2)
+    half = add_plane(bpy, "Half", size=1, location=(-0.5, 0, 0.05))  # covers x < 0 of the low plane, y in [-.5, .5]
+    add_cube(bpy, "Box", size=0.2, location=(-0.5, 0.0, 0.25))
+    s2a_scene(scene, cage_extrusion=0.1, margin=0, error_map=True, samples=1024, min_samples=16,
+              target_error=0.05)
+    select_only(bpy, low, half)
+    bpy.context.view_layer.objects.active = low
+    result, error, reports = run(bpy, capfd)
+    assert (result, error) == ({"FINISHED"}, None)
+    ao, _ = image_ao(bpy.data.images["Low_AO"])
+    se, _ = image_ao(bpy.data.images["Low_AO_stderr"])
+    settings = BakeSettings.from_properties(scene.mc_ao)
+    assert settings.replicates == 2
+    job = selected_to_active.plan(bpy.context.evaluated_depsgraph_get(), low, [low, half], settings,
+                                  view_layer=bpy.context.view_layer)
+    r = job.run(settings, threads=2)
+    np.testing.assert_array_equal(se, r.stderr)
+    np.testing.assert_array_equal(ao, r.ao)
+    assert r.miss.sum() == 24 * 24 - 12 * 12 and np.all(se[r.miss] == 0)
+    shaded = r.mask & (r.ao < 0.95)
+    assert shaded.any() and np.all(se[shaded] > 0)
+    assert r.samples[r.mask].min() == 16 and r.samples[shaded].max() > 16
+
+
 def test_several_selected_objects_bake_onto_the_active_one(bpy, scene, capfd):
     # Two halves of a plane at 0.05 (a box is no high-poly: lights and empties are skipped with a
     # warning, meshes and curves are sources), onto the low plane: every point finds one of them.
