@@ -44,6 +44,7 @@ from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE,
                        available_memory, estimate_memory)
 from .surface import SurfaceTable, allocate, build_units, contact_texels
 from .tracing import Tracer
+from . import highpoly as _highpoly
 
 
 @dataclass
@@ -62,6 +63,11 @@ class BakeResult:
     seconds : wall time of the bake; trace_seconds : time inside embreex, summed over threads;
     trace_cpu_seconds : the same in thread CPU time (steadier on a shared machine).
     metadata : settings and version, for image files.
+    miss : selected to active only (else None): bool, texels a UV triangle covers where no sample
+        point's matching ray found the high-poly surface; they are not in ``mask`` (the margin
+        fills them). See :mod:`core.highpoly`.
+    missed : selected to active only: sample points whose matching ray missed (each point carries a
+        block of samples, ``report['directions_per_point']``; none of them is traced).
     report : counts of what the input held: degenerate UV triangles skipped, triangles of zero area
         in space skipped (they have no surface), triangles with UVs
         outside [0, 1] (only their part inside the image is baked), texels covered by more than one
@@ -82,6 +88,8 @@ class BakeResult:
     metadata: dict = field(default_factory=dict)
     report: dict = field(default_factory=dict)
     bent: np.ndarray = None
+    miss: np.ndarray = None
+    missed: int = 0
 
     @property
     def rays_per_second(self):
@@ -138,6 +146,14 @@ class _Stop(Exception):
 
 
 
+def allocation_seeds(settings):
+    """Per replicate, the seed :func:`core.surface.allocate` splits texels' samples with. Replicate 0
+    keeps the bake's seed (one replicate traces what a bake always traced); the others allocate from
+    seeds of their own, independent of it (also used by :class:`core.highpoly.HighPolyBaker`)."""
+    return [np.uint64(settings.seed)] + [hash64(np.uint64(settings.seed), np.uint64(r), np.uint64(31))
+                                         for r in range(1, settings.replicates)]
+
+
 class _TileBaker:
     """Bakes one tile: rasterise, build its sample units, trace the plan's rounds, estimate.
 
@@ -150,10 +166,7 @@ class _TileBaker:
         self.plan = SamplingPlan(settings)
         self.bent = bent
         self.caps = replicate_samples(settings.samples, settings.replicates)
-        # Replicate 0 keeps the bake's seed (one replicate traces what a bake always traced); the
-        # others allocate split texels' samples from seeds of their own, independent of it.
-        self.seeds = [np.uint64(settings.seed)] + [hash64(np.uint64(settings.seed), np.uint64(r), np.uint64(31))
-                                                    for r in range(1, settings.replicates)]
+        self.seeds = allocation_seeds(settings)
 
     def bake(self, key, tri_ids):
         """(fragments, estimates, direction sums or None) of the tile ``key``'s texels."""
@@ -229,6 +242,18 @@ class _TileBaker:
 MAX_SCENE_SPAN = 1e15
 
 
+def _frame(target):
+    """(centre, unit) of the frame :func:`_normalized_scene` moves a bake into."""
+    lo, hi = target.positions.min(axis=0), target.positions.max(axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        unit = float(np.max(hi - lo))
+    if not math.isfinite(unit):
+        raise MeshError(f"mesh {target.name!r} spans more than the largest float ({unit}); scale it down")
+    if unit <= 0 or unit < np.finfo(np.float64).tiny * 1e3:
+        unit = 1.0  # a point: every triangle is degenerate and skipped anyway
+    return (lo + hi) / 2.0, unit
+
+
 def _normalized_scene(target, occluders):
     """The target and its occluders in a frame centred on the target and scaled to its size.
 
@@ -245,14 +270,7 @@ def _normalized_scene(target, occluders):
         if o is target or target.same_geometry(o) or any(o is k or k.same_geometry(o) for k in kept):
             continue
         kept.append(o)
-    lo, hi = target.positions.min(axis=0), target.positions.max(axis=0)
-    with np.errstate(over="ignore", invalid="ignore"):
-        unit = float(np.max(hi - lo))
-    if not math.isfinite(unit):
-        raise MeshError(f"mesh {target.name!r} spans more than the largest float ({unit}); scale it down")
-    if unit <= 0 or unit < np.finfo(np.float64).tiny * 1e3:
-        unit = 1.0  # a point: every triangle is degenerate and skipped anyway
-    centre = (lo + hi) / 2.0
+    centre, unit = _frame(target)
     scene = []
     for o in kept:
         m = o.transformed(centre, unit)
@@ -271,8 +289,13 @@ def _normalized_scene(target, occluders):
 def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
-            tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None):
+            tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
+            extrusion=0.0, max_ray_distance=0.0, cage=None):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
+
+    With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
+    "Selected to Active"): each sample point of the target is moved to the high-poly surface by
+    Cycles' rules and AO is evaluated there (:mod:`core.highpoly` says exactly how).
 
     Parameters
     ----------
@@ -326,6 +349,16 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     bent_space : the space of the bent normals: None (world space), a (3, 3) matrix (M b,
         normalised; Blender's object space is the inverse of the object's matrix) or a
         :class:`core.bent.TangentFrames` (tangent space, Blender's normal-map convention).
+    highpoly : None, or a Mesh or a list of Meshes (corner normals used, UVs not needed) whose AO is
+        baked into the target's UVs. The high-poly meshes occlude, as do the ``occluders``; the target
+        and the cage never do (left out of the occluders if they are among them).
+    extrusion : with ``highpoly``, the distance (world units, >= 0) the matching rays start out from the
+        target's surface along its interpolated normal, pointing back along it (Cycles' Extrusion).
+    max_ray_distance : with ``highpoly``, the longest matching ray (world units, measured from where it
+        starts), 0 for no limit.
+    cage : with ``highpoly``, None or a Mesh of the target's topology (same vertex count and triangles,
+        vertices moved): the matching rays go from the cage's points towards the target's (the
+        extrusion is then not used).
 
     Returns
     -------
@@ -334,6 +367,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     Raises
     ------
     MeshError, MeshTypeError, SettingsError, BakeMemoryError (before any heavy work), BakeCancelled.
+    With ``highpoly``, also MeshError when no matching ray finds the high-poly surface (it says what
+    to change), before any AO ray is traced.
     """
     t_start = time.perf_counter()
     if not isinstance(target, Mesh):
@@ -347,10 +382,18 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
                                     replicates)
+    s2a = None
+    if highpoly is not None:  # selected to active: checked here, before any work
+        if bent_normals:
+            raise SettingsError("bent normals are not baked with selected to active (highpoly): bake them "
+                                "from the high-poly object itself, or bake AO only")
+        s2a = _highpoly.SelectedToActive.check(target, highpoly, extrusion, max_ray_distance, cage)
+        occluders = s2a.occluders_of(occluders)
+        s2a = s2a.normalized(*_frame(target), MAX_SCENE_SPAN)
     bent_space = bent_mod.check_space(bent_space, target) if bent_normals else None
     target, occluders, unit = _normalized_scene(target, occluders)
     w, h = s.width, s.height
-    tri_total = target.triangle_count + sum(o.triangle_count for o in occluders)
+    tri_total = target.triangle_count + sum(o.triangle_count for o in occluders) + (s2a.triangle_count if s2a else 0)
     need = estimate_memory(w, h, tri_total, s.threads, s.chunk_rays, s.samples, s.source, s.replicates)
     avail = available_memory()
     if avail is not None and need > avail:
@@ -362,7 +405,10 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     uvtris = prepare(target, w, h)
     table = SurfaceTable.build(target, uvtris)
     bins = bin_triangles(uvtris, w, h, s.tile_size)
-    tracer = Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / unit)
+    stage = None if s2a is None else _highpoly.HighPolyStage(s2a, target, occluders, uvtris, table, bins, s, unit,
+                                                              lambda: _cancelled(cancel))
+    tracer = (Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / unit) if stage is None
+              else stage.scene.tracer)
     pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
     kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
     tile = s.tile_size
@@ -370,8 +416,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     # so count each tile's texels times samples as it is rasterised, against an upper bound.
     planned = sum(min(tile, w - kx * tile) * min(tile, h - ky * tile) for ky, kx in bins) * s.samples
     shared = _Shared(planned, progress, cancel)
-    baker = _TileBaker(uvtris, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals))
-    errors = ErrorModel(s)
+    baker = (_TileBaker(uvtris, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals)) if stage is None
+             else stage.baker(pattern, shared, on_rays, allocation_seeds(s)))
+    errors = ErrorModel(s, grouped=stage is not None)
 
     ao = np.zeros((h, w), np.float32)
     se = np.zeros((h, w), np.float32)
@@ -397,6 +444,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                 tri = bent_mod.primary_pieces(frag, w)
                 weights = bent_mod.barycentric(table.corners_xy, tri, cols + 0.5, rows + 0.5)
                 bent[rows, cols] = bent_mod.texel_directions(sums, tri, weights, target.normals, bent_space)
+            if stage is not None:
+                baker.settle(est, rows, cols, mask, se)
             with shared.lock:
                 coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
             if on_tile is not None:
@@ -426,6 +475,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     if progress is not None:
         progress(1.0)
 
+    miss, missed, extra = baker.finish(mask) if stage is not None else (None, 0, {})
     if s.margin > 0:
         ao = dilate(ao, mask, s.margin)
     if bent is not None:
@@ -435,9 +485,12 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
               "degenerate_triangles": uvtris.degenerate_space,
               "uv_outside_triangles": uvtris.outside, "overlapping_texels": coverage_over}
+    if stage is not None:
+        metadata.update(s2a.metadata())
+        report.update(extra)
     return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=shared.rays, seconds=seconds,
                       trace_seconds=shared.trace_seconds, threads=s.threads, metadata=metadata, report=report,
-                      trace_cpu_seconds=shared.trace_cpu_seconds, bent=bent)
+                      trace_cpu_seconds=shared.trace_cpu_seconds, bent=bent, miss=miss, missed=missed)
 
 
 __all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "MAX_RESOLUTION", "SAMPLE_PIECE",

@@ -179,11 +179,15 @@ class ErrorModel:
     mean (n - 1 degrees of freedom) for independent samples, where that one is valid; either is
     pooled over the texel's window (:func:`pooled_variance`); for binary terms see
     :meth:`variance`.
+
+    ``grouped``: a texel's samples come in blocks that share a random position (selected to active,
+    :mod:`core.highpoly`), so they are not independent even from the independent source, and the
+    spread of the replicates (each of its own positions) is used for every source.
     """
 
-    def __init__(self, settings, confidence=0.95):
+    def __init__(self, settings, confidence=0.95, grouped=False):
         self.replicates = settings.replicates
-        self.independent = settings.source == "independent"
+        self.independent = settings.source == "independent" and not grouped
         self.binary, self.bound = settings.binary, settings.bound
         self.confidence = confidence
         self.z = z_for_confidence(confidence)
@@ -197,7 +201,10 @@ class ErrorModel:
             if self.replicates < 2:
                 return v, dof
         else:
-            v, dof = est.replicate_variance(), np.full(len(n), self.replicates - 1.0)
+            # A texel with a replicate of no samples (selected to active: every point of that
+            # replicate missed the high-poly surface, core.highpoly) has no spread of its own: no
+            # degrees of freedom, so it takes its neighbours' variance and gives them none.
+            v, dof = est.replicate_variance(), np.where(np.all(est.rn > 0, axis=0), self.replicates - 1.0, 0.0)
         pooled, pooled_dof = pooled_variance(v, dof, n, x, y)
         if not self.binary:
             return pooled, pooled_dof
@@ -286,7 +293,7 @@ class SamplingPlan:
     #: How much a texel's count may grow in one round, at the most.
     MAX_GROWTH = 64
 
-    def __init__(self, settings, confidence=0.95):
+    def __init__(self, settings, confidence=0.95, grouped=False):
         R = settings.replicates
         self.caps = replicate_samples(settings.samples, R)
         self.cap = self.caps[0]
@@ -294,7 +301,7 @@ class SamplingPlan:
         self.first = max(1, -(-first // R))
         self.target = settings.target_error
         self.rate = 0.5 if settings.source == "independent" else 0.75
-        self.errors = ErrorModel(settings, confidence)
+        self.errors = ErrorModel(settings, confidence, grouped)
 
     def next_counts(self, est, texels, n, x, y):
         """Per texel of ``texels`` (current count ``n`` per replicate): the count it goes on to, or

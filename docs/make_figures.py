@@ -15,6 +15,10 @@ adaptive     docs/adaptive.png: an adaptive bake's AO, its standard-error map an
 cycles       docs/cycles_vs_mc_ao.png: Suzanne of suzanne.blend baked by Cycles' AO bake and by this
              add-on's operator at the same resolution, samples and threads, with the times and the
              difference (bench/cycles.py runs Cycles as the benchmark does).
+selected     docs/selected_to_active.png: rock.blend's 123k-triangle Rock_high baked onto its
+             80-triangle Rock_low by scripts/bake_ao.py --match-suffix _high _low; Cycles renders of
+             the high-poly under a white sky (direct light only: its AO) and of the low-poly showing
+             the baked texture, and the texture itself.
 """
 
 import json
@@ -78,10 +82,14 @@ def convergence(res=64, ns=(4, 8, 16, 32, 64, 128, 256, 512, 1024), seeds=3):
     (ROOT / "docs" / "convergence.json").write_text(json.dumps({"samples": list(ns), **table}, indent=1))
 
 
-# (scene, objects, extra arguments): the room is closed, so without a distance limit it is all 0.
+# (scene, objects, extra arguments): the room is closed, so without a distance limit it is all 0;
+# the rock is Selected to Active (Rock_high baked onto Rock_low, paired by name).
+ROCK_ARGS = ["--match-suffix", "_high", "_low", "--extrusion", "0.1"]
 GALLERY = [("suzanne.blend", ["Suzanne", "Ground"], []),
            ("room.blend", ["Room", "Table", "Crate"], ["--max-distance", "1.0"]),
-           ("analytic.blend", ["Plane"], []), ("dense.blend", ["Terrain"], [])]
+           ("analytic.blend", ["Plane"], []), ("dense.blend", ["Terrain"], []),
+           ("rock.blend", ["Rock_low"], ROCK_ARGS)]
+TITLES = {"Rock_low": "Rock_high onto Rock_low"}
 
 
 def gallery(res=256, samples=64):
@@ -95,7 +103,7 @@ def gallery(res=256, samples=64):
             subprocess.run(cmd, check=True)
             for obj in objects:
                 img, _ = read_image(out / f"{obj}_AO.exr")
-                panels.append((f"{blend}: {obj}", img if img.ndim == 2 else img[..., 0]))
+                panels.append((f"{blend}: {TITLES.get(obj, obj)}", img if img.ndim == 2 else img[..., 0]))
     cols = 4
     rows = -(-len(panels) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(2.2 * cols, 2.4 * rows), dpi=90)
@@ -171,8 +179,93 @@ def adaptive_maps(res=256, target=0.01, cap=2048):
     print(f"adaptive: mean {n.mean():.1f} samples, {np.mean(n == 16):.0%} at the minimum, {r.seconds:.2f} s")
 
 
+def _render(bpy, path, width, height, samples):
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.cycles.use_denoising = False
+    scene.cycles.max_bounces = 0  # direct light from a uniform white sky only: the render is AO x albedo
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = "PNG"
+    scene.view_settings.view_transform = "Standard"
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    img = plt.imread(str(path))
+    return img[..., :3].mean(axis=2)
+
+
+def selected_to_active_figure(res=512, samples=128, width=360, height=300, render_samples=64):
+    """The rock's high-poly, its low-poly with the baked AO, and the baked texture (see the docstring)."""
+    import bpy
+    from mathutils import Vector
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp)
+        cmd = [sys.executable, str(ROOT / "scripts" / "bake_ao.py"), str(ROOT / "sample_scenes" / "rock.blend"),
+               *ROCK_ARGS, "--resolution", str(res), "--samples", str(samples), "--output", str(out),
+               "--format", "exr", "--quiet", "--summary-json", str(out / "summary.json")]
+        subprocess.run(cmd, check=True)
+        record = json.loads((out / "summary.json").read_text())["objects"][0]
+        baked = out / "Rock_low_AO.exr"
+        texture = np.squeeze(read_image(baked)[0])
+        bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "rock.blend"))
+        scene = bpy.context.scene
+        world = bpy.data.worlds.new("Sky")
+        world.use_nodes = True
+        world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
+        scene.world = world
+        bpy.ops.object.camera_add(location=(2.3, -2.3, 1.7))
+        camera = bpy.context.active_object
+        camera.rotation_euler = (Vector((0.0, 0.0, 0.5)) - camera.location).to_track_quat("-Z", "Y").to_euler()
+        camera.data.lens = 60
+        scene.camera = camera
+        white = bpy.data.materials.new("White")
+        white.use_nodes = True
+        white.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (1, 1, 1, 1)
+        high, low, ground = (bpy.data.objects[n] for n in ("Rock_high", "Rock_low", "Ground"))
+        evaluated = high.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        evaluated.calc_loop_triangles()
+        triangles = len(evaluated.loop_triangles)
+        for obj in (high, ground):
+            obj.data.materials.clear()
+            obj.data.materials.append(white)
+        shown = bpy.data.materials.new("Baked AO")
+        shown.use_nodes = True
+        nodes, links = shown.node_tree.nodes, shown.node_tree.links
+        nodes.clear()
+        tex = nodes.new("ShaderNodeTexImage")
+        tex.image = bpy.data.images.load(str(baked))
+        tex.image.colorspace_settings.name = "Non-Color"
+        emit = nodes.new("ShaderNodeEmission")
+        result = nodes.new("ShaderNodeOutputMaterial")
+        links.new(tex.outputs["Color"], emit.inputs["Color"])
+        links.new(emit.outputs["Emission"], result.inputs["Surface"])
+        low.data.materials.clear()
+        low.data.materials.append(shown)
+        low.hide_render = True
+        a = _render(bpy, out / "high.png", width, height, render_samples)
+        low.hide_render, high.hide_render = False, True
+        b = _render(bpy, out / "low.png", width, height, render_samples)
+    fig, axes = plt.subplots(1, 3, figsize=(10.5, 4.0), dpi=90)
+    for ax, img, title in [
+            (axes[0], a, f"Rock_high: {triangles} triangles\n(Cycles, white sky, direct light: its AO)"),
+            (axes[1], b, "Rock_low: 80 triangles\nwith the baked AO as its colour"),
+            (axes[2], texture, f"Rock_low_AO, {res}x{res}, {samples} spp\n{record['seconds']:.1f} s, "
+                               f"{record['missed_sample_points']} of {record['matching_rays']} points missed")]:
+        ax.imshow(img, cmap="gray", vmin=0, vmax=1, origin="lower" if img is texture else "upper",
+                  interpolation="nearest")
+        ax.set_title(title, fontsize=8)
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "selected_to_active.png")
+    print(f"rock: {record['seconds']:.2f} s, {record['missed_sample_points']} of {record['matching_rays']} "
+          "sample points missed")
+
+
 if __name__ == "__main__":
-    which = sys.argv[1:] or ["convergence", "gallery", "cycles", "adaptive"]
+    which = sys.argv[1:] or ["convergence", "gallery", "cycles", "selected", "adaptive"]
     if "adaptive" in which:
         adaptive_maps()
     if "convergence" in which:
@@ -181,3 +274,5 @@ if __name__ == "__main__":
         gallery()
     if "cycles" in which:
         cycles_side_by_side()
+    if "selected" in which:
+        selected_to_active_figure()

@@ -24,6 +24,7 @@ def register(addon_name="mc_ao"):
         panel.VIEW3D_PT_mc_ao_target,
         panel.VIEW3D_PT_mc_ao_sampling,
         panel.VIEW3D_PT_mc_ao_occlusion,
+        panel.VIEW3D_PT_mc_ao_selected_to_active,
         panel.VIEW3D_PT_mc_ao_image,
         panel.VIEW3D_PT_mc_ao_output,
     )

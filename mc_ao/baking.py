@@ -84,6 +84,17 @@ class Job:
     image_name: str
     target: MeshArrays
     occluders: list = field(default_factory=list)
+    # Selected to Active (mc_ao.selected_to_active): the high-poly sources, the cage (or None), the
+    # extrusion (world units) and the max ray distance; warnings for the report.
+    highpoly: list = field(default_factory=list)
+    cage: MeshArrays = None
+    extrusion: float = 0.0
+    max_ray_distance: float = 0.0
+    notes: list = field(default_factory=list)
+
+    @property
+    def selected_to_active(self):
+        return bool(self.highpoly)
 
     def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None):
         """core.bake_ao of this job; returns its result. Needs no bpy (safe in a worker thread).
@@ -102,6 +113,11 @@ class Job:
                 normals=arrays.normals, name=arrays.name,
             )
 
+        extra = {}
+        if self.highpoly:
+            extra = dict(highpoly=[mesh(h) for h in self.highpoly], extrusion=self.extrusion,
+                         max_ray_distance=self.max_ray_distance,
+                         cage=None if self.cage is None else mesh(self.cage))
         return core.bake_ao(
             mesh(self.target),
             occluders=[mesh(o) for o in self.occluders],
@@ -109,6 +125,7 @@ class Job:
             progress=progress,
             cancel=cancel,
             on_tile=on_tile,
+            **extra,
         )
 
 
@@ -167,7 +184,9 @@ def input_notes(result):
         n = report.get(key)
         if n:
             notes.append((one if n == 1 else several).format(n=n))
-    return notes
+    from .selected_to_active import miss_notes
+
+    return notes + miss_notes(result)
 
 
 def _visible_geometry(depsgraph, view_layer):

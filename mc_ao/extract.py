@@ -51,7 +51,7 @@ def _foreach(collection, attr, count, width, dtype):
     return out.reshape(count, width) if width > 1 else out
 
 
-def mesh_arrays(name, mesh, matrix, *, uv_map=None, with_uvs=False, with_normals=False):
+def mesh_arrays(name, mesh, matrix, *, uv_map=None, with_uvs=False, with_normals=False, vertex_normals=False):
     """Triangles of a (usually evaluated) Blender mesh, transformed by ``matrix`` into world space.
 
     Parameters
@@ -66,6 +66,9 @@ def mesh_arrays(name, mesh, matrix, *, uv_map=None, with_uvs=False, with_normals
     with_uvs, with_normals : bool
         Read the per-corner UVs and the corner normals (Blender's custom, smooth or flat normals,
         whatever the mesh shades with). Occluders need neither.
+    vertex_normals : bool
+        With ``with_normals``, the vertex normals instead (from the geometry alone: what Cycles'
+        Selected to Active extrudes a cage along).
 
     Returns
     -------
@@ -109,7 +112,11 @@ def mesh_arrays(name, mesh, matrix, *, uv_map=None, with_uvs=False, with_normals
             to_world = np.linalg.inv(linear)
         except np.linalg.LinAlgError:
             raise ExtractError(f"{name} has a zero scale, its surface has no normal") from None
-        normals = _foreach(mesh.corner_normals, "vector", len(mesh.loops), 3, np.float64)
+        if vertex_normals:
+            verts = _foreach(mesh.loops, "vertex_index", len(mesh.loops), 1, np.int32)
+            normals = _foreach(mesh.vertex_normals, "vector", len(mesh.vertices), 3, np.float64)[verts]
+        else:
+            normals = _foreach(mesh.corner_normals, "vector", len(mesh.loops), 3, np.float64)
         normals = normals @ to_world
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
         normals = normals.astype(np.float32)[corners]

@@ -151,6 +151,15 @@ def check_settings(settings):
     if not (max_distance is not None and max_distance >= 0):  # NaN fails too; inf means unlimited
         problems.append(("max_distance", f"must be a distance >= 0 (0 or inf = unlimited), "
                                          f"not {settings.max_distance!r}"))
+    # Selected to Active: the core's own rule for these (core.highpoly), checked for every bake so that
+    # a bad value is refused before the mode is switched on too.
+    extrusion = _number(getattr(settings, "cage_extrusion", 0.0))
+    if not (extrusion is not None and math.isfinite(extrusion) and extrusion >= 0):
+        problems.append(("cage_extrusion", f"must be a finite distance >= 0, not {settings.cage_extrusion!r}"))
+    ray_distance = _number(getattr(settings, "max_ray_distance", 0.0))
+    if not (ray_distance is not None and ray_distance >= 0):
+        problems.append(("max_ray_distance", f"must be a distance >= 0 (0 = no limit), "
+                                             f"not {settings.max_ray_distance!r}"))
     for field, allowed in (("source", SOURCES), ("distribution", DISTRIBUTIONS), ("occluders", OCCLUDERS),
                            ("file_format", IMAGE_FORMATS), ("target", TARGETS), ("attribute_domain", DOMAINS),
                            ("bent_space", BENT_SPACES)):
@@ -178,11 +187,11 @@ def settings_record(settings):
 
     The same dict goes into ``--summary-json``, so a later run can check a file against the bake
     that was asked for. Unlimited max_distance is ``inf`` (``Infinity`` in the JSON, as Python's
-    json writes and reads it).
+    json writes and reads it). A Selected to Active bake adds its settings (Cycles' names).
     """
     kw = settings.bake_kwargs()
     w, h = kw["resolution"]
-    return {
+    record = {
         "samples": int(kw["samples"]),
         "min_samples": int(kw["min_samples"]),
         "target_error": float(kw["target_error"]),
@@ -202,6 +211,12 @@ def settings_record(settings):
         **({"bent_normals": settings.bent_space.lower()} if settings.bent_normals else {}),
         "replicates": int(kw["replicates"]),
     }
+    if getattr(settings, "use_selected_to_active", False):
+        record.update({"selected_to_active": True, "cage_extrusion": float(settings.cage_extrusion),
+                       "max_ray_distance": float(settings.max_ray_distance),
+                       "use_cage": bool(settings.use_cage),
+                       "cage_object": settings.cage_object if settings.use_cage else ""})
+    return record
 
 
 # -- files -----------------------------------------------------------------------------------------

@@ -35,7 +35,7 @@ import traceback
 import bpy
 import numpy as np
 
-from . import baking, corelink, images, jobs, targets
+from . import baking, corelink, images, jobs, selected_to_active, targets
 from .extract import ExtractError
 from .jobs import BakeRun
 from .properties import resolve_threads
@@ -84,6 +84,17 @@ def _redraw(context):
                 area.tag_redraw()
 
 
+def why_not(context):
+    """Why the Bake AO button is disabled in ``context`` (the poll message, the panel's hint), or None."""
+    settings = getattr(context.scene, "mc_ao", None)
+    if settings is not None and settings.use_selected_to_active:
+        return (selected_to_active.unsupported(settings)
+                or selected_to_active.why_not(context.selected_objects, context.active_object,
+                                              selected_to_active.cage_of(settings)))
+    needs_uvs = settings is None or settings.target != "VERTEX_COLORS"
+    return baking.why_not_bakeable(context.selected_objects, needs_uvs)
+
+
 def is_running():
     """Whether an AO bake is in progress (the panel says so, the operator refuses a second one)."""
     return bool(_RUNS)
@@ -119,12 +130,14 @@ UNDO_HANDLERS = {
 
 
 def summary(job, result):
-    """One line per baked object: size, time, samples per texel, ray throughput."""
+    """One line per baked object: size, time, samples per texel, ray throughput (and for Selected to
+    Active, the high-poly objects and how many sample points missed them)."""
     h, w = result.ao.shape
     per_texel, rate = baking.throughput(result)
+    sources = f" from {', '.join(h.name for h in job.highpoly)}" if getattr(job, "highpoly", None) else ""
     return (
-        f"{job.object_name}: {w}x{h} into {job.image_name!r} in {result.seconds:.2f} s, "
-        f"{per_texel:.0f} samples per texel, {rate:.2f} M rays/s"
+        f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r} in {result.seconds:.2f} s, "
+        f"{per_texel:.0f} samples per texel, {rate:.2f} M rays/s{selected_to_active.miss_summary(result)}"
     )
 
 
@@ -202,19 +215,35 @@ class BakeSession:
             ) + "; nothing was baked")
             return False
         selected = list(context.selected_objects)
+        to_active = self.settings.use_selected_to_active
         needs_uvs = targets.needs_uvs(self.settings)
-        objects = baking.targets_of(selected, needs_uvs)
+        if to_active:
+            # Selected to Active: the active object from the other selected ones (their cage aside).
+            active, cage = context.active_object, selected_to_active.cage_of(self.settings)
+            reason = (selected_to_active.unsupported(self.settings)
+                      or selected_to_active.why_not(selected, active, cage))
+            objects = [] if reason else [active]
+            skipped = [obj for obj in selected if obj is not active and obj is not cage
+                       and obj not in selected_to_active.high_objects(selected, active, cage)]
+        else:
+            objects = baking.targets_of(selected, needs_uvs)
+            reason = baking.why_not_bakeable(selected, needs_uvs) or "Nothing to bake"
+            skipped = [obj for obj in selected if obj not in objects]
         if not objects:
             # The poll refuses this already; a script that gets past it (or a changed selection)
             # hears the same reason.
-            self.report({"ERROR"}, baking.why_not_bakeable(selected, needs_uvs) or "Nothing to bake")
+            self.report({"ERROR"}, reason)
             return False
         try:
             self.output_dir = _output_dir(self.settings) if self.settings.save_to_file else None
-            planned = baking.plan(
-                context.evaluated_depsgraph_get(), objects, self.settings,
-                selected=selected, view_layer=context.view_layer,
-            )
+            if to_active:
+                planned = [selected_to_active.plan(context.evaluated_depsgraph_get(), objects[0], selected,
+                                                   self.settings, view_layer=context.view_layer)]
+            else:
+                planned = baking.plan(
+                    context.evaluated_depsgraph_get(), objects, self.settings,
+                    selected=selected, view_layer=context.view_layer,
+                )
             for job in planned:
                 try:
                     targets.check_images(job, self.settings)
@@ -226,9 +255,11 @@ class BakeSession:
         self.warnings = 0  # warnings reported, counted in the summary of the whole bake
         self.unsummarised = 0  # warnings since the last summary line, counted in the next one
         self.unsummarised_errors = 0  # errors (a file not saved) since the last summary line
-        for obj in selected:
-            if obj not in objects:
-                self._warn(baking.skip_note(obj, self.settings.occluders, needs_uvs))
+        for obj in skipped:
+            self._warn(baking.skip_note(obj, self.settings.occluders, needs_uvs))
+        for job in planned:
+            for note in job.notes:
+                self._warn(f"{job.object_name}: {note}")
         w, h = self.settings.size
         # UDIM tiles and colour attributes are written when their object's bake finishes.
         self.live = live and w * h <= LIVE_MAX_TEXELS and not targets.custom(self.settings)
@@ -600,7 +631,8 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         "settings. An existing image of another size is resized to the bake's size. Objects that are "
         "not meshes or have no UV map are skipped. The baked image is packed into the .blend file "
         "(or, with Save to File, can load from its file). Esc cancels; a cancelled or failed bake "
-        "leaves each image as it was"
+        "leaves each image as it was. With Selected to Active, bakes the selected objects onto the "
+        "active one"
     )
     # UNDO: a finished bake is one undo step, so Ctrl-Z takes back exactly the bake (its new images
     # go, a reused image gets its former size and settings) and not the step before it too, as it
@@ -615,9 +647,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
         # A running bake does not disable the button: Blender 4.3 keeps drawing a button that was
         # disabled under a resting mouse pointer as disabled, and ignores clicks on it, after it
         # is enabled again. start() refuses a second bake instead, and the panel says why.
-        settings = getattr(context.scene, "mc_ao", None)
-        needs_uvs = settings is None or settings.target != "VERTEX_COLORS"
-        reason = baking.why_not_bakeable(context.selected_objects, needs_uvs)
+        reason = why_not(context)
         if reason is not None:
             cls.poll_message_set(reason)
             return False

@@ -4,7 +4,7 @@ import bpy
 
 from . import baking
 from . import operators
-from . import preview
+from . import preview, selected_to_active
 from .operators import OBJECT_OT_mc_ao_bake, is_running
 from .extract import default_uv_map
 from .settings import BakeSettings
@@ -106,9 +106,12 @@ def draw_targets(layout, context):
     settings = BakeSettings.from_properties(context.scene.mc_ao)
     needs_uvs = not settings.vertex_colors
     # The button greys out when its poll fails; say why under it.
-    reason = baking.why_not_bakeable(selected, needs_uvs)
+    reason = operators.why_not(context)
     if reason is not None:
         wrapped_label(layout, context, reason, icon="INFO")
+        return
+    if settings.use_selected_to_active:
+        draw_selected_to_active(layout, context)
         return
     targets = baking.targets_of(selected, needs_uvs)
     if settings.vertex_colors:
@@ -156,6 +159,45 @@ class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = settings.bent_normals
         sub.prop(settings, "bent_space")
+
+
+def draw_selected_to_active(layout, context):
+    """Selected to Active: which objects bake onto which, into which image."""
+    settings = context.scene.mc_ao
+    active, cage = context.active_object, selected_to_active.cage_of(settings)
+    highs = selected_to_active.high_objects(context.selected_objects, active, cage)
+    names = ", ".join(o.name for o in highs[:MAX_SKIPPED_LINES])
+    if len(highs) > MAX_SKIPPED_LINES:
+        names += f" and {len(highs) - MAX_SKIPPED_LINES} more"
+    image_name = BakeSettings.from_properties(settings).image_name_for(active.name, baking.id_name_max_bytes())
+    wrapped_label(layout, context, f"From {names} onto {active.name}", icon="MOD_SHRINKWRAP")
+    wrapped_label(layout, context, f"Into {image_name}", icon="IMAGE_DATA")
+
+
+class VIEW3D_PT_mc_ao_selected_to_active(_McAoPanel, bpy.types.Panel):
+    """Cycles' Bake panel's "Selected to Active", with the same settings and layout."""
+
+    bl_label = "Selected to Active"
+    bl_parent_id = "VIEW3D_PT_mc_ao"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.mc_ao, "use_selected_to_active", text="")
+
+    def draw(self, context):
+        settings = context.scene.mc_ao
+        layout = self.split_layout()
+        layout.active = settings.use_selected_to_active
+        col = layout.column()
+        col.prop(settings, "use_cage", text="Cage")
+        if settings.use_cage:
+            col.prop(settings, "cage_object")
+            sub = col.column()
+            sub.active = settings.cage_object is None  # a cage object replaces the extrusion
+            sub.prop(settings, "cage_extrusion")
+        else:
+            col.prop(settings, "cage_extrusion", text="Extrusion")
+        col.prop(settings, "max_ray_distance")
 
 
 class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):

@@ -1,7 +1,7 @@
 """The bake settings on every scene (``scene.mc_ao``) and the add-on preferences."""
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from .settings import BakeSettings
 
@@ -206,6 +206,45 @@ class McAoSettings(bpy.types.PropertyGroup):
             "two independent sample sets, about 1.2 times the noise of one at the same samples"
         ),
         default=_DEFAULTS.error_map,
+    )
+    # Selected to Active, named and described as Cycles' bake settings (scene.render.bake).
+    use_selected_to_active: BoolProperty(
+        name="Selected to Active",
+        description=(
+            "Bake the ambient occlusion of the selected objects onto the active object's UV map, "
+            "into <active>_AO (the active object is the low-poly, the other selected objects the high-poly)"
+        ),
+        default=_DEFAULTS.use_selected_to_active,
+    )
+    cage_extrusion: FloatProperty(
+        name="Cage Extrusion",
+        description=(
+            "Inflate the active object by the specified distance for baking. This helps matching to points "
+            "nearer to the outside of the selected object meshes"
+        ),
+        default=_DEFAULTS.cage_extrusion, min=0.0, soft_max=1.0, step=1, precision=3,
+        subtype="DISTANCE", unit="LENGTH",
+    )
+    max_ray_distance: FloatProperty(
+        name="Max Ray Distance",
+        description=(
+            "The maximum ray distance for matching points between the active and selected objects. "
+            "If zero, there is no limit"
+        ),
+        default=_DEFAULTS.max_ray_distance, min=0.0, soft_max=1.0, step=1, precision=3,
+        subtype="DISTANCE", unit="LENGTH",
+    )
+    use_cage: BoolProperty(
+        name="Cage", description="Cast rays to active object from a cage", default=_DEFAULTS.use_cage,
+    )
+    cage_object: PointerProperty(
+        name="Cage Object",
+        description=(
+            "Object to use as cage instead of calculating the cage from the active object with cage "
+            "extrusion; it must be a copy of the active object with its vertices moved"
+        ),
+        type=bpy.types.Object,
+        poll=lambda _self, obj: obj.type == "MESH",
     )
 
 

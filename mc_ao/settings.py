@@ -54,11 +54,28 @@ class BakeSettings:
     bent_normals: bool = False  # also bake "<object>_BentNormal" from the same rays
     bent_space: str = "TANGENT"  # or "OBJECT"
     error_map: bool = False  # also keep each texel's standard error: image "<image>_stderr", file "<stem>_stderr.exr"
+    # Selected to Active (mc_ao.selected_to_active), named as Cycles' bake settings: bake the selected
+    # objects onto the active one; extrusion and max ray distance in the active object's units (0 =
+    # no limit); a cage: the active object extruded without its Edge Split modifiers' splits (use_cage
+    # alone) or the object named cage_object.
+    use_selected_to_active: bool = False
+    cage_extrusion: float = 0.0
+    max_ray_distance: float = 0.0
+    use_cage: bool = False
+    cage_object: str = ""  # an object's name ("" = none); scene.mc_ao holds a pointer
 
     @classmethod
     def from_properties(cls, props, **overrides):
-        """Copy the values of a property group (scene.mc_ao) or any object with the same attributes."""
+        """Copy the values of a property group (scene.mc_ao) or any object with the same attributes.
+
+        An object pointer (``cage_object``) becomes the object's name ("" for none).
+        """
         values = {f.name: getattr(props, f.name) for f in fields(cls)}
+        cage = values.get("cage_object")
+        if cage is None:
+            values["cage_object"] = ""
+        elif not isinstance(cage, str):
+            values["cage_object"] = cage.name
         values.update(overrides)
         return cls(**values)
 

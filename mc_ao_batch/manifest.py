@@ -156,6 +156,10 @@ def _value_args(where, key, value, action):
         values = value if isinstance(value, list) else [value]
         if not values and action.nargs == "+":
             raise ManifestError(f"{where}: {key} must not be empty")
+    elif isinstance(action.nargs, int) and action.nargs > 1:  # match_suffix = ["_high", "_low"]
+        if not isinstance(value, list) or len(value) != action.nargs:
+            raise ManifestError(f"{where}: {key} takes a list of {action.nargs} values, not {value!r}")
+        values = value
     else:
         if isinstance(value, list):
             if key == "resolution" and len(value) == 2 and all(isinstance(v, int) for v in value):

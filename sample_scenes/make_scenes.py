@@ -23,6 +23,9 @@ test_sample_scenes.py checks that). Scenes:
                   F Lambert's form factor of the polygon (see tests/scenes.py).
   dense.blend     a grid subdivided and displaced by modifiers into 524k triangles (the file stays
                   small; the add-on bakes the evaluated mesh), for benchmarks.
+  rock.blend      Selected to Active: Rock_high (an icosphere subdivided and displaced by modifiers
+                  into 123k triangles) baked onto Rock_low (an 80-triangle icosphere, smooth, Smart
+                  UV Project; --match-suffix _high _low pairs them), on a ground plane.
 """
 
 import argparse
@@ -37,6 +40,9 @@ HERE = Path(__file__).resolve().parent
 
 #: The analytic scene's numbers, shared with tests and docs.
 ANALYTIC = {"plane_half_size": 1.0, "disk_radius": 0.5, "disk_height": 0.4, "disk_vertices": 64}
+#: The rock's numbers: its high-poly reaches displacement / 2 outside the sphere of its radius, and the
+#: low-poly's flat faces lie inside that sphere, so an extrusion of 0.1 (the README's) covers the gap.
+ROCK = {"radius": 0.5, "displacement": 0.12, "cell": 0.15}
 
 
 def reset():
@@ -201,7 +207,37 @@ def dense():
     save("dense.blend")
 
 
-SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense}
+def rock():
+    """A high-poly rock (an icosphere subdivided and displaced by modifiers into 123k triangles) and
+    its low-poly (an 80-triangle icosphere, smooth, Smart UV Project) for Selected to Active:
+    Rock_high onto Rock_low (the names --match-suffix _high _low pairs), on a ground plane."""
+    reset()
+    ground(4.0)
+    r = ROCK["radius"]
+    z = r + ROCK["displacement"] / 2 + 0.01  # its lowest point just above the ground
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=r, location=(0, 0, z))
+    high = bpy.context.active_object
+    high.name = high.data.name = "Rock_high"
+    sub = high.modifiers.new("Subdivision", "SUBSURF")  # 123k triangles, kept small in the file
+    sub.levels = sub.render_levels = 4
+    tex = bpy.data.textures.new("Cracks", type="VORONOI")
+    tex.noise_scale = ROCK["cell"]
+    tex.distance_metric = "DISTANCE"
+    disp = high.modifiers.new("Displace", "DISPLACE")
+    disp.texture = tex
+    disp.strength = ROCK["displacement"]
+    disp.texture_coords = "LOCAL"
+    shade(high, True)
+    smart_uv(high)  # not needed to bake from it; it makes the mesh a valid bake target too
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=r, location=(0, 0, z))
+    low = bpy.context.active_object
+    low.name = low.data.name = "Rock_low"
+    shade(low, True)
+    smart_uv(low, margin=0.03)
+    save("rock.blend")
+
+
+SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense, "rock": rock}
 
 
 #: Where save() writes; main() sets it.

@@ -10,7 +10,21 @@ or by a Python that has the bpy module (then the .blend file is the first argume
     python scripts/bake_ao.py scene.blend --objects A B --samples 128 --resolution 1024 --output out/
 
 Writes <image>_AO.png (and/or .exr, .tif, per --format) for each object into the output folder
-and prints a summary. Every setting is checked before anything is baked. File names come from
+and prints a summary.
+
+Selected to Active (as Cycles' bake, see core.highpoly for the exact rules): the AO of high-poly
+objects baked into a low-poly's UVs, into <low>_AO:
+
+    ... --selected-to-active --active Chair_low --objects Chair_high Bolts --extrusion 0.05
+    ... --match-suffix _high _low [--objects Chair_low Table_low]
+
+--active is the low-poly (default: the file's active object) and --objects the high-poly objects
+(default: the file's other selected objects); --extrusion, --max-ray-distance (0 = no limit) and
+--cage [NAME] (Cycles' Cage: alone, the low-poly extruded along its vertex normals; with NAME, an
+object of the low-poly's topology) are Cycles' settings. --match-suffix HIGH LOW
+bakes every object named <base>LOW that has a <base>HIGH onto it, one image each (--objects names
+the low-poly objects to bake, default all of them; a <base>LOW without its <base>HIGH is skipped
+with a note, or is an error when named). Every setting is checked before anything is baked. File names come from
 the image names ("<object>_AO"), made safe: a name never chooses where a file goes (no folders,
 no "..", no names Windows refuses; a name that had to change gets a short hash of the original,
 and two objects never share a file, also on filesystems that ignore case). Every file lands in
@@ -70,6 +84,7 @@ OPTIONS = {
     "uv_map": "--uv-map", "margin": "--margin", "image_name": "--image-name", "seed": "--seed",
     "threads": "--threads", "target": "--target", "attribute_name": "--attribute", "attribute_domain": "--domain",
     "bent_space": "--bent-space", "error_map": "--stderr",
+    "cage_extrusion": "--extrusion", "max_ray_distance": "--max-ray-distance",
 }
 
 
@@ -188,6 +203,24 @@ def make_parser(with_blend):
                              "--overwrite-input is given)")
     parser.add_argument("--overwrite-input", action="store_true",
                         help="allow --save to replace the .blend file the bake read")
+    s2a = parser.add_argument_group(
+        "selected to active", "bake the AO of high-poly objects into a low-poly's UVs (Cycles' Selected to Active)")
+    s2a.add_argument("--selected-to-active", action="store_true",
+                     help="bake the --objects (the high-poly; default: the file's other selected objects) "
+                          "onto --active, into <active>_AO")
+    s2a.add_argument("--active", metavar="NAME",
+                     help="the low-poly to bake onto (default: the file's active object)")
+    s2a.add_argument("--extrusion", type=float, default=0.0, metavar="D",
+                     help="distance the matching rays start out from the low-poly's surface (default: 0)")
+    s2a.add_argument("--max-ray-distance", type=float, default=0.0, metavar="D",
+                     help="longest matching ray, from where it starts; 0 = no limit (default)")
+    s2a.add_argument("--cage", metavar="NAME", nargs="?", const="",
+                     help="cast the rays from a cage (Cycles' Cage): alone, the low-poly extruded along its "
+                          "smooth vertex normals; with NAME, that object, a copy of the low-poly with its "
+                          "vertices moved outwards (the extrusion is then not used)")
+    s2a.add_argument("--match-suffix", nargs=2, metavar=("HIGH", "LOW"),
+                     help="bake each object named <base>HIGH onto <base>LOW (e.g. _high _low: Chair_high "
+                          "onto Chair_low), one image per low-poly; implies --selected-to-active")
     parser.add_argument("--summary-json", type=Path, metavar="PATH",
                         help="write a JSON record of the run (settings, each object's status, time, "
                              "rays and files) to PATH at the end, whatever the exit status")
@@ -257,11 +290,11 @@ class Summary:
         self.objects = []
         self.error = None
 
-    def add(self, name, status, seconds=0.0, rays=0, samples_per_texel=0.0, files=(), error=None):
+    def add(self, name, status, seconds=0.0, rays=0, samples_per_texel=0.0, files=(), error=None, **extra):
         self.objects.append({
             "object": name, "status": status, "seconds": float(seconds), "rays": int(rays),
             "samples_per_texel": float(samples_per_texel), "files": [str(f) for f in files],
-            "error": None if error is None else str(error),
+            "error": None if error is None else str(error), **extra,
         })
 
     def write(self, exit_code):
@@ -332,6 +365,94 @@ def pick_objects(bpy, names, baking, needs_uvs=True):
     return objects
 
 
+def _objects_named(bpy, names, what):
+    """The view layer's objects of these names (UsageError naming the missing ones)."""
+    layer = bpy.context.view_layer.objects
+    missing = [n for n in names if n not in layer]
+    if missing:
+        raise UsageError(f"no {what} {', '.join(map(repr, missing))} in the view layer; its objects: "
+                         f"{', '.join(sorted(o.name for o in layer)) or 'none'}")
+    return [layer[n] for n in names]
+
+
+def selected_to_active_pairs(bpy, args):
+    """[(low-poly object, [high-poly objects])] of the Selected to Active options; UsageError when the
+    objects are not there or not usable (before baking)."""
+    from mc_ao import baking
+
+    layer = bpy.context.view_layer.objects
+    if args.match_suffix:
+        high_suffix, low_suffix = args.match_suffix
+        if args.objects:
+            lows = _objects_named(bpy, list(dict.fromkeys(args.objects)), "object")
+            for obj in lows:
+                if not obj.name.endswith(low_suffix):
+                    raise UsageError(f"{obj.name} does not end with the low-poly suffix {low_suffix!r}")
+        else:
+            lows = sorted((o for o in layer if o.name.endswith(low_suffix) and len(o.name) > len(low_suffix)),
+                          key=lambda o: o.name)
+        pairs = []
+        for low in lows:
+            name = low.name[:-len(low_suffix)] + high_suffix
+            high = layer.get(name)
+            if high is None:
+                if args.objects:
+                    raise UsageError(f"{low.name} has no high-poly {name!r} in the view layer")
+                print(f"bake_ao: {low.name}: skipped, there is no {name}", file=sys.stderr)
+                continue
+            pairs.append((low, [high]))
+        if not pairs:
+            raise UsageError(f"no pair of objects named <base>{high_suffix} and <base>{low_suffix} in the view layer")
+        return pairs
+    if args.active is not None:
+        low = _objects_named(bpy, [args.active], "object")[0]
+    else:
+        low = layer.active
+        if low is None:
+            raise UsageError("--selected-to-active needs --active NAME: the file has no active object")
+    cage = _objects_named(bpy, [args.cage], "cage object")[0] if args.cage else None
+    if args.objects:
+        highs = _objects_named(bpy, list(dict.fromkeys(args.objects)), "object")
+    else:
+        highs = [o for o in layer if o.select_get() and o is not low and o is not cage]
+        if highs:
+            print(f"bake_ao: baking the selected {', '.join(o.name for o in highs)} onto {low.name}",
+                  file=sys.stderr)
+    if not highs:
+        raise UsageError(f"no high-poly objects to bake onto {low.name}: name them with --objects, or select "
+                         "them in the file")
+    for obj in highs:
+        if obj.type not in baking.GEOMETRY_TYPES:
+            raise UsageError(f"{obj.name} is {baking.kind_of(obj)}, not an object with a surface to bake from")
+    return [(low, highs)]
+
+
+def plan_selected_to_active(bpy, args, settings):
+    """The Jobs of a Selected to Active run, one per low-poly (UsageError for unusable objects)."""
+    from mc_ao import selected_to_active
+    from mc_ao.extract import ExtractError
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    plan = []
+    for low, highs in selected_to_active_pairs(bpy, args):
+        reason = selected_to_active.why_not([low, *highs], low, selected_to_active.cage_of(settings))
+        if reason is not None:
+            raise UsageError(reason.replace("Selected to Active: ", "").replace("the active object ", ""))
+        try:
+            plan.append(selected_to_active.plan(depsgraph, low, [low, *highs], settings,
+                                                view_layer=bpy.context.view_layer))
+        except ExtractError as exc:
+            raise UsageError(str(exc)) from None
+    names = [job.image_name for job in plan]
+    for name in set(names):
+        if names.count(name) > 1:
+            raise UsageError(f"several low-poly objects would bake into image {name!r}; put {{object}} into --image-name")
+    for job in plan:
+        for note in job.notes:
+            print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
+    return plan
+
+
 def settings_from(args):
     """The BakeSettings of the arguments, after checking every value (UsageError lists what is wrong)."""
     from core import imageio
@@ -350,8 +471,11 @@ def settings_from(args):
         attribute_name=getattr(args, "attribute", "AO"), attribute_domain=getattr(args, "domain", "point").upper(),
         float_buffer=getattr(args, "attribute_type", "float") == "float",
         bent_normals=getattr(args, "bent_normals", False), bent_space=getattr(args, "bent_space", "tangent").upper(),
+        use_selected_to_active=bool(args.selected_to_active or args.match_suffix),
+        cage_extrusion=args.extrusion, max_ray_distance=args.max_ray_distance,
+        use_cage=args.cage is not None, cage_object=args.cage or "",
     )
-    problems = []
+    problems = selected_to_active_problems(args)
     for field, message in jobs.check_settings(settings):
         if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
             message = f"--resolution must be at most {corelink.load('bake').MAX_RESOLUTION} a side, not {width}x{height}"
@@ -447,6 +571,38 @@ def save_blend(bpy, path):
 
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     atomicfile.write_file(path, write, verify=verify, ext=".blend")
+
+
+def selected_to_active_problems(args):
+    """What is wrong with the Selected to Active options together (their values: jobs.check_settings)."""
+    problems = []
+    on = args.selected_to_active or args.match_suffix
+    if not on:
+        for option, given in (("--active", args.active is not None), ("--cage", args.cage is not None),
+                              ("--extrusion", args.extrusion != 0.0),
+                              ("--max-ray-distance", args.max_ray_distance != 0.0)):
+            if given:
+                problems.append(f"{option} is a setting of --selected-to-active (or --match-suffix), which is off")
+        return problems
+    for option, given in (("--target vertex-colors", getattr(args, "target", "") == "vertex-colors"),
+                          ("--udim", getattr(args, "udim", False)),
+                          ("--bent-normals", getattr(args, "bent_normals", False))):
+        if given:
+            problems.append(f"{option}: --selected-to-active bakes AO into one image texture of the low-poly")
+    if args.match_suffix:
+        high, low = args.match_suffix
+        if not high or not low or high == low:
+            problems.append(f"--match-suffix needs two different, non-empty suffixes, not {high!r} and {low!r}")
+        if args.active is not None:
+            problems.append("--active names one low-poly; with --match-suffix, --objects names the low-poly objects")
+        if args.cage:
+            problems.append("--cage NAME names one cage for one low-poly; bake a pair with a cage object with "
+                            "--active (--cage alone extrudes each low-poly along its vertex normals)")
+    elif args.cage and (args.cage == args.active or args.cage in (args.objects or [])):
+        problems.append(f"--cage {args.cage!r} is also the low-poly or one of the high-poly objects")
+    if args.active is not None and args.active in (args.objects or []):
+        problems.append(f"--active {args.active!r} is also among --objects (the high-poly objects)")
+    return problems
 
 
 def check_paths(args, summary):
@@ -548,23 +704,47 @@ def run(argv, in_blender, summary):
     from mc_ao import targets
 
     check_save(args, bpy.data.filepath)
-    objects = pick_objects(bpy, args.objects, baking, needs_uvs=targets.needs_uvs(settings))
     try:
-        plan = baking.plan(
-            bpy.context.evaluated_depsgraph_get(), objects, settings,
-            selected=objects, view_layer=bpy.context.view_layer,
-        )
+        if settings.use_selected_to_active:
+            plan = plan_selected_to_active(bpy, args, settings)
+        else:
+            objects = pick_objects(bpy, args.objects, baking, needs_uvs=targets.needs_uvs(settings))
+            plan = baking.plan(
+                bpy.context.evaluated_depsgraph_get(), objects, settings,
+                selected=objects, view_layer=bpy.context.view_layer,
+            )
         formats = [(FORMATS[f], BITS[args.bits] if args.bits else None) for f in args.format]
         files = targets.output_files(settings, str(args.output), plan, formats, stderr=args.stderr)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
     summary.settings = record = jobs.settings_record(settings)
+    if args.match_suffix:  # the summary's record only: file metadata holds plain values
+        summary.settings = dict(record, match_suffix=list(args.match_suffix))
     return bake(plan, files, settings, record, args, summary)
+
+
+def s2a_record(job, result=None):
+    """A Selected to Active job's entries in the summary's object record ({} for another job): its
+    high-poly objects, and the sample points and texels that missed them."""
+    if not job.selected_to_active:
+        return {}
+    report = getattr(result, "report", None) or {}
+    return {"highpoly": [h.name for h in job.highpoly], "cage": job.cage.name if job.cage is not None else None,
+            "matching_rays": int(report.get("matching_rays", 0)),
+            "missed_sample_points": int(getattr(result, "missed", 0) or 0),
+            "missed_texels": int(report.get("missed_texels", 0))}
+
+
+def s2a_metadata(job):
+    """What a Selected to Active job adds to its files' metadata: the high-poly objects and the cage."""
+    if not job.selected_to_active:
+        return {}
+    return {"highpoly": ", ".join(h.name for h in job.highpoly), "cage": job.cage.name if job.cage is not None else ""}
 
 
 def bake(plan, files, settings, record, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
-    from mc_ao import baking, jobs, targets
+    from mc_ao import baking, jobs, selected_to_active, targets
 
     progress = Progress(enabled=not args.quiet)
     run = jobs.BakeRun(plan, settings, args.threads or None, live=False)
@@ -575,7 +755,7 @@ def bake(plan, files, settings, record, args, summary):
         print(f"bake_ao: [{i + 1}/{len(plan)}] baking {plan[i].object_name}", flush=True)
         progress.begin(f"[{i + 1}/{len(plan)}] {plan[i].object_name}")
 
-    def failed(i, errors, seconds=None, files=(), rays=0, per_texel=0.0):
+    def failed(i, errors, seconds=None, files=(), rays=0, per_texel=0.0, result=None):
         nonlocal failures
         progress.end()
         failures += 1
@@ -584,7 +764,8 @@ def bake(plan, files, settings, record, args, summary):
             print(f"bake_ao: {plan[i].object_name}: {error}", file=sys.stderr)
         if seconds is None:
             seconds = time.monotonic() - run.started.get(i, time.monotonic())
-        summary.add(plan[i].object_name, "failed", seconds, rays, per_texel, files, "; ".join(map(str, errors)))
+        summary.add(plan[i].object_name, "failed", seconds, rays, per_texel, files, "; ".join(map(str, errors)),
+                    **s2a_record(plan[i], result))
 
     begin(0)
     run.start()
@@ -605,17 +786,22 @@ def bake(plan, files, settings, record, args, summary):
                                                           settings)
                 else:
                     written, errors = jobs.write_outputs(result, files[job.image_name],
-                                                         dict(record, object=job.object_name))
+                                                         dict(record, object=job.object_name, **s2a_metadata(job)))
                 if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
                     errors = attribute_errors(job, result, settings)
                 for note in baking.input_notes(result):
                     print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
+                if job.selected_to_active:
+                    print(f"bake_ao: {job.object_name}: from {', '.join(h.name for h in job.highpoly)}"
+                          f"{selected_to_active.miss_summary(result)}", file=sys.stderr)
                 per_texel, rate = baking.throughput(result)
                 if errors:
-                    failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel)
+                    failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
+                           result=result)
                 else:
                     done.add(i)
-                    summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written)
+                    summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
+                                **s2a_record(job, result))
                     rows.append((job.object_name, size_text(result, settings), f"{result.seconds:.2f}",
                                  f"{per_texel:.0f}", f"{rate:.2f}", ", ".join(written)))
             elif kind == "error":

@@ -14,7 +14,7 @@ pytestmark = pytest.mark.blender
 CLASS_NAMES = (
     "McAoSettings", "McAoPreferences", "OBJECT_OT_mc_ao_bake", "VIEW3D_PT_mc_ao",
     "VIEW3D_PT_mc_ao_sampling", "VIEW3D_PT_mc_ao_occlusion", "VIEW3D_PT_mc_ao_image",
-    "VIEW3D_PT_mc_ao_output",
+    "VIEW3D_PT_mc_ao_output", "VIEW3D_PT_mc_ao_selected_to_active",
 )
 
 

@@ -71,7 +71,7 @@ def bake(blend, out, *args):
 
 
 def test_there_are_scenes():
-    assert SCENES == ["analytic", "dense", "room", "suzanne"]
+    assert SCENES == ["analytic", "dense", "rock", "room", "suzanne"]
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -136,6 +136,17 @@ def test_scene_bakes_without_a_warning(name, tmp_path):
     assert "warning" not in proc.stdout + proc.stderr, proc.stderr
     assert f"baked {len(objects)} of {len(objects)} objects" in proc.stdout
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"{obj}_AO.png" for obj in objects)
+
+
+def test_rock_bakes_selected_to_active_without_a_miss(tmp_path):
+    """Rock_high onto Rock_low, paired by name with the extrusion the README gives: every sample
+    point finds the high-poly surface, and nothing to warn about."""
+    proc = bake(SAMPLES / "rock.blend", tmp_path, "--match-suffix", "_high", "_low", "--extrusion", "0.1",
+                "--resolution", "64", "--samples", "64")
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" not in proc.stdout + proc.stderr, proc.stderr
+    assert "bake_ao: Rock_low: from Rock_high; no sample point missed the high-poly" in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Rock_low_AO.png"]
 
 
 def test_readme_first_command_prints_no_warning(tmp_path):

@@ -1,0 +1,770 @@
+"""Selected to active: the AO of high-poly meshes baked into the UVs of a low-poly one, by Cycles' rules.
+
+A stage between surface sampling (:mod:`core.surface`) and direction sampling: each sample point of a
+texel on the low-poly surface is moved to the high-poly surface the way Blender's bake does it
+(``source/blender/render/intern/bake.cc``: ``RE_bake_pixels_populate_from_objects``,
+``calc_point_from_barycentric_extrusion``, ``calc_point_from_barycentric_cage``,
+``cast_ray_highpoly``), and AO is evaluated there (``intern/cycles/kernel/integrator/
+init_from_bake.h``, ``shade_surface.h``: ``integrate_surface_ao``). The rules, exactly:
+
+1. **The matching ray.** For a point p of the low-poly's triangle at barycentrics (u, v), with n the
+   low-poly's normal there (the normalised interpolation of its corner normals on smooth faces, the
+   face normal on flat ones):
+
+   - *extrusion* (no cage): origin ``p + e n``, direction ``-n``, e the extrusion distance: the
+     ray starts outside the low surface and points back into it, along the normal only (a high
+     surface farther out than ``e`` is never found);
+   - *cage*: origin the cage's point of the same triangle at the same barycentrics, direction from
+     it towards p (normalised; it does not stop at p). A cage point on p gives no direction: a miss.
+     The extrusion is not used with a cage.
+
+2. **The hit.** The nearest intersection with any high-poly mesh at distance ``t >= 0`` from the
+   origin (front or back faces alike), if ``t <= max_ray_distance`` (measured from the extruded or
+   cage point, not from p; 0 = no limit). Several high-poly meshes are one scene: the nearest hit
+   among all of them wins.
+
+3. **A miss.** A sample point whose ray finds nothing has no value: its samples are not traced and
+   not counted. A texel's value is the mean over its points that found the high-poly surface (the
+   part of the texel that matched); a texel none of whose points matched is left uncovered (``mask``
+   False, ``miss`` True in the result), like the texels Cycles leaves unbaked, and the margin fills
+   those within reach of covered texels (the rest stay 0). Misses are counted (``missed``).
+
+4. **AO at the hit point** q: cosine-weighted (or uniform) directions about the high-poly's own
+   shading normal there, the normalised interpolation of its corner normals (the face normal on flat
+   faces), in the high-poly's own orientation, whatever side the matching ray came from (Cycles
+   shades the hit as if seen from along that normal: a high-poly with flipped normals gets the AO of
+   its other side). Rays leave from q pushed off along the high-poly's geometric normal on the
+   shading normal's side; directions below the geometric surface count as occluded, as everywhere
+   in the baker (:mod:`core.bake`).
+
+5. **Occluders**: the high-poly meshes and the ``occluders`` given (Cycles: every other visible
+   object of the view layer); never the low-poly target or the cage, even when passed among the
+   occluders. Another object's face lying on the high-poly surface occludes the points it touches
+   (contact, as :class:`core.tracing.Tracer` explains for the target).
+
+Differences from Cycles, by design: Cycles casts one matching ray per texel, at its centre, and then
+jitters its AO samples over the high-poly triangle that ray hit; here every sample point has its own
+position in the texel and its own matching ray, so a texel is the mean over the high-poly surface
+its whole square maps to (the two agree in expectation where the AO field is smooth, not texel by
+texel on detail finer than a texel). The matching rays are traced once per sample *point*, and
+each point takes a block of :data:`DIRECTIONS_PER_POINT` directions (consecutive samples of the
+texel's pattern: a stratified set), so they cost a fraction of the AO rays. The extrusion and the
+max ray distance are world distances along the world-space normal; Cycles adds the extrusion in the
+low-poly's object space (the same for a uniformly scaled object, whose scale the caller multiplies
+in: :mod:`mc_ao.baking` does). Texels: mc_ao covers every texel a UV triangle touches, Cycles those
+whose centre a triangle covers. Material normal maps and transparency of the high-poly are not seen.
+
+The standard error (``stderr``). A texel's error has two parts: its directions, and the positions of
+its P = samples / g sample points (the variance of the AO over the part of the high-poly surface the
+texel maps to, over P). With replicates (``replicates`` >= 2, the default; the add-on's with an error
+map or adaptive sampling) each replicate draws its own points, positions and directions, from its own
+keys (:meth:`core.patterns.TexelPattern.keys`), and ``stderr`` is the spread of the replicates
+(:class:`core.estimators.ErrorModel`, ``grouped``: for every source, since a point's block of
+directions shares its position and the samples are not independent): both parts, pooled over the
+texel's window like every error map. A replicate whose points all missed gives its texel no degrees
+of freedom (it takes its neighbours' pooled error). Adaptive rounds stop on that interval; the
+misses' texels take no round after the first. With one replicate ``stderr`` is the samples' spread,
+the directions' part alone: where the AO changes within a texel (detail finer than a texel) the error
+is larger than it says. tests/test_highpoly.py checks both against the exact values. The pooling
+assumes the error varies smoothly over the image; it does not where the high-poly's AO jumps inside
+single texels (a box resting on the high-poly, its footprint's edge cutting texels at 64 spp: there
+the position part dominates and the pooled ``stderr`` is about 1.7 times too small, and 2-3 times
+too large on the texels around them; measured, not tested).
+
+Everything here runs in the bake's normalised frame (:func:`core.bake._normalized_scene`): the
+extrusion and the distance scale with it. A sample point draws its position from its index in the
+texel's pattern and its directions from the indices of its block, so bakes stay bit-identical for
+any thread count, tile size and chunk size.
+"""
+
+import math
+import threading
+
+import numpy as np
+
+from . import warps
+from .errors import MeshError, SettingsError
+from .estimators import SamplingPlan, TexelEstimates, replicate_samples
+from .mesh import Mesh
+from .raster import rasterize_tile
+from .surface import SurfaceTable, allocate, build_units
+from .tracing import FAR, Clock, RayBatch, Tracer, embree_scene
+
+#: Directions traced per sample point (the most: fewer when the sample counts are not multiples).
+DIRECTIONS_PER_POINT = 64
+#: Points spread over the low-poly surface (by area) that the check before a bake casts matching rays from.
+PRECHECK_POINTS = 1 << 12
+_TAG_PRECHECK = 31
+_TWO_M32 = 2.0 ** -32
+_POSITION_COLUMNS = np.array([[2, 3]])  # u2, u3 of a pattern point: its position in the texel
+
+
+def directions_per_point(samples, min_samples, adaptive, replicates=1):
+    """Directions per sample point: the largest power of two up to :data:`DIRECTIONS_PER_POINT` that
+    divides each replicate's share of the sample count (:func:`core.estimators.replicate_samples`)
+    and, with adaptive sampling, each replicate's share of the minimum (the first round): every round
+    of every replicate is then whole points (the later rounds' counts are powers of two at least
+    twice the first, or the share: :class:`core.estimators.SamplingPlan`)."""
+    g = DIRECTIONS_PER_POINT
+    for cap in replicate_samples(samples, replicates):
+        g = math.gcd(g, int(cap))
+    if adaptive:
+        g = math.gcd(g, max(1, -(-int(min(min_samples, samples)) // int(replicates))))
+    return g
+
+
+def _as_list(highpoly):
+    if isinstance(highpoly, Mesh):
+        return [highpoly]
+    try:
+        return list(highpoly)
+    except TypeError:
+        raise SettingsError(f"highpoly must be a core.Mesh or a list of them, got {type(highpoly).__name__}") from None
+
+
+def _distance(value, what):
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise SettingsError(f"{what} must be a number, got {value!r}") from None
+    if math.isnan(value) or value < 0:
+        raise SettingsError(f"{what} must be a distance >= 0, got {value}")
+    return value
+
+
+class SelectedToActive:
+    """The checked input of a selected-to-active bake, in world space (see the module docstring).
+
+    Built by :meth:`check` from :func:`core.bake_ao`'s arguments; :meth:`normalized` moves it into the
+    bake's frame.
+    """
+
+    def __init__(self, target, highs, extrusion, max_ray_distance, cage):
+        self.target, self.highs, self.cage = target, highs, cage
+        self.extrusion, self.max_ray_distance = extrusion, max_ray_distance
+        self.unit = 1.0
+
+    @classmethod
+    def check(cls, target, highpoly, extrusion, max_ray_distance, cage):
+        """Refuse bad input with an error naming the meshes and saying what to change."""
+        highs = _as_list(highpoly)
+        for h in highs:
+            if not isinstance(h, Mesh):
+                raise SettingsError(f"high-poly meshes must be core.Mesh objects, got {type(h).__name__}")
+        if not highs:
+            raise SettingsError(f"selected to active needs at least one high-poly mesh to bake onto {target.name!r}")
+        for h in highs:
+            if h is target:
+                raise SettingsError(f"{target.name!r} is the low-poly target and cannot also be a high-poly mesh "
+                                    "baked onto itself; leave it out of the high-poly meshes")
+        extrusion = _distance(extrusion, "the extrusion")
+        limit = _distance(max_ray_distance, "the max ray distance (0 = no limit)")
+        if not math.isfinite(extrusion):
+            raise SettingsError(f"the extrusion must be a finite distance, got {extrusion}")
+        if cage is not None:
+            if not isinstance(cage, Mesh):
+                raise SettingsError(f"the cage must be a core.Mesh, got {type(cage).__name__}")
+            if cage is target:
+                raise SettingsError(f"the cage {cage.name!r} is the low-poly target itself; a cage is a copy of it "
+                                    "with its vertices moved outwards, around the high-poly surface")
+            same = (cage.positions.shape == target.positions.shape and cage.triangles.shape == target.triangles.shape
+                    and np.array_equal(cage.triangles, target.triangles))
+            if not same:
+                raise MeshError(
+                    f"the cage {cage.name!r} does not have the topology of the low-poly {target.name!r} "
+                    f"({len(cage.positions)} vertices and {len(cage.triangles)} triangles against "
+                    f"{len(target.positions)} and {len(target.triangles)}, or other triangles): a cage must be a "
+                    f"copy of {target.name!r} with only its vertices moved"
+                )
+        return cls(target, highs, extrusion, 0.0 if math.isinf(limit) else limit, cage)
+
+    def occluders_of(self, occluders):
+        """The occluders less the target, the cage and the high-poly meshes (which occlude anyway)."""
+        skip = [self.target] + ([self.cage] if self.cage is not None else []) + self.highs
+        return [o for o in occluders if not any(o is k or k.same_geometry(o) for k in skip)]
+
+    @property
+    def triangle_count(self):
+        return sum(h.triangle_count for h in self.highs) + (self.cage.triangle_count if self.cage is not None else 0)
+
+    def normalized(self, centre, unit, max_span=float("inf")):
+        """The same input in the bake's frame: positions (p - centre) / unit, distances / unit.
+
+        A high-poly mesh or cage reaching ``max_span`` target sizes or farther is refused (single
+        precision rays cannot hold both), as :func:`core.bake._normalized_scene` refuses occluders.
+        """
+        highs = [h.transformed(centre, unit) for h in self.highs]
+        cage = None if self.cage is None else self.cage.transformed(centre, unit)
+        for what, original, m in [("high-poly mesh", h, n) for h, n in zip(self.highs, highs)] + (
+                [("cage", self.cage, cage)] if cage is not None else []):
+            far = float(np.abs(m.positions).max())
+            if not far < max_span:
+                raise MeshError(f"{what} {original.name!r} reaches {far:.3g} times the size of {self.target.name!r} "
+                                "away from it; ray tracing in single precision cannot hold both: move it onto "
+                                f"{self.target.name!r}")
+        out = SelectedToActive(self.target, highs, self.extrusion / unit, self.max_ray_distance / unit, cage)
+        out.unit = unit
+        out.world = self
+        return out
+
+    def metadata(self):
+        """What goes into the files' metadata and the result's settings (world units)."""
+        world = getattr(self, "world", self)
+        return {"selected_to_active": True, "highpoly": ", ".join(h.name for h in world.highs),
+                "extrusion": world.extrusion if world.cage is None else 0.0,
+                "max_ray_distance": world.max_ray_distance,
+                "cage": world.cage.name if world.cage is not None else ""}
+
+
+def _concatenate(meshes, name):
+    """One Mesh of ``meshes`` (their triangles in order, vertex indices shifted), corner normals kept."""
+    if len(meshes) == 1:
+        return meshes[0]
+    offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
+    return Mesh(np.concatenate([m.positions for m in meshes]),
+                np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)]),
+                normals=np.concatenate([m.normals for m in meshes]), name=name)
+
+
+class HighPolyScene:
+    """The high-poly side of a bake in its normalised frame: the matching scene, the occlusion tracer,
+    and each high-poly triangle's corners and normals (to shade a hit).
+
+    Parameters
+    ----------
+    s2a : a normalised :class:`SelectedToActive`; occluders : the other occluders (normalised);
+    ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the frame).
+    """
+
+    def __init__(self, s2a, occluders, ignore_backfaces, falloff, max_distance):
+        self.s2a = s2a
+        highs = s2a.highs
+        self.owner = np.repeat(np.arange(len(highs)), [h.triangle_count for h in highs])
+        high = _concatenate(highs, "high-poly")
+        self.corners = high.positions[high.triangles]          # (T, 3, 3)
+        self.normals = high.normals                            # (T, 3, 3) unit corner normals
+        self.face_normals = high.face_normals
+        # Occlusion: the high-poly meshes and the occluders, as one mesh (Tracer's contact scene is for a
+        # single target; contact here is per high-poly mesh, below).
+        everything = _concatenate(highs + list(occluders), "high-poly and occluders")
+        self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance)
+        # Matching: the high-poly meshes alone (the tracer's scene when there is nothing else).
+        self.match_scene = self.tracer.scene if not occluders else embree_scene([high])[0]
+        self.limit = np.float32(min(s2a.max_ray_distance, FAR) if s2a.max_ray_distance > 0 else FAR)
+        self.contact = _Contact(highs, list(occluders), self.tracer)
+
+    def match(self, origins, directions):
+        """Cast matching rays (m, 3) float64; returns (hit (m,) bool, and for the hits: high-poly
+        triangle, point q (float64), unit shading normal, unit geometric normal on its side)."""
+        o32 = np.ascontiguousarray(origins, dtype=np.float32)
+        d32 = np.ascontiguousarray(directions, dtype=np.float32)
+        out = self.match_scene.run(o32, d32, dists=np.full(len(o32), self.limit, np.float32), output=True)
+        prim = out["primID"]
+        hit = prim >= 0
+        tri = prim[hit].astype(np.int64)
+        weights = np.empty((len(tri), 3))
+        weights[:, 1] = out["u"][hit]
+        weights[:, 2] = out["v"][hit]
+        weights[:, 0] = 1.0 - weights[:, 1] - weights[:, 2]
+        q = np.einsum("ij,ijk->ik", weights, self.corners[tri])
+        n = np.einsum("ij,ijk->ik", weights, self.normals[tri])
+        ln = np.sqrt(np.einsum("ij,ij->i", n, n))
+        fn = self.face_normals[tri]
+        good = (ln > 1e-12) & np.any(fn != 0, axis=1)  # a hit on a triangle of no area has no normal
+        if not good.all():
+            keep = np.flatnonzero(hit)[good]
+            hit = np.zeros_like(hit)
+            hit[keep] = True
+            tri, q, n, ln, fn = tri[good], q[good], n[good], ln[good], fn[good]
+        n /= ln[:, None]
+        gn = np.where((np.einsum("ij,ij->i", fn, n) < 0)[:, None], -fn, fn)
+        return hit, tri, q, n, gn
+
+
+class _Contact:
+    """Contact between a high-poly mesh and the other meshes (other high-poly meshes, occluders).
+
+    For each high-poly mesh whose bounding box comes within reach of other triangles, an Embree scene
+    of those triangles; a sample point in contact (another object's face through it, found by a probe
+    across the surface, as :meth:`core.tracing.Tracer.contact`) is occluded in every direction.
+    """
+
+    def __init__(self, highs, occluders, tracer):
+        self.tracer = tracer
+        self.scenes = {}
+        others = highs + occluders
+        grow = 2.0 * tracer.offset(max((float(np.abs(m.positions).max()) for m in others), default=0.0))
+        boxes = [(m.positions.min(axis=0) - grow, m.positions.max(axis=0) + grow) for m in others]
+        for i in range(len(highs)):
+            lo, hi = boxes[i]
+            parts = []
+            for j, m in enumerate(others):
+                if j == i or np.any(boxes[j][0] > hi) or np.any(boxes[j][1] < lo):
+                    continue
+                corners = m.positions[m.triangles]
+                near = np.all((corners.max(axis=1) >= lo) & (corners.min(axis=1) <= hi), axis=1)
+                if near.any():
+                    parts.append(corners[near])
+            if parts:
+                corners = np.concatenate(parts)
+                mesh = Mesh(corners.reshape(-1, 3), np.arange(3 * len(corners)).reshape(-1, 3), name="contact")
+                self.scenes[i] = (embree_scene([mesh])[0], corners.min(axis=1), corners.max(axis=1))
+
+    def touching(self, owner, tri_corners, points, gn):
+        """Per point (on high-poly mesh ``owner``, triangle corners (m, 3, 3)), whether another
+        object's surface crosses it."""
+        out = np.zeros(len(points), bool)
+        for i in np.unique(owner):
+            entry = self.scenes.get(int(i))
+            if entry is None:
+                continue
+            scene, olo, ohi = entry
+            sel = np.flatnonzero(owner == i)
+            c = tri_corners[sel]
+            grow = 2.0 * self.tracer.offset(np.abs(c).max(axis=(1, 2)))[:, None]
+            lo, hi = c.min(axis=1) - grow, c.max(axis=1) + grow
+            ulo, uhi = lo.min(axis=0), hi.max(axis=0)
+            cand = np.flatnonzero(np.all((olo <= uhi) & (ohi >= ulo), axis=1))
+            if not len(cand):
+                continue
+            near = np.zeros(len(sel), bool)
+            for c0 in range(0, len(cand), 256):
+                k = cand[c0:c0 + 256]
+                near |= np.any(np.all((olo[k][None] <= hi[:, None]) & (ohi[k][None] >= lo[:, None]), axis=2), axis=1)
+            idx = sel[near]
+            if not len(idx):
+                continue
+            p = points[idx]
+            e = self.tracer.offset(np.abs(p).max(axis=1))
+            below = (p - gn[idx] * e[:, None]).astype(np.float32)
+            hit = scene.run(below, np.ascontiguousarray(gn[idx], dtype=np.float32), query="OCCLUDED",
+                            dists=(2.0 * e).astype(np.float32))
+            out[idx[hit >= 0]] = True
+        return out
+
+
+
+class LowPoints:
+    """The low-poly's sample points and their matching rays (normalised frame, float64).
+
+    ``table`` is the target's :class:`core.surface.SurfaceTable`; ``cage_table`` the cage's, built on
+    the target's UV triangles (same triangles, same texel-space maps), or None for extrusion.
+    """
+
+    def __init__(self, s2a, table, cage_table):
+        self.s2a, self.table, self.cage_table = s2a, table, cage_table
+        # Per triangle, [P0, Px, Py] and [N0, Nx, Ny] (or the cage's positions) as one (T, 3, 3) map each:
+        # a point is [1, a, b] times its triangle's map.
+        self.position = np.stack([table.P0, table.Px, table.Py], axis=1)
+        if cage_table is None:
+            self.second = np.stack([table.N0, table.Nx, table.Ny], axis=1)
+        else:
+            self.second = np.stack([cage_table.P0, cage_table.Px, cage_table.Py], axis=1)
+
+    def rays(self, tri, a, b):
+        """Matching rays of the points at texel-space offsets (a, b) from their triangles' first corners.
+
+        Returns (p, origins, unit directions, usable): ``usable`` is False where a cage point lies on
+        its low-poly point (no direction: a miss, as in Cycles).
+        """
+        x = np.empty((len(tri), 3))
+        x[:, 0] = 1.0
+        x[:, 1] = a
+        x[:, 2] = b
+        p = np.einsum("ij,ijk->ik", x, self.position[tri])
+        other = np.einsum("ij,ijk->ik", x, self.second[tri])
+        if self.cage_table is None:
+            return (p,) + extruded(p, other, self.table.FN[tri], self.s2a.extrusion)
+        return (p,) + towards(other, p)
+
+
+def extruded(p, n, fn, extrusion):
+    """Extrusion rays: origin p + e n, direction -n, n the normalised interpolated normal (``fn`` where
+    it vanishes); all usable."""
+    ln = np.sqrt(np.einsum("ij,ij->i", n, n))
+    ok = ln > 1e-12
+    if ok.all():
+        n /= ln[:, None]
+    else:
+        n = np.where(ok[:, None], n / np.where(ok, ln, 1.0)[:, None], fn)
+    return p + extrusion * n, -n, np.ones(len(p), bool)
+
+
+def towards(origin, p):
+    """Cage rays: from the cage point towards the low-poly point; unusable where they coincide."""
+    d = p - origin
+    ln = np.linalg.norm(d, axis=1)
+    usable = ln > 0
+    return origin, d / np.where(usable, ln, 1.0)[:, None], usable
+
+
+class HighPolyBaker:
+    """Bakes one tile of a selected-to-active bake: the low-poly's sample points, their matching rays,
+    the AO rays at the hits. The counterpart of :class:`core.bake._TileBaker` (same rasteriser, sample
+    units, rounds, sums and progress), with one sample *point* per block of ``g`` consecutive samples:
+    point j of a texel takes position coordinates (u2, u3) of the texel's pattern point j and the
+    directions (u0, u1) of its points j g .. j g + g - 1.
+    """
+
+    def __init__(self, stage, pattern, settings, shared, on_rays=None, seeds=None):
+        self.stage, self.uvtris, self.table = stage, stage.uvtris, stage.table
+        self.points, self.scene = stage.points, stage.scene
+        self.pattern, self.s, self.shared, self.on_rays = pattern, settings, shared, on_rays
+        self.g = stage.g
+        self.plan = SamplingPlan(settings, grouped=True)
+        self.caps = replicate_samples(settings.samples, settings.replicates)
+        # Per replicate, the seed that splits texels' points among their units (core.bake.allocation_seeds).
+        self.seeds = [np.uint64(settings.seed)] * settings.replicates if seeds is None else list(seeds)
+        self.uniform = settings.distribution == "uniform"
+        self.features = pattern.features("uniform" if self.uniform else "cosine")
+        self.reach = np.float32(self.scene.tracer.tfar)
+        self.lock = threading.Lock()
+        self.matching_rays = 0
+        self.missed = 0
+        self.partial = 0
+        # The check before the bake (HighPolyStage) counts as matching too.
+        self.match_seconds = stage.check_seconds
+        self.match_cpu_seconds = stage.check_cpu_seconds
+        self.miss = np.zeros((settings.height, settings.width), bool)
+
+    # -- one tile ------------------------------------------------------------------------------------
+
+    def bake(self, key, tri_ids):
+        s, shared, g = self.s, self.shared, self.g
+        ty, tx = key
+        x0, y0 = tx * s.tile_size, ty * s.tile_size
+        x1, y1 = min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height)
+        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1)
+        n_tex = len(frag.texels)
+        est = TexelEstimates(n_tex, s.replicates)
+        est.points = np.zeros(n_tex, np.int64)   # sample points cast per texel (all replicates)
+        est.missed = np.zeros(n_tex, np.int64)   # of which found no high-poly surface
+        if n_tex == 0:
+            return frag, est, None
+        units = build_units(frag, self.table, s.width)
+        # Each replicate draws its points (positions and directions) from its own keys: an independent
+        # randomisation of the whole texel, so the error model (core.estimators) sees the spread of
+        # the positions too.
+        tiles = [(units, self.pattern.keys(frag.texels, r), frag.texels) for r in range(s.replicates)]
+        x, y = frag.texels % s.width, frag.texels // s.width
+        done = 0
+        for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
+            # A texel none of whose points found the high-poly surface takes no further rounds.
+            keep = ~((est.points[texels] > 0) & (est.n[texels] == 0))
+            if np.ndim(start):  # an adaptive round: each texel from its own count to its next
+                start, count = start[keep], count[keep]
+            texels = texels[keep]
+            if not len(texels):
+                continue
+            for r, (tile, cap) in enumerate(zip(tiles, self.caps)):
+                c = np.minimum(count, cap - start)  # replicate r's own share of the samples
+                if np.ndim(c):
+                    some = c > 0
+                    if np.any(some):
+                        done += self._trace(tile, est, r, texels[some], start[some], c[some])
+                elif c > 0:
+                    done += self._trace(tile, est, r, texels, start, c)
+        shared.advance(n_tex * s.samples - done)  # what the adaptive stop and the misses saved
+        return frag, est, None
+
+    def _trace(self, tile, est, replicate, texels, start, count):
+        """Samples ``start`` .. ``start + count - 1`` of replicate ``replicate`` of ``texels`` (whole
+        points: ``g`` divides both); returns the samples' work (points times ``g``)."""
+        s, shared, g = self.s, self.shared, self.g
+        done = 0
+        units, _, texel_ids = tile
+        unit, first, size = allocate(units, texels, start // g, count // g, self.seeds[replicate], texel_ids)
+        kind = units.kind[unit].astype(np.int64)
+        group = size * 2 + kind
+        order = np.argsort(group, kind="stable")
+        unit, first, size, group, kind = unit[order], first[order], size[order], group[order], kind[order]
+        bounds = np.flatnonzero(np.diff(group)) + 1
+        for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
+            k = int(size[lo])
+            step = max(1, s.chunk_rays // (k * g))
+            for c0 in range(lo, hi, step):
+                shared.check()
+                c = slice(c0, min(c0 + step, hi))
+                squares = int(np.count_nonzero(kind[c] == 0))
+                rows = units.texel[unit[c]]
+                hits, s1, s2, rays, sec, cpu = self.run(tile, unit[c], first[c], k, squares, replicate)
+                est.add(rows, hits * g, s1, s2, replicate)
+                np.add.at(est.points, rows, k)
+                np.add.at(est.missed, rows, k - hits)
+                work = (c.stop - c.start) * k * g
+                done += work
+                shared.advance(work, rays, sec, cpu)
+        return done
+
+    def run(self, tile, unit, start, k, squares, replicate=0):
+        """Trace pieces of ``k`` sample points from ``start`` of each piece's unit (the first ``squares``
+        pieces texel squares, the rest pieces of triangles): their matching rays, then ``g`` AO rays
+        for each point that found the high-poly surface.
+
+        Returns per piece (points that hit, sum of terms, sum of squared terms; float64 sums), the rays
+        traced (matching and AO) and the time inside Embree (wall, thread CPU).
+        """
+        units, keys, texel_ids = tile
+        pattern, g, scene = self.pattern, self.g, self.scene
+        npieces = len(unit)
+        tex = units.texel[unit]
+        e, o = keys.pattern[tex], keys.order[tex]
+        inside, stage = Clock(), Clock()
+        with stage:
+            # The sample points: position coordinates of pattern points start .. start + k - 1 of
+            # each piece's texel, with the texel's shift, through the unit's map.
+            rows = pattern.rows_of(e, o, start[:, None] + np.arange(k, dtype=np.int64)[None, :])
+            q = pattern.q[rows.reshape(-1, 1), _POSITION_COLUMNS].reshape(npieces, k, 2)
+            pattern.shift_positions(q, keys.shift[tex][:, None, :])
+            uu = q[:, :, 0] * _TWO_M32
+            vv = q[:, :, 1] * _TWO_M32
+            coef = units.coef[unit]
+            a, b = np.empty_like(uu), np.empty_like(vv)
+            a[:squares] = coef[:squares, 0, None] + uu[:squares]
+            b[:squares] = coef[:squares, 3, None] + vv[:squares]
+            if squares < npieces:
+                ct = coef[squares:]
+                w0, w1 = warps.square_to_triangle(uu[squares:], vv[squares:])
+                a[squares:] = ct[:, 0, None] + ct[:, 1, None] * w0 + ct[:, 2, None] * w1
+                b[squares:] = ct[:, 3, None] + ct[:, 4, None] * w0 + ct[:, 5, None] * w1
+            tri = np.repeat(units.tri[unit], k)
+            _, origins, directions, usable = self.points.rays(tri, a.reshape(-1), b.reshape(-1))
+            cast = np.flatnonzero(usable)
+            with inside:
+                found, htri, hq, hn, hgn = scene.match(origins[cast], directions[cast])
+                point = cast[found]  # index (piece * k + j) of every point that hit
+                touch = None
+                if scene.contact.scenes and len(point):
+                    touch = scene.contact.touching(scene.owner[htri], scene.corners[htri], hq, hgn)
+        nh = len(point)
+        piece = point // k
+        hits = np.bincount(piece, minlength=npieces)
+        with self.lock:
+            self.matching_rays += len(cast)
+            self.missed += npieces * k - nh
+            self.match_seconds += stage.wall
+            self.match_cpu_seconds += stage.cpu
+        if nh == 0:
+            zero = np.zeros(npieces)
+            return hits, zero, zero, len(cast), inside.wall, inside.cpu
+        # AO at the hits: g directions each, from samples (start + j) g .. + g - 1 of the texel.
+        eps = scene.tracer.offset(np.abs(hq).max(axis=1))
+        org = (hq + hgn * eps[:, None]).astype(np.float32)
+        first_sample = (start[piece] + point % k) * g
+        samples = first_sample[:, None] + np.arange(g, dtype=np.int64)[None, :]       # (nh, g)
+        f = self.features[pattern.rows_of(e[piece], o[piece], samples).reshape(-1)].reshape(nh, g, 6)
+        cos_t = keys.cos_turn[tex[piece]].astype(np.float32)[:, None]
+        sin_t = keys.sin_turn[tex[piece]].astype(np.float32)[:, None]
+        f0, f1, f2 = f[:, :, 3], f[:, :, 4], f[:, :, 5]
+        t0 = f0 * cos_t - f1 * sin_t                 # the texel's turn about the normal
+        t1 = f1 * cos_t + f0 * sin_t
+        sx, sy, sz, tx_, ty_, tz = warps.basis_components(hn[:, 0], hn[:, 1], hn[:, 2])
+        frame = np.stack([sx, sy, sz, tx_, ty_, tz, hn[:, 0], hn[:, 1], hn[:, 2]], axis=1).astype(np.float32)
+        n = nh * g
+        dirs = np.empty((nh, g, 3), np.float32)
+        for c in range(3):
+            d = dirs[:, :, c]
+            np.multiply(t0, frame[:, c, None], out=d)
+            d += t1 * frame[:, 3 + c, None]
+            d += f2 * frame[:, 6 + c, None]
+        # Below the high-poly's geometric surface: occluded, not traced.
+        gf = frame.reshape(nh, 3, 3) @ hgn.astype(np.float32)[:, :, None]           # (nh, 3, 1): s.gn, t.gn, n.gn
+        up = t0 * gf[:, 0] + t1 * gf[:, 1] + f2 * gf[:, 2]
+        below = (up <= 0).reshape(n)
+        dirs = dirs.reshape(n, 3)
+        origins_ao = np.repeat(org, g, axis=0)
+        tfar = np.full(n, self.reach, np.float32)
+        tfar[below] = 0.0
+        traced_tfar = tfar.copy() if self.on_rays is not None else None
+        tracer = scene.tracer
+        with inside:
+            if tracer.simple:
+                occluded = tracer.occluded(origins_ao, dirs, tfar)
+                value = ~(occluded | below)
+            else:
+                value = tracer.visibility(origins_ao, dirs, tfar)
+                occluded = value < 1.0
+        if touch is not None and touch.any():
+            value.reshape(nh, g)[touch] = 0
+        if self.on_rays is not None:
+            self.on_rays(RayBatch(origins=origins_ao, directions=dirs, tfar=traced_tfar, occluded=occluded,
+                                  texels=np.repeat(texel_ids[tex[piece]], g), samples=samples.reshape(n),
+                                  seconds=inside.wall, cpu_seconds=inside.cpu, replicate=replicate))
+        if value.dtype == bool and not self.uniform:
+            per_point = value.reshape(nh, g).sum(axis=1, dtype=np.int64).astype(np.float64)
+            s1 = np.bincount(piece, weights=per_point, minlength=npieces)
+            return hits, s1, s1, len(cast) + n, inside.wall, inside.cpu
+        term = value.astype(np.float64).reshape(nh, g)
+        if self.uniform:
+            term *= 2.0 * f2.astype(np.float64)          # 2 cos(theta) for uniform directions
+        s1 = np.bincount(piece, weights=term.sum(axis=1), minlength=npieces)
+        s2 = np.bincount(piece, weights=(term * term).sum(axis=1), minlength=npieces)
+        return hits, s1, s2, len(cast) + n, inside.wall, inside.cpu
+
+    # -- the whole bake --------------------------------------------------------------------------------
+
+    def settle(self, est, rows, cols, mask, stderr=None):
+        """After a tile: texels none of whose points matched are uncovered (``mask`` False, ``miss`` True,
+        ``stderr`` 0)."""
+        lost = est.n == 0
+        mask[rows[lost], cols[lost]] = False
+        if stderr is not None:
+            stderr[rows[lost], cols[lost]] = 0.0
+        self.miss[rows[lost], cols[lost]] = True
+        with self.lock:
+            self.partial += int(np.count_nonzero((est.missed > 0) & ~lost))
+
+    def finish(self, mask):
+        """The result's miss mask, miss count and report entries; raises when nothing matched at all."""
+        if self.matching_rays and not mask.any():
+            raise MeshError(self.stage.nothing_matched())
+        report = {"matching_rays": self.matching_rays, "missed_matching_rays": self.missed,
+                  "missed_texels": int(self.miss.sum()), "partly_missed_texels": self.partial,
+                  "directions_per_point": self.g, "matching_seconds": self.match_seconds,
+                  "matching_cpu_seconds": self.match_cpu_seconds}
+        return self.miss, self.missed, report
+
+
+class HighPolyStage:
+    """Everything a selected-to-active bake sets up before its tiles: the high-poly scene, the
+    low-poly's points, and the check that some matching ray finds the high-poly surface at all.
+
+    Parameters
+    ----------
+    s2a : a normalised :class:`SelectedToActive`; target : the normalised target; occluders : the
+    normalised occluders (target, cage and high-poly meshes left out); uvtris, table, bins : the
+    target's UV triangles, surface table and tiles (:mod:`core.raster`, :mod:`core.surface`);
+    settings : :class:`core.settings.BakeSettings`; unit : world length of one unit of the frame;
+    cancelled : callable, True to stop (checked while scanning).
+    """
+
+    def __init__(self, s2a, target, occluders, uvtris, table, bins, settings, unit, cancelled=lambda: False):
+        self.s2a, self.target, self.uvtris, self.table, self.unit = s2a, target, uvtris, table, unit
+        self.s = settings
+        self.g = directions_per_point(settings.samples, settings.min_samples, settings.adaptive,
+                                      settings.replicates)
+        self.scene = HighPolyScene(s2a, occluders, settings.ignore_backfaces, settings.falloff,
+                                   settings.max_distance / unit)
+        cage_table = None
+        if s2a.cage is not None:
+            cage = s2a.cage
+            cage_table = SurfaceTable.build(cage, uvtris)
+        self.points = LowPoints(s2a, table, cage_table)
+        self._probe = None
+        clock = Clock()
+        with clock:
+            found = self._any_match(bins, cancelled)
+        self.check_seconds, self.check_cpu_seconds = clock.wall, clock.cpu
+        if not found:
+            raise MeshError(self.nothing_matched())
+
+    def baker(self, pattern, shared, on_rays=None, seeds=None):
+        return HighPolyBaker(self, pattern, self.s, shared, on_rays, seeds)
+
+    # -- the check before baking -----------------------------------------------------------------------
+
+    def _surface_points(self):
+        """PRECHECK_POINTS points on the target's bakeable triangles, spread by area (stratified,
+        deterministic): (triangle, barycentric weights (n, 3))."""
+        valid = np.flatnonzero(self.uvtris.valid)
+        if not len(valid):
+            return valid, np.zeros((0, 3))
+        area = self.target.areas[valid]
+        cdf = np.cumsum(area)
+        cdf /= cdf[-1]
+        n = PRECHECK_POINTS
+        from .patterns import hash_uniform
+
+        k = np.arange(n, dtype=np.uint64)
+        u = (np.arange(n) + hash_uniform(np.uint64(1), k, np.uint64(_TAG_PRECHECK))) / n
+        tri = valid[np.minimum(np.searchsorted(cdf, u, side="right"), len(valid) - 1)]
+        w0, w1 = warps.square_to_triangle(hash_uniform(np.uint64(2), k, np.uint64(_TAG_PRECHECK)),
+                                          hash_uniform(np.uint64(3), k, np.uint64(_TAG_PRECHECK)))
+        return tri, np.stack([w0, w1, 1.0 - w0 - w1], axis=1)
+
+    def _point_rays(self, tri, w):
+        m = self.target
+        p = np.einsum("ij,ijk->ik", w, m.positions[m.triangles[tri]])
+        if self.s2a.cage is None:
+            n = np.einsum("ij,ijk->ik", w, m.normals[tri])
+            return p, extruded(p, n, m.face_normals[tri], self.s2a.extrusion)
+        c = np.einsum("ij,ijk->ik", w, self.s2a.cage.positions[self.s2a.cage.triangles[tri]])
+        return p, towards(c, p)
+
+    def _any_match(self, bins, cancelled):
+        """Whether some matching ray finds the high-poly surface: first from points spread over the
+        surface by area; where none does, from every texel the bake covers (one point each), so that a
+        high-poly matching only a small part of the low-poly is not refused."""
+        tri, w = self._surface_points()
+        if not len(tri):
+            return True  # nothing to bake: the bake says so itself
+        p, (origin, direction, usable) = self._point_rays(tri, w)
+        self._probe = (p, origin, direction, usable)
+        if self.scene.match(origin[usable], direction[usable])[0].any():
+            return True
+        s = self.s
+        for ty, tx in sorted(bins):
+            if cancelled():
+                from .errors import BakeCancelled
+
+                raise BakeCancelled("the bake was cancelled before it started")
+            x0, y0 = tx * s.tile_size, ty * s.tile_size
+            frag = rasterize_tile(self.uvtris, bins[(ty, tx)], s.width, s.height, x0, y0,
+                                  min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height))
+            full = frag.full_tri >= 0
+            t_full = frag.full_tri[full]
+            xy_full = np.stack([frag.texels[full] % s.width, frag.texels[full] // s.width], axis=1) + 0.5
+            xy_sub = frag.sub_xy.mean(axis=1)
+            t = np.concatenate([t_full, frag.sub_tri])
+            xy = np.concatenate([xy_full, xy_sub]).astype(np.float64)
+            if not len(t):
+                continue
+            a = xy[:, 0] - self.table.origin[t, 0]
+            b = xy[:, 1] - self.table.origin[t, 1]
+            _, origin, direction, usable = self.points.rays(t, a, b)
+            if self.scene.match(origin[usable], direction[usable])[0].any():
+                return True
+        return False
+
+    def nothing_matched(self):
+        """Why no matching ray found the high-poly surface, and what to change (world units)."""
+        world = getattr(self.s2a, "world", self.s2a)
+        low = world.target.name
+        highs = ", ".join(repr(h.name) for h in world.highs)
+        unit = self.unit
+        head = f"no matching ray from {low!r} found the high-poly surface of {highs}, so nothing could be baked"
+        if self._probe is None:
+            return head
+        p, origin, direction, usable = self._probe
+        if not usable.any():
+            return (f"{head}: the cage {world.cage.name!r} lies on {low!r} itself; move its vertices outwards, "
+                    f"so that it encloses the high-poly surface")
+        o, d = origin[usable], direction[usable]
+        far = self._distances(o, d)
+        if far.size:
+            need = float(far.min()) * unit
+            return (f"{head}: the nearest high-poly surface along the rays lies {need:.4g} from where they start, "
+                    f"beyond the max ray distance {world.max_ray_distance:.4g}; raise the max ray distance above "
+                    f"{need:.4g}, or set it to 0 (no limit)")
+        back = self._distances(o, -d)
+        if back.size:
+            if world.cage is not None:
+                return (f"{head}: the high-poly surface lies outside the cage {world.cage.name!r} (the rays go "
+                        f"from the cage towards {low!r}); enlarge the cage so that it encloses the high-poly surface")
+            gap = float(np.quantile(back, 0.99)) * unit + world.extrusion
+            return (f"{head}: the high-poly surface lies outside {low!r}, up to {gap:.4g} above it along its "
+                    f"normals, farther than the extrusion ({world.extrusion:.4g}) pushes the rays out; raise the "
+                    f"extrusion above {gap:.4g}")
+        return (f"{head}: no high-poly surface lies along {low!r}'s normals at all; the high-poly objects must "
+                f"lie over {low!r}'s surface (move them onto it, or check that the right objects are selected)")
+
+    def _distances(self, origins, directions):
+        """Distances to the nearest high-poly surface along rays, no length limit (hits only)."""
+        out = self.scene.match_scene.run(np.ascontiguousarray(origins, np.float32),
+                                         np.ascontiguousarray(directions, np.float32),
+                                         dists=np.full(len(origins), FAR, np.float32), output=True)
+        return out["tfar"][out["primID"] >= 0].astype(np.float64)
+
+
+__all__ = ["SelectedToActive", "HighPolyStage", "HighPolyBaker", "HighPolyScene", "DIRECTIONS_PER_POINT",
+           "directions_per_point"]
