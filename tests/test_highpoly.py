@@ -392,6 +392,7 @@ def test_every_ray_missing_is_refused_before_baking_saying_what_to_change(case, 
     (dict(highpoly="high"), SettingsError, r"high-poly meshes must be core.Mesh objects, got str"),
     (dict(highpoly=5), SettingsError, r"highpoly must be a core.Mesh or a list of them, got int"),
     (dict(cage="cage"), SettingsError, r"the cage must be a core.Mesh, got str"),
+    (dict(bent_normals=True), SettingsError, r"bent normals are not baked with selected to active"),
 ])
 def test_bad_settings_are_refused_by_name(kw, error, message):
     args = dict(highpoly=[high_plane()], extrusion=0.1)

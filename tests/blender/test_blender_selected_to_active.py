@@ -292,6 +292,15 @@ def test_the_button_and_panel_say_why_it_is_disabled_in_this_mode(bpy, scene, ca
     scene.mc_ao.cage_object = low
     select_only(bpy, low, high)
     assert reason() == "Selected to Active: the cage object is Low itself; choose a copy of it, moved outwards"
+    scene.mc_ao.use_cage = False
+    select_only(bpy, low, high)
+    # What Selected to Active does not bake (issue 14's targets), said before the selection.
+    for prop, value, text in [("target", "VERTEX_COLORS", "set Target to Image Textures"),
+                              ("use_udim", True, "turn off UDIM Tiles"), ("bent_normals", True, "turn off Bent Normals")]:
+        setattr(scene.mc_ao, prop, value)
+        assert text in reason()
+        scene.mc_ao.property_unset(prop)
+    assert bpy.ops.object.mc_ao_bake.poll()
     scene.mc_ao.use_selected_to_active = False  # the usual bake: each selected mesh with a UV map
     assert bpy.ops.object.mc_ao_bake.poll()
 
