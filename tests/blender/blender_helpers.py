@@ -21,19 +21,8 @@ def clean_scene(bpy):
         for name in scene.mc_ao.bl_rna.properties.keys():
             if name not in {"rna_type", "name"}:
                 scene.mc_ao.property_unset(name)
-    # What the tests that run Cycles set: its bake settings and the worlds' AO distance (Cycles' AO bake
-    # reads it), so that one test's Cycles reference cannot leak into the next test's.
-    # (property_unset resets only properties defined in Python: these are set to their defaults.)
-    bake = scene.render.bake
-    for prop in bake.bl_rna.properties:
-        if prop.identifier == "rna_type" or prop.is_readonly:
-            continue
-        if prop.type in {"BOOLEAN", "INT", "FLOAT"}:
-            setattr(bake, prop.identifier, prop.default_array if prop.is_array else prop.default)
-        elif prop.type == "ENUM" and not prop.is_enum_flag:
-            setattr(bake, prop.identifier, prop.default)
-        elif prop.type == "POINTER":
-            setattr(bake, prop.identifier, None)
+    # The worlds' AO distance, which Cycles' AO bake reads, set by tests that run Cycles: one test's
+    # Cycles reference must not leak into the next test's (a factory scene has no world).
     scene.world = None
     for world in list(bpy.data.worlds):
         bpy.data.worlds.remove(world)
