@@ -41,7 +41,7 @@ from . import raster as R
 from .raster import bin_triangles, prepare, rasterize_tile
 from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE, BakeSettings, auto_tile_size,
                        available_memory, estimate_memory)
-from .surface import SurfaceTable, allocate, build_units, contact_texels
+from .surface import LOCATED, SQUARE, TRIANGLE, SurfaceTable, allocate, build_units, contact_texels
 from .tracing import Tracer
 
 
@@ -140,6 +140,8 @@ class _TileBaker:
         self.pattern, self.s, self.shared = pattern, settings, shared
         self.plan = SamplingPlan(settings)
         self.seed = np.uint64(settings.seed)
+        # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
+        self.located_curved = bool(np.any(table.smooth[uvtris.valid]))
 
     def bake(self, key, tri_ids):
         s, shared = self.s, self.shared
@@ -153,26 +155,30 @@ class _TileBaker:
             return frag, est
         units = build_units(frag, self.table, s.width)
         contact = contact_texels(frag, self.table, s.width, self.tracer, s.samples)
-        tile = TileContext(self.table, units, self.pattern.keys(frag.texels), frag.texels, contact, self.tracer.offset)
+        tile = TileContext(self.table, units, self.pattern.keys(frag.texels), frag.texels, contact, self.tracer.offset,
+                           located_curved=self.located_curved)
         for start, count, texels in self.plan.rounds(est, np.arange(n_tex)):
             unit, first, size = allocate(units, texels, start, count, self.seed, frag.texels)
-            # Equal pieces go through the kernel together, squares before triangles, in a fixed order
-            # (so every texel's sums are added in the same order however the pieces are chunked).
+            # Equal pieces go through the kernel together, squares before triangles, located texels
+            # apart, in a fixed order (so every texel's sums are added in the same order however the
+            # pieces are chunked).
             kind = units.kind[unit].astype(np.int64)
-            curved = self.table.smooth[units.tri[unit]]
-            group = (size * 2 + curved) * 2 + kind
+            located = kind == LOCATED
+            curved = np.where(located, self.located_curved, self.table.smooth[units.tri[unit]])
+            group = ((size * 2 + curved) * 2 + located) * 2 + (kind == TRIANGLE)
             order = np.argsort(group, kind="stable")
             unit, first, size, group, kind = unit[order], first[order], size[order], group[order] // 2, kind[order]
+            curved = curved[order]
             bounds = np.flatnonzero(np.diff(group)) + 1
             for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
                 k = int(size[lo])
-                curved = bool(self.table.smooth[units.tri[unit[lo]]])
                 step = max(1, s.chunk_rays // k)
                 for c0 in range(lo, hi, step):
                     shared.check()
                     c = slice(c0, min(c0 + step, hi))
-                    squares = int(np.count_nonzero(kind[c] == 0))
-                    s1, s2, rays, sec, cpu = self.kernel.run(tile, curved, unit[c], first[c], k, squares)
+                    squares = int(np.count_nonzero(kind[c] == SQUARE))
+                    s1, s2, rays, sec, cpu = self.kernel.run(tile, bool(curved[lo]), unit[c], first[c], k, squares,
+                                                             located=bool(kind[lo] == LOCATED))
                     est.add(units.texel[unit[c]], k, s1, s2)
                     shared.advance(rays, rays, sec, cpu)
         # Credit the work the adaptive stop saved, so progress reaches 1.

@@ -42,11 +42,12 @@ from .tracing import FAR, Clock, RayBatch
 FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
 
 
-def triangle_matrices(table, tris, offset):
+def triangle_matrices(table, tris, offset, curved_all=False):
     """Per triangle of ``tris`` (unique ids), the float32 matrix (6, 6) (flat-shaded) or (6, 11)
-    (smooth-shaded) taking a feature row to what its rays need; returns (flat, curved, slot), slot
-    mapping a triangle id to its row in the array of its kind (-1 for triangles not in ``tris``)."""
-    smooth = table.smooth[tris]
+    (smooth-shaded, or every triangle with ``curved_all``: a flat triangle's normal is constant)
+    taking a feature row to what its rays need; returns (flat, curved, slot, gn, eps), slot mapping
+    a triangle id to its row in the array of its kind (-1 for triangles not in ``tris``)."""
+    smooth = table.smooth[tris] | bool(curved_all)
     # The ray offset: from the largest |coordinate| on the triangle (at a corner: |.|_inf is convex).
     eps = offset(np.abs(table.corners[tris]).max(axis=(1, 2)))
     fn = table.FN[tris]
@@ -88,9 +89,14 @@ def triangle_matrices(table, tris, offset):
 
 
 class TileContext:
-    """What the kernel needs of one tile: its units, its texels' keys, its triangles' matrices."""
+    """What the kernel needs of one tile: its units, its texels' keys, its triangles' matrices.
 
-    def __init__(self, table, units, keys, texel_ids, contact, offset):
+    ``located_curved``: located samples (each on its own triangle) take every triangle's matrix in
+    the smooth-shaded form when True (a bake-wide choice: any smooth triangle in the target), in the
+    flat form otherwise.
+    """
+
+    def __init__(self, table, units, keys, texel_ids, contact, offset, located_curved=True):
         self.units = units
         self.keys = keys
         self.texel_ids = texel_ids      # global flat texel index of each of the tile's texels
@@ -102,6 +108,15 @@ class TileContext:
         pos = np.searchsorted(tris, units.tri)
         self.unit_gn, self.unit_eps = gn[pos], eps[pos]
         self.coef = units.coef.astype(np.float32)
+        # Located samples: one matrix per candidate triangle, all in one form.
+        self.located_curved = bool(located_curved)
+        cand = units.cand_tri if units.cand_tri is not None else np.zeros(0, np.int64)
+        if len(cand):
+            ctris = np.unique(cand)
+            flat, curved, self.loc_slot, self.loc_gn, self.loc_eps = triangle_matrices(
+                table, ctris, offset, curved_all=self.located_curved)
+            self.loc_m = curved if self.located_curved else flat
+            self.loc_pos = np.searchsorted(ctris, np.arange(len(table.P0)))  # triangle id -> row of gn, eps
 
 
 def _per_piece(values, k):
@@ -137,10 +152,12 @@ class Kernel:
             ws = self._local.ws = _Workspace(n)
         return ws
 
-    def run(self, tile, curved, unit, start, size, squares):
+    def run(self, tile, curved, unit, start, size, squares, located=False):
         """Trace the aligned blocks of ``size`` samples from ``start`` (per piece) of each piece's ``unit``;
         the first ``squares`` pieces are texel squares, the rest pieces of triangles; all pieces'
-        triangles flat-shaded (``curved`` False) or all smooth-shaded.
+        triangles flat-shaded (``curved`` False) or all smooth-shaded. With ``located``, every piece
+        is a located texel's square, each sample on its own triangle (``curved``: the tile's
+        ``located_curved``).
 
         Returns (s1, s2, rays, seconds, cpu_seconds): per piece the sum of its samples' terms and of
         their squares (float64), the rays traced, and the time spent inside Embree.
@@ -178,11 +195,16 @@ class Kernel:
             np.copyto(dst, xu[:, :, c], casting="unsafe")
             dst *= np.float32(2.0 ** -32)
         # (u, v) -> the triangle's texel space: a translation for squares, Heitz's map and the
-        # piece's corners for pieces of triangles.
+        # piece's corners for pieces of triangles; located samples find their triangle first.
         coef = tile.coef[unit]
+        tri_s = None
+        if located:
+            tri_s = self._locate(units, unit, a, b, k)
+            squares = g
         sq = slice(0, squares)
-        a[sq] += _per_piece(coef[sq, 0], k)
-        b[sq] += _per_piece(coef[sq, 3], k)
+        if not located:
+            a[sq] += _per_piece(coef[sq, 0], k)
+            b[sq] += _per_piece(coef[sq, 3], k)
         if squares < g:
             tr = slice(squares, g)
             u, v = warps.square_to_triangle(a[tr], b[tr])
@@ -198,10 +220,17 @@ class Kernel:
         f1 *= cos_t
         f1 += f0 * sin_t
         f0[...] = t0
-        m = (tile.curved_m if curved else tile.flat_m)[tile.slot[units.tri[unit]]]
-        cols = m.shape[2]
-        y = ws.y[:n * cols].reshape(g, k, cols)
-        np.matmul(x, m, out=y)
+        if located:
+            # One matrix per sample, its own triangle's.
+            m = tile.loc_m[tile.loc_slot[tri_s]]
+            cols = m.shape[2]
+            y = ws.y[:n * cols].reshape(n, 1, cols)
+            np.matmul(xf.reshape(n, 1, 6), m, out=y)
+        else:
+            m = (tile.curved_m if curved else tile.flat_m)[tile.slot[units.tri[unit]]]
+            cols = m.shape[2]
+            y = ws.y[:n * cols].reshape(g, k, cols)
+            np.matmul(x, m, out=y)
         y = y.reshape(n, cols)
         origins = y[:, 0:3]
         tfar = ws.tfar[:n]
@@ -271,8 +300,12 @@ class Kernel:
             if near.any():
                 # Samples where another object's face lies on the surface are occluded (see Tracer).
                 sel = np.flatnonzero(np.repeat(near, k))
-                piece = unit[sel // k]
-                gn, eps = tile.unit_gn[piece], tile.unit_eps[piece]
+                if located:
+                    row = tile.loc_pos[tri_s[sel]]
+                    gn, eps = tile.loc_gn[row], tile.loc_eps[row]
+                else:
+                    piece = unit[sel // k]
+                    gn, eps = tile.unit_gn[piece], tile.unit_eps[piece]
                 touch = self.tracer.contact(origins[sel].astype(np.float64) - gn * eps[:, None], gn, eps)
         if touch is not None and touch.any():
             value[sel[touch]] = 0
@@ -290,6 +323,37 @@ class Kernel:
             term *= weight
         term = term.reshape(g, k)
         return term.sum(axis=1), (term * term).sum(axis=1), n, clock.wall, clock.cpu
+
+
+    @staticmethod
+    def _locate(units, unit, a, b, k):
+        """Each sample's triangle among its located texel's candidates, at its texel-local position
+        (a, b) (g, k): the candidate whose least edge function there is largest (the one containing
+        the point; the first of equals); adds that triangle's translation to (a, b) in place and
+        returns the triangles (g * k,)."""
+        first = units.cand_first[unit]
+        count = units.cand_first[unit + 1] - first
+        best = np.zeros(a.shape, np.int64)
+        best_d = None
+        for c in range(int(count.max())):
+            e = units.cand_edges[first + np.minimum(c, count - 1)]  # (g, 3, 3); short runs repeat their last
+            d = None
+            for j in range(3):
+                v = _per_piece(e[:, j, 0], k) * a
+                v += _per_piece(e[:, j, 1], k) * b
+                v += _per_piece(e[:, j, 2], k)
+                d = v if d is None else np.minimum(d, v, out=d)
+            if best_d is None:
+                best_d = d
+            else:
+                better = d > best_d
+                best[better] = c
+                np.maximum(best_d, d, out=best_d)
+        pick = first[:, None] + best
+        tr = units.cand_coef[pick]
+        a += tr[:, :, 0]
+        b += tr[:, :, 1]
+        return units.cand_tri[pick].ravel()
 
 
 class _Workspace:

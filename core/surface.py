@@ -8,7 +8,11 @@ position coordinates to the triangle's texel space:
 
 - a texel inside one triangle is one unit, a square: (u, v) in [0, 1)^2 is the point's position in
   the texel (u2, u3 of the sample pattern), and the map is a translation to the texel's corner;
-- a texel split among triangles (an island edge, or triangles smaller than texels) has one unit per
+- a located texel (covered exactly once by several triangles, :data:`core.raster.LOCATED`) is one
+  unit too, a square whose samples each find their own triangle: the candidate whose edge functions
+  at (u, v) are least negative (the one containing the point), and then that triangle's translation
+  to the texel's corner (``cand_*``);
+- a texel split among triangles (an island's border or overlapping islands cross it) has one unit per
   piece of triangle inside it (the rasteriser's sub-triangles): (u, v) are the weights of the
   piece's corners 0 and 1 from Heitz's square-to-triangle map of (u2, u3)
   (:func:`core.warps.square_to_triangle`), corner 2 the origin.
@@ -30,7 +34,7 @@ import numpy as np
 
 from .patterns import hash_uniform
 
-SQUARE, TRIANGLE = 0, 1
+SQUARE, TRIANGLE, LOCATED = 0, 1, 2
 _TAG_ALLOCATE = 21
 
 
@@ -89,10 +93,13 @@ class SurfaceTable:
 class Units:
     """The sample units of one tile, sorted by texel (see the module docstring).
 
-    kind : SQUARE or TRIANGLE; texel : the unit's texel, as an index into the tile's texel list;
-    tri : its triangle; first : (n_texels + 1,) units of texel k are first[k]:first[k + 1];
-    cdf : cumulative area fraction of the texel's covered area up to and including the unit;
-    coef : (U, 6) float64, (A0, A1, A2, B0, B1, B2) of the map above.
+    kind : SQUARE, TRIANGLE or LOCATED; texel : the unit's texel, as an index into the tile's texel
+    list; tri : its triangle (a located unit's first candidate); first : (n_texels + 1,) units of
+    texel k are first[k]:first[k + 1]; cdf : cumulative area fraction of the texel's covered area up
+    to and including the unit; coef : (U, 6) float64, (A0, A1, A2, B0, B1, B2) of the map above.
+    Candidates of located units: cand_first (U + 1,) offsets (empty runs for other units), cand_tri
+    (c,) triangles, cand_edges (c, 3, 3) float32 edge functions (a, b, c) in texel-local
+    coordinates, cand_coef (c, 2) float32 the translation (A0, B0) to each candidate's texel space.
     """
 
     kind: np.ndarray
@@ -101,6 +108,10 @@ class Units:
     first: np.ndarray
     cdf: np.ndarray
     coef: np.ndarray
+    cand_first: np.ndarray = None
+    cand_tri: np.ndarray = None
+    cand_edges: np.ndarray = None
+    cand_coef: np.ndarray = None
 
     def __len__(self):
         return len(self.kind)
@@ -108,6 +119,8 @@ class Units:
 
 def build_units(frag, table, width):
     """The units of a tile's fragments."""
+    from .raster import LOCATED as _LOCATED
+
     simple = np.flatnonzero(frag.full_tri >= 0)
     tri_s = frag.full_tri[simple]
     tex = frag.texels[simple]
@@ -117,18 +130,39 @@ def build_units(frag, table, width):
     coef_s[:, 1] = 1.0
     coef_s[:, 3] = (tex // width) - table.origin[tri_s, 1]
     coef_s[:, 5] = 1.0
+    # Located texels: a square each; its candidates' translations.
+    loc = np.flatnonzero(frag.full_tri == _LOCATED)
+    loc_start = frag.loc_start if frag.loc_start is not None else np.zeros(len(frag.texels) + 1, np.int64)
+    cand_tri = frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64)
+    per = loc_start[loc + 1] - loc_start[loc]
+    cand_tex = np.repeat(frag.texels[loc], per)
+    cand_coef = np.stack([(cand_tex % width) - table.origin[cand_tri, 0],
+                          (cand_tex // width) - table.origin[cand_tri, 1]], axis=1).astype(np.float32)
+    coef_l = np.zeros((len(loc), 6))
+    coef_l[:, 1] = 1.0
+    coef_l[:, 5] = 1.0
+    tri_l = cand_tri[loc_start[loc]] if len(loc) else np.zeros(0, np.int64)
     # Sub-triangles: corner 2 plus the weights of corners 0 and 1 times the edges to them.
     tri_t = frag.sub_tri
     c = frag.sub_xy - table.origin[tri_t][:, None, :]
     coef_t = np.stack([c[:, 2, 0], c[:, 0, 0] - c[:, 2, 0], c[:, 1, 0] - c[:, 2, 0],
                        c[:, 2, 1], c[:, 0, 1] - c[:, 2, 1], c[:, 1, 1] - c[:, 2, 1]], axis=1)
-    kind = np.concatenate([np.full(len(simple), SQUARE, np.int8), np.full(len(tri_t), TRIANGLE, np.int8)])
-    texel = np.concatenate([simple, frag.sub_texel]).astype(np.int64)
+    kind = np.concatenate([np.full(len(simple), SQUARE, np.int8), np.full(len(loc), LOCATED, np.int8),
+                           np.full(len(tri_t), TRIANGLE, np.int8)])
+    texel = np.concatenate([simple, loc, frag.sub_texel]).astype(np.int64)
     order = np.argsort(texel, kind="stable")  # sub-triangles keep their order within a texel
-    return Units(kind=kind[order], texel=texel[order], tri=np.concatenate([tri_s, tri_t])[order],
-                 first=np.searchsorted(texel[order], np.arange(len(frag.texels) + 1)),
-                 cdf=np.concatenate([np.ones(len(simple)), frag.sub_cdf])[order],
-                 coef=np.concatenate([coef_s, coef_t])[order])
+    kind, texel = kind[order], texel[order]
+    # Candidate runs follow the units: located units in texel order are the fragments' runs.
+    cand_count = np.zeros(len(kind), np.int64)
+    cand_count[kind == LOCATED] = per
+    cand_first = np.zeros(len(kind) + 1, np.int64)
+    np.cumsum(cand_count, out=cand_first[1:])
+    edges = frag.loc_edges if frag.loc_edges is not None else np.zeros((0, 3, 3))
+    return Units(kind=kind, texel=texel, tri=np.concatenate([tri_s, tri_l, tri_t])[order],
+                 first=np.searchsorted(texel, np.arange(len(frag.texels) + 1)),
+                 cdf=np.concatenate([np.ones(len(simple) + len(loc)), frag.sub_cdf])[order],
+                 coef=np.concatenate([coef_s, coef_l, coef_t])[order],
+                 cand_first=cand_first, cand_tri=cand_tri, cand_edges=edges.astype(np.float32), cand_coef=cand_coef)
 
 
 def allocate(units, texels, start, count, seed, texel_ids):
@@ -186,7 +220,8 @@ def contact_texels(frag, table, width, tracer, samples):
         return np.zeros(n_tex, bool)
     # Only triangles whose bounding box, grown by twice the largest offset, meets an occluder's can
     # touch one: the probes go to their texels alone.
-    tris = np.unique(np.concatenate([frag.full_tri[frag.full_tri >= 0], frag.sub_tri]))
+    loc_tri = frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64)
+    tris = np.unique(np.concatenate([frag.full_tri[frag.full_tri >= 0], frag.sub_tri, loc_tri]))
     corners3 = table.corners[tris]
     grow = 2.0 * tracer.offset(np.abs(corners3).max(axis=(1, 2)))[:, None]
     near = np.zeros(len(table.P0), bool)
@@ -194,6 +229,13 @@ def contact_texels(frag, table, width, tracer, samples):
     candidates = np.zeros(n_tex, bool)
     candidates[frag.full_tri >= 0] = near[frag.full_tri[frag.full_tri >= 0]]
     candidates[frag.sub_texel[near[frag.sub_tri]]] = True
+    # A located texel's samples may lie on any of its candidates: each sample is probed (its own
+    # triangle's normal) when one of them is near an occluder.
+    located = np.zeros(n_tex, bool)
+    if len(loc_tri):
+        owner = np.repeat(np.arange(n_tex), np.diff(frag.loc_start))
+        located[owner[near[loc_tri]]] = True
+        candidates |= located
     if not candidates.any():
         return candidates
     if samples <= 8:
@@ -214,7 +256,7 @@ def contact_texels(frag, table, width, tracer, samples):
     own = np.concatenate([own_s, own_p])
     pos = table.position(tri, xy[:, 0], xy[:, 1])
     hit = tracer.contact(pos, table.FN[tri])
-    return np.bincount(own[hit], minlength=n_tex) > 0
+    return (np.bincount(own[hit], minlength=n_tex) > 0) | located
 
 
-__all__ = ["FLAT_TURN", "SQUARE", "TRIANGLE", "SurfaceTable", "Units", "build_units", "allocate", "contact_texels"]
+__all__ = ["SQUARE", "TRIANGLE", "LOCATED", "SurfaceTable", "Units", "build_units", "allocate", "contact_texels"]
