@@ -165,14 +165,18 @@ class _TileBaker:
             kind = units.kind[unit].astype(np.int64)
             located = kind == LOCATED
             curved = np.where(located, self.located_curved, self.table.smooth[units.tri[unit]])
-            group = ((size * 2 + curved) * 2 + located) * 2 + (kind == TRIANGLE)
-            order = np.argsort(group, kind="stable")
-            unit, first, size, group, kind = unit[order], first[order], size[order], group[order] // 2, kind[order]
-            curved = curved[order]
-            bounds = np.flatnonzero(np.diff(group)) + 1
-            for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
+            # Located texels go by their number of candidates too (each piece's location is then
+            # the same arithmetic whatever else shares its call).
+            cands = units.cand_first[unit + 1] - units.cand_first[unit]
+            order = np.lexsort((kind == TRIANGLE, cands, located, curved, size))
+            unit, first, size, kind, curved, cands = (unit[order], first[order], size[order], kind[order],
+                                                      curved[order], cands[order])
+            change = (np.diff(size) != 0) | (np.diff(curved) != 0) | (np.diff(kind == LOCATED) != 0) | (np.diff(cands) != 0)
+            bounds = np.flatnonzero(change) + 1
+            for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(size)]])):
                 k = int(size[lo])
-                step = max(1, s.chunk_rays // k)
+                # A located call holds 3 * candidates edge values per sample: bound it like the rays.
+                step = max(1, s.chunk_rays // (k * max(1, int(cands[lo]) // 2)))
                 for c0 in range(lo, hi, step):
                     shared.check()
                     c = slice(c0, min(c0 + step, hi))

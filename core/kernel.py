@@ -199,7 +199,7 @@ class Kernel:
         coef = tile.coef[unit]
         tri_s = None
         if located:
-            tri_s = self._locate(units, unit, a, b, k)
+            tri_s = self._locate(units, unit, x, k)
             squares = g
         sq = slice(0, squares)
         if not located:
@@ -326,33 +326,29 @@ class Kernel:
 
 
     @staticmethod
-    def _locate(units, unit, a, b, k):
+    def _locate(units, unit, x, k):
         """Each sample's triangle among its located texel's candidates, at its texel-local position
-        (a, b) (g, k): the candidate whose least edge function there is largest (the one containing
-        the point; the first of equals); adds that triangle's translation to (a, b) in place and
-        returns the triangles (g * k,)."""
+        (a, b) = x[..., 0:2] (x: (g, k, 6) feature rows): the candidate whose least edge function
+        there is largest (the one containing the point; the first of equals). Adds that triangle's
+        translation to (a, b) in place and returns the triangles (g * k,). Every piece of the call
+        has the same number of candidates (the baker groups them so), so each piece's arithmetic
+        does not depend on the others."""
+        g = len(unit)
         first = units.cand_first[unit]
-        count = units.cand_first[unit + 1] - first
-        best = np.zeros(a.shape, np.int64)
-        best_d = None
-        for c in range(int(count.max())):
-            e = units.cand_edges[first + np.minimum(c, count - 1)]  # (g, 3, 3); short runs repeat their last
-            d = None
-            for j in range(3):
-                v = _per_piece(e[:, j, 0], k) * a
-                v += _per_piece(e[:, j, 1], k) * b
-                v += _per_piece(e[:, j, 2], k)
-                d = v if d is None else np.minimum(d, v, out=d)
-            if best_d is None:
-                best_d = d
-            else:
-                better = d > best_d
-                best[better] = c
-                np.maximum(best_d, d, out=best_d)
-        pick = first[:, None] + best
+        m = int(units.cand_first[unit[0] + 1] - first[0])
+        if m == 1:
+            pick = np.broadcast_to(first[:, None], (g, k))
+        else:
+            # Every candidate's three edge functions at every sample: one product [a, b, 1] @ (3, 3m).
+            ec = units.cand_edges[first[:, None] + np.arange(m)]           # (g, m, edge, coef)
+            coef = np.ascontiguousarray(ec.transpose(0, 3, 2, 1)).reshape(g, 3, 3 * m)
+            e = np.matmul(x[:, :, 0:3], coef).reshape(g, k, 3, m)
+            d = np.minimum(e[:, :, 0], e[:, :, 1])
+            np.minimum(d, e[:, :, 2], out=d)
+            pick = first[:, None] + d.argmax(axis=2)
         tr = units.cand_coef[pick]
-        a += tr[:, :, 0]
-        b += tr[:, :, 1]
+        x[:, :, 0] += tr[:, :, 0]
+        x[:, :, 1] += tr[:, :, 1]
         return units.cand_tri[pick].ravel()
 
 

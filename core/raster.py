@@ -269,12 +269,15 @@ def _border_half_edges(xy):
     if n == 0:
         return border.reshape(n, 3)
     bits = np.concatenate([p, q], axis=1).view(np.uint64)
+    h = np.full(3 * n, 0x9E3779B97F4A7C15, np.uint64)
     with np.errstate(over="ignore"):
-        h = (bits[:, 0] * np.uint64(0x9E3779B97F4A7C15) + bits[:, 1] * np.uint64(0xBF58476D1CE4E5B9)
-             + bits[:, 2] * np.uint64(0x94D049BB133111EB) + bits[:, 3] * np.uint64(0xD6E8FEB86659FD93))
-        h ^= h >> np.uint64(29)
-        h *= np.uint64(0xBF58476D1CE4E5B9)
-        h ^= h >> np.uint64(32)
+        for c in range(4):  # splitmix64's finaliser after each coordinate
+            h ^= bits[:, c]
+            h ^= h >> np.uint64(30)
+            h *= np.uint64(0xBF58476D1CE4E5B9)
+            h ^= h >> np.uint64(27)
+            h *= np.uint64(0x94D049BB133111EB)
+            h ^= h >> np.uint64(31)
     m = 3 * n
     ib = max(1, int(m - 1).bit_length())
     packed = np.sort(((h >> np.uint64(ib)) << np.uint64(ib)) | np.arange(m, dtype=np.uint64))
@@ -288,12 +291,14 @@ def _border_half_edges(xy):
     # Pairs with equal hashes: twins when the points are equal and the directions opposite.
     two = first[size == 2]
     i, j = idx[two], idx[two + 1]
-    twin = np.all(p[i] == p[j], axis=1) & np.all(q[i] == q[j], axis=1) & (swap[i] != swap[j])
+    twin = swap[i] != swap[j]
+    for c in (p[:, 0], p[:, 1], q[:, 0], q[:, 1]):
+        twin &= c[i] == c[j]
     border[i[twin]] = False
     border[j[twin]] = False
     # Larger groups (hash collisions or edges shared by more than two triangles): exactly, by points.
-    for f in first[size > 2]:
-        members = idx[f:f + int(size[first == f][0])]
+    for f, sz in zip(first[size > 2], size[size > 2]):
+        members = idx[f:f + int(sz)]
         groups = {}
         for e in members:
             groups.setdefault((p[e, 0], p[e, 1], q[e, 0], q[e, 1]), []).append(e)
