@@ -370,7 +370,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         progress(1.0)
 
     if s.margin > 0:
-        ao = dilate(ao, mask, s.margin)
+        ao = dilate(ao, mask, s.margin, threads=s.threads)
     seconds = time.perf_counter() - t_start
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=shared.rays)
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,

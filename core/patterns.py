@@ -56,7 +56,7 @@ _M2 = np.uint64(0x94D049BB133111EB)
 _TWO_M32 = 2.0 ** -32
 
 # Hash tags: one per independent quantity drawn from (seed, texel, replicate).
-_TAG_PATTERN, _TAG_ORDER, _TAG_SHIFT2, _TAG_SHIFT3, _TAG_TURN, _TAG_SCRAMBLE = 11, 12, 13, 14, 15, 16
+_TAG_PATTERN, _TAG_SHIFT2, _TAG_TURN, _TAG_SCRAMBLE = 11, 13, 15, 16
 
 
 def _mix(x):
@@ -73,12 +73,41 @@ def hash64(*keys):
     """Hash integer keys (arrays broadcast together) into uint64, one mixing round per key."""
     # 0-d arrays, not numpy scalars: array arithmetic wraps silently, scalar arithmetic warns.
     h = np.array(0x2545F4914F6CDD1D, dtype=np.uint64)
+    tmp = None
     with np.errstate(over="ignore"):
         for k in keys:
             k = np.asarray(k)
             k = k.astype(np.uint64) if k.dtype != np.uint64 else k
-            h = _mix(np.add(h ^ k, _GOLDEN))
+            h = np.bitwise_xor(h, k)  # a new array: the keys are never written
+            h += _GOLDEN
+            if h.ndim == 0:
+                h = _mix(h)
+            else:
+                if tmp is None or tmp.shape != h.shape:
+                    tmp = np.empty_like(h)
+                _mix_into(h, tmp)
     return h
+
+
+def _mix_into(x, tmp):
+    """:func:`_mix` of the uint64 array ``x`` in place (``tmp``: scratch of its shape)."""
+    np.right_shift(x, np.uint64(30), out=tmp)
+    x ^= tmp
+    x *= _M1
+    np.right_shift(x, np.uint64(27), out=tmp)
+    x ^= tmp
+    x *= _M2
+    np.right_shift(x, np.uint64(31), out=tmp)
+    x ^= tmp
+    return x
+
+
+def _extend(prefix, key, tmp):
+    """:func:`hash64` of (prefix's keys..., key) from ``prefix`` (their hash64): one more round."""
+    h = prefix ^ np.uint64(key)
+    with np.errstate(over="ignore"):
+        h += _GOLDEN
+        return _mix_into(h, tmp)
 
 
 def hash_uniform(*keys):
@@ -104,7 +133,7 @@ class TexelKeys:
         self.pattern = pattern    # (n,) int64, which pattern of the pool
         self.order = order        # (n,) int64, the reordering key (xor mask or offset)
         self.shift = shift        # (n, 2) uint32, position shifts d2, d3
-        self.cos_turn = cos_turn  # (n,) float64, the tangent frame's turn about the normal
+        self.cos_turn = cos_turn  # (n,) float32, the tangent frame's turn about the normal
         self.sin_turn = sin_turn
 
 
@@ -151,17 +180,35 @@ class TexelPattern:
     # -- per texel -----------------------------------------------------------------------------
 
     def keys(self, texels, replicate=0):
-        """The random choices of ``texels`` (array of non-negative ints) for ``replicate``."""
+        """The random choices of ``texels`` (array of non-negative ints) for ``replicate``.
+
+        Three hashes of (seed, texel, replicate, tag), sharing the rounds of their common prefix:
+        the pattern (high word) and the reordering (low word); the two position shifts (one word
+        each); the frame's turn (its top 24 bits, an angle in float32).
+        """
         t = np.asarray(texels, dtype=np.uint64)
-        r = np.uint64(replicate)
-        s = self.seed
-        pattern = _below(hash64(s, t, r, _TAG_PATTERN), self.patterns).astype(np.int64)
-        h = hash64(s, t, r, _TAG_ORDER)
-        order = (h >> np.uint64(40)) & np.uint64(self.length - 1) if self.xor else _below(h, self.length)
-        shift = np.stack([(hash64(s, t, r, _TAG_SHIFT2) >> np.uint64(32)).astype(np.uint32),
-                          (hash64(s, t, r, _TAG_SHIFT3) >> np.uint64(32)).astype(np.uint32)], axis=-1)
+        tmp = np.empty(t.shape, np.uint64)
+        base = hash64(self.seed, t, np.uint64(replicate))
+        low = np.uint64(0xFFFFFFFF)
+        h = _extend(base, _TAG_PATTERN, tmp)
+        pattern = _below(h, self.patterns).astype(np.int64)
+        h &= low
+        if self.xor:
+            order = h >> np.uint64(32 - (self.length.bit_length() - 1))
+        else:
+            h *= np.uint64(self.length)
+            order = h >> np.uint64(32)
+        h = _extend(base, _TAG_SHIFT2, tmp)
+        shift = np.empty(t.shape + (2,), np.uint32)
+        np.right_shift(h, np.uint64(32), out=tmp)
+        shift[..., 0] = tmp
+        h &= low
+        shift[..., 1] = h
         shift &= self.shift_mask
-        turn = warps.TWO_PI * hash_uniform(s, t, r, _TAG_TURN)
+        h = _extend(base, _TAG_TURN, tmp)
+        h >>= np.uint64(40)
+        turn = h.astype(np.float32)
+        turn *= np.float32(warps.TWO_PI * 2.0 ** -24)
         return TexelKeys(pattern, order.astype(np.int64), shift, np.cos(turn), np.sin(turn))
 
     def rows(self, keys, index):
