@@ -156,7 +156,7 @@ class _TileBaker:
         units = build_units(frag, self.table, s.width)
         contact = contact_texels(frag, self.table, s.width, self.tracer, s.samples)
         tile = TileContext(self.table, units, self.pattern.keys(frag.texels), frag.texels, contact, self.tracer.offset,
-                           located_curved=self.located_curved)
+                           located_curved=self.located_curved, tris=tri_ids)
         for start, count, texels in self.plan.rounds(est, np.arange(n_tex)):
             unit, first, size = allocate(units, texels, start, count, self.seed, frag.texels)
             # Equal pieces go through the kernel together, squares before triangles, located texels
@@ -168,11 +168,17 @@ class _TileBaker:
             # Located texels go by their number of candidates too (each piece's location is then
             # the same arithmetic whatever else shares its call).
             cands = units.cand_first[unit + 1] - units.cand_first[unit]
-            order = np.lexsort((kind == TRIANGLE, cands, located, curved, size))
-            unit, first, size, kind, curved, cands = (unit[order], first[order], size[order], kind[order],
-                                                      curved[order], cands[order])
-            change = (np.diff(size) != 0) | (np.diff(curved) != 0) | (np.diff(kind == LOCATED) != 0) | (np.diff(cands) != 0)
-            bounds = np.flatnonzero(change) + 1
+            # One integer per piece: (size, curved, located, candidates) says its call, the last bit
+            # puts squares before pieces of triangles; a stable sort keeps each texel's pieces in order.
+            span = int(cands.max()) + 1 if len(cands) else 1
+            key = (((np.log2(size).astype(np.int64) * 2 + curved) * 2 + located) * span + cands) * 2 + (kind == TRIANGLE)
+            if len(key) and key.max() < 1 << 16:
+                order = np.argsort(key.astype(np.uint16), kind="stable")  # a radix sort
+            else:
+                order = np.argsort(key, kind="stable")
+            unit, first, size, kind, curved, cands, key = (unit[order], first[order], size[order], kind[order],
+                                                           curved[order], cands[order], key[order])
+            bounds = np.flatnonzero(np.diff(key >> 1)) + 1
             for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(size)]])):
                 k = int(size[lo])
                 # A located call holds 3 * candidates edge values per sample: bound it like the rays.
@@ -335,11 +341,11 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         rect = min(tile, w - tx * tile) * min(tile, h - ty * tile)
         shared.advance(rect * s.samples - len(frag.texels) * s.samples)
         if len(frag.texels):
-            rows, cols = frag.texels // w, frag.texels % w
-            ao[rows, cols] = np.clip(est.mean, 0.0, 1.0)
-            se[rows, cols] = est.stderr
-            count[rows, cols] = est.n
-            mask[rows, cols] = True
+            t = frag.texels
+            ao.reshape(-1)[t] = np.clip(est.mean, 0.0, 1.0)
+            se.reshape(-1)[t] = est.stderr
+            count.reshape(-1)[t] = est.n
+            mask.reshape(-1)[t] = True
             with shared.lock:
                 coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
             if on_tile is not None:

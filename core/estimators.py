@@ -35,6 +35,12 @@ class TexelEstimates:
         Pieces are added one after another in the order given, so a texel's sums do not depend on
         how its pieces were grouped into calls (floating-point addition is not associative).
         """
+        rows = np.asarray(rows)
+        if len(rows) < 2 or np.all(rows[1:] > rows[:-1]):  # each texel once: plain indexed adds
+            self.n[rows] += n
+            self.s1[rows] += s1
+            self.s2[rows] += s2
+            return
         np.add.at(self.n, rows, n)
         np.add.at(self.s1, rows, s1)
         np.add.at(self.s2, rows, s2)

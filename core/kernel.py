@@ -40,6 +40,24 @@ from . import warps
 from .tracing import FAR, Clock, RayBatch
 
 FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
+#: Pieces shorter than this (and located samples, each on its own triangle) are computed row by row
+#: from the matrices' nonzero entries gathered per ray (a batched product of tiny matrices costs
+#: about 100 ns a row); longer pieces take one product per piece.
+ROW_PIECES = 8
+#: The nonzero entries (row j of the feature vector, output column c) of each matrix form, grouped
+#: by output column: a position column is M[2, c] + a M[0, c] + b M[1, c], a direction column
+#: f0 M[3, c] + f1 M[4, c] + f2 M[5, c].
+_POSITION_ROWS, _DIRECTION_ROWS = (2, 0, 1), (3, 4, 5)
+FLAT_ENTRIES = tuple((c, _POSITION_ROWS if c < 3 else _DIRECTION_ROWS) for c in range(FLAT_COLUMNS))
+CURVED_ENTRIES = tuple((c, _POSITION_ROWS if c in (0, 1, 2, 3, 4, 5, 9) else _DIRECTION_ROWS)
+                       for c in range(CURVED_COLUMNS))
+
+
+def _row_table(m, entries):
+    """The matrices ``m`` (T, 6, cols) as a float32 table (entries, T) of their nonzero entries."""
+    js = [j for c, rows in entries for j in rows]
+    cs = [c for c, rows in entries for _ in rows]
+    return np.ascontiguousarray(m[:, js, cs].T)
 
 
 def triangle_matrices(table, tris, offset, curved_all=False):
@@ -96,32 +114,47 @@ class TileContext:
     flat form otherwise.
     """
 
-    def __init__(self, table, units, keys, texel_ids, contact, offset, located_curved=True):
+    def __init__(self, table, units, keys, texel_ids, contact, offset, located_curved=True, tris=None):
         self.units = units
         self.keys = keys
         self.texel_ids = texel_ids      # global flat texel index of each of the tile's texels
         self.contact = contact          # per tile texel: probe its samples for contact
-        tris = np.unique(units.tri)
+        # ``tris``: the tile's triangles, ascending (a superset of its units' is fine).
+        tris = np.unique(units.tri) if tris is None else np.asarray(tris, np.int64)
         self.flat_m, self.curved_m, self.slot, gn, eps = triangle_matrices(table, tris, offset)
         self.smooth = table.smooth
         # The geometric normal and offset of each unit (for contact probes).
         pos = np.searchsorted(tris, units.tri)
         self.unit_gn, self.unit_eps = gn[pos], eps[pos]
         self.coef = units.coef.astype(np.float32)
+        self.flat_rows = _row_table(self.flat_m, FLAT_ENTRIES)
+        self.curved_rows = _row_table(self.curved_m, CURVED_ENTRIES)
         # Located samples: one matrix per candidate triangle, all in one form.
         self.located_curved = bool(located_curved)
         cand = units.cand_tri if units.cand_tri is not None else np.zeros(0, np.int64)
         if len(cand):
-            ctris = np.unique(cand)
-            flat, curved, self.loc_slot, self.loc_gn, self.loc_eps = triangle_matrices(
-                table, ctris, offset, curved_all=self.located_curved)
-            self.loc_m = curved if self.located_curved else flat
-            self.loc_pos = np.searchsorted(ctris, np.arange(len(table.P0)))  # triangle id -> row of gn, eps
+            native = bool(np.all(table.smooth[cand] == self.located_curved))
+            if native:  # the located form is every candidate's own form: share the matrices
+                self.loc_m = self.curved_m if self.located_curved else self.flat_m
+                self.loc_rows = self.curved_rows if self.located_curved else self.flat_rows
+                self.loc_slot, self.loc_gn, self.loc_eps = self.slot, gn, eps
+                self.loc_pos = np.full(len(table.P0), -1, np.int64)
+                self.loc_pos[tris] = np.arange(len(tris))
+            else:
+                ctris = np.unique(cand)
+                flat, curved, self.loc_slot, self.loc_gn, self.loc_eps = triangle_matrices(
+                    table, ctris, offset, curved_all=self.located_curved)
+                self.loc_m = curved if self.located_curved else flat
+                self.loc_rows = _row_table(self.loc_m, CURVED_ENTRIES if self.located_curved else FLAT_ENTRIES)
+                self.loc_pos = np.full(len(table.P0), -1, np.int64)
+                self.loc_pos[ctris] = np.arange(len(ctris))  # triangle id -> row of gn, eps
 
 
 def _per_piece(values, k):
     """Per-piece values (g,) as (g, 1) to broadcast over a piece's k samples, or repeated (g, k) when
     k is small (numpy's inner loops are slow on a short broadcast axis)."""
+    if k == 1:
+        return values.reshape(-1, 1)
     return values[:, None] if k >= 8 else np.repeat(values, k).reshape(len(values), k)
 
 
@@ -220,18 +253,23 @@ class Kernel:
         f1 *= cos_t
         f1 += f0 * sin_t
         f0[...] = t0
-        if located:
-            # One matrix per sample, its own triangle's.
-            m = tile.loc_m[tile.loc_slot[tri_s]]
-            cols = m.shape[2]
-            y = ws.y[:n * cols].reshape(n, 1, cols)
-            np.matmul(xf.reshape(n, 1, 6), m, out=y)
+        if located or k < ROW_PIECES:
+            # Row by row, each ray's own triangle's entries (a located sample's, or its piece's).
+            if located:
+                table, slot = tile.loc_rows, tile.loc_slot[tri_s]
+            else:
+                table = tile.curved_rows if curved else tile.flat_rows
+                slot = tile.slot[units.tri[unit]]
+                if k > 1:
+                    slot = np.repeat(slot, k)
+            y = self._rows(table, CURVED_ENTRIES if curved else FLAT_ENTRIES, slot, xf, ws)
+            cols = y.shape[1]
         else:
             m = (tile.curved_m if curved else tile.flat_m)[tile.slot[units.tri[unit]]]
             cols = m.shape[2]
             y = ws.y[:n * cols].reshape(g, k, cols)
             np.matmul(x, m, out=y)
-        y = y.reshape(n, cols)
+            y = y.reshape(n, cols)
         origins = y[:, 0:3]
         tfar = ws.tfar[:n]
         below = ws.below[:n]
@@ -326,6 +364,31 @@ class Kernel:
 
 
     @staticmethod
+    def _rows(table, entries, slot, xf, ws):
+        """Y = X M row by row: (n, cols), a view of (cols, n) columns computed from the entries
+        ``table[:, slot]`` of each row's matrix."""
+        n = len(slot)
+        g = np.take(table, slot, axis=1)  # (entries, n)
+        y = ws.y[:len(entries) * n].reshape(len(entries), n)
+        tmp = ws.f2[:n]
+        i = 0
+        for c, rows in entries:
+            out = y[c]
+            if rows[0] == 2:  # position: M[2] + a M[0] + b M[1]
+                np.multiply(xf[:, 0], g[i + 1], out=out)
+                out += g[i]
+                np.multiply(xf[:, 1], g[i + 2], out=tmp)
+                out += tmp
+            else:  # direction: f0 M[3] + f1 M[4] + f2 M[5]
+                np.multiply(xf[:, 3], g[i], out=out)
+                np.multiply(xf[:, 4], g[i + 1], out=tmp)
+                out += tmp
+                np.multiply(xf[:, 5], g[i + 2], out=tmp)
+                out += tmp
+            i += 3
+        return y.T
+
+    @staticmethod
     def _locate(units, unit, x, k):
         """Each sample's triangle among its located texel's candidates, at its texel-local position
         (a, b) = x[..., 0:2] (x: (g, k, 6) feature rows): the candidate whose least edge function
@@ -338,6 +401,29 @@ class Kernel:
         m = int(units.cand_first[unit[0] + 1] - first[0])
         if m == 1:
             pick = np.broadcast_to(first[:, None], (g, k))
+        elif k < ROW_PIECES:
+            # Short pieces: candidate by candidate over the samples (the same comparisons).
+            a = x[:, :, 0].reshape(-1)
+            b = x[:, :, 1].reshape(-1)
+            best = np.zeros(g * k, np.int64)
+            best_d = None
+            for c in range(m):
+                e = units.cand_edges[first + c]
+                if k > 1:
+                    e = np.repeat(e, k, axis=0)
+                d = None
+                for j in range(3):
+                    v = e[:, j, 0] * a
+                    v += e[:, j, 1] * b
+                    v += e[:, j, 2]
+                    d = v if d is None else np.minimum(d, v, out=d)
+                if best_d is None:
+                    best_d = d
+                else:
+                    better = d > best_d
+                    best[better] = c
+                    np.maximum(best_d, d, out=best_d)
+            pick = first[:, None] + best.reshape(g, k)
         else:
             # Every candidate's three edge functions at every sample: one product [a, b, 1] @ (3, 3m).
             ec = units.cand_edges[first[:, None] + np.arange(m)]           # (g, m, edge, coef)

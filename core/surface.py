@@ -118,51 +118,62 @@ class Units:
 
 
 def build_units(frag, table, width):
-    """The units of a tile's fragments."""
+    """The units of a tile's fragments, in texel order (a split texel's sub-triangles in theirs)."""
     from .raster import LOCATED as _LOCATED
 
-    simple = np.flatnonzero(frag.full_tri >= 0)
-    tri_s = frag.full_tri[simple]
+    n = len(frag.texels)
+    full = frag.full_tri
+    # Units per texel: one for a texel inside one triangle or located, its sub-triangles' count else.
+    per = np.where(full != -1, 1, np.diff(frag.sub_start))
+    first = np.zeros(n + 1, np.int64)
+    np.cumsum(per, out=first[1:])
+    U = int(first[-1])
+    kind = np.empty(U, np.int8)
+    tri = np.empty(U, np.int64)
+    cdf = np.ones(U)
+    coef = np.zeros((U, 6))
+    simple = np.flatnonzero(full >= 0)
+    at = first[simple]
+    tri_s = full[simple]
     tex = frag.texels[simple]
     # Squares: a translation to the texel's corner.
-    coef_s = np.zeros((len(simple), 6))
-    coef_s[:, 0] = (tex % width) - table.origin[tri_s, 0]
-    coef_s[:, 1] = 1.0
-    coef_s[:, 3] = (tex // width) - table.origin[tri_s, 1]
-    coef_s[:, 5] = 1.0
+    kind[at] = SQUARE
+    tri[at] = tri_s
+    coef[at, 0] = (tex % width) - table.origin[tri_s, 0]
+    coef[at, 1] = 1.0
+    coef[at, 3] = (tex // width) - table.origin[tri_s, 1]
+    coef[at, 5] = 1.0
     # Located texels: a square each; its candidates' translations.
-    loc = np.flatnonzero(frag.full_tri == _LOCATED)
-    loc_start = frag.loc_start if frag.loc_start is not None else np.zeros(len(frag.texels) + 1, np.int64)
+    loc = np.flatnonzero(full == _LOCATED)
+    loc_start = frag.loc_start if frag.loc_start is not None else np.zeros(n + 1, np.int64)
     cand_tri = frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64)
-    per = loc_start[loc + 1] - loc_start[loc]
-    cand_tex = np.repeat(frag.texels[loc], per)
+    per_c = loc_start[loc + 1] - loc_start[loc]
+    cand_tex = np.repeat(frag.texels[loc], per_c)
     cand_coef = np.stack([(cand_tex % width) - table.origin[cand_tri, 0],
                           (cand_tex // width) - table.origin[cand_tri, 1]], axis=1).astype(np.float32)
-    coef_l = np.zeros((len(loc), 6))
-    coef_l[:, 1] = 1.0
-    coef_l[:, 5] = 1.0
-    tri_l = cand_tri[loc_start[loc]] if len(loc) else np.zeros(0, np.int64)
+    at = first[loc]
+    kind[at] = LOCATED
+    tri[at] = cand_tri[loc_start[loc]] if len(loc) else 0
+    coef[at, 1] = 1.0
+    coef[at, 5] = 1.0
     # Sub-triangles: corner 2 plus the weights of corners 0 and 1 times the edges to them.
     tri_t = frag.sub_tri
+    at = first[frag.sub_texel] + (np.arange(len(tri_t)) - frag.sub_start[frag.sub_texel])
     c = frag.sub_xy - table.origin[tri_t][:, None, :]
-    coef_t = np.stack([c[:, 2, 0], c[:, 0, 0] - c[:, 2, 0], c[:, 1, 0] - c[:, 2, 0],
-                       c[:, 2, 1], c[:, 0, 1] - c[:, 2, 1], c[:, 1, 1] - c[:, 2, 1]], axis=1)
-    kind = np.concatenate([np.full(len(simple), SQUARE, np.int8), np.full(len(loc), LOCATED, np.int8),
-                           np.full(len(tri_t), TRIANGLE, np.int8)])
-    texel = np.concatenate([simple, loc, frag.sub_texel]).astype(np.int64)
-    order = np.argsort(texel, kind="stable")  # sub-triangles keep their order within a texel
-    kind, texel = kind[order], texel[order]
+    kind[at] = TRIANGLE
+    tri[at] = tri_t
+    cdf[at] = frag.sub_cdf
+    coef[at] = np.stack([c[:, 2, 0], c[:, 0, 0] - c[:, 2, 0], c[:, 1, 0] - c[:, 2, 0],
+                         c[:, 2, 1], c[:, 0, 1] - c[:, 2, 1], c[:, 1, 1] - c[:, 2, 1]], axis=1)
+    texel = np.repeat(np.arange(n), per)
     # Candidate runs follow the units: located units in texel order are the fragments' runs.
-    cand_count = np.zeros(len(kind), np.int64)
-    cand_count[kind == LOCATED] = per
-    cand_first = np.zeros(len(kind) + 1, np.int64)
+    cand_count = np.zeros(U, np.int64)
+    cand_count[first[loc]] = per_c
+    cand_first = np.zeros(U + 1, np.int64)
     np.cumsum(cand_count, out=cand_first[1:])
     edges = frag.loc_edges if frag.loc_edges is not None else np.zeros((0, 3, 3))
-    return Units(kind=kind, texel=texel, tri=np.concatenate([tri_s, tri_l, tri_t])[order],
-                 first=np.searchsorted(texel, np.arange(len(frag.texels) + 1)),
-                 cdf=np.concatenate([np.ones(len(simple) + len(loc)), frag.sub_cdf])[order],
-                 coef=np.concatenate([coef_s, coef_l, coef_t])[order],
-                 cand_first=cand_first, cand_tri=cand_tri, cand_edges=edges.astype(np.float32), cand_coef=cand_coef)
+    return Units(kind=kind, texel=texel, tri=tri, first=first, cdf=cdf, coef=coef, cand_first=cand_first,
+                 cand_tri=cand_tri, cand_edges=edges.astype(np.float32), cand_coef=cand_coef)
 
 
 def allocate(units, texels, start, count, seed, texel_ids):
@@ -170,32 +181,45 @@ def allocate(units, texels, start, count, seed, texel_ids):
     list; ``texel_ids`` the global texel numbers of the whole list): which unit takes which samples.
 
     Returns (unit, piece start, piece size) arrays: every unit's share of the block, cut into pieces
-    whose sizes are powers of two (the kernel traces equal pieces together).
+    whose sizes are powers of two (the kernel traces equal pieces together). A texel of one unit
+    (inside one triangle, or located) takes the whole block; the units of a split texel share it.
     """
     texels = np.asarray(texels, dtype=np.int64)
-    lo, hi = units.first[texels], units.first[texels + 1]
-    per = hi - lo
-    unit = np.repeat(lo, per) + (np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per))
-    owner = np.repeat(texels, per)
-    multi = np.repeat(per > 1, per)
-    # Systematic sampling among a split texel's units: the first sample past each unit's cumulative share.
-    phi = hash_uniform(seed, texel_ids[owner], np.uint64(start), _TAG_ALLOCATE)
-    edge = np.clip(np.ceil(units.cdf[unit] * count - phi), 0, count).astype(np.int64)
-    last = np.ones(len(unit), bool)
-    last[:-1] = owner[1:] != owner[:-1]
-    edge[last] = count
-    before = np.zeros(len(unit), np.int64)
-    before[1:] = edge[:-1]
-    before[np.concatenate([[True], owner[1:] != owner[:-1]])] = 0
-    size = np.where(multi, edge - before, count)
-    offset = np.where(multi, before, 0)
-    keep = size > 0
-    unit, size, offset = unit[keep], size[keep], offset[keep] + start
+    lo = units.first[texels]
+    per = units.first[texels + 1] - lo
+    one = per == 1
+    single = lo[one]
+    mt = texels[~one]
+    if len(mt):
+        lo_m, per_m = lo[~one], per[~one]
+        unit = np.repeat(lo_m, per_m) + (np.arange(per_m.sum()) - np.repeat(np.cumsum(per_m) - per_m, per_m))
+        owner = np.repeat(mt, per_m)
+        # Systematic sampling among a split texel's units: the first sample past each unit's cumulative share.
+        phi = hash_uniform(seed, texel_ids[owner], np.uint64(start), _TAG_ALLOCATE)
+        edge = np.clip(np.ceil(units.cdf[unit] * count - phi), 0, count).astype(np.int64)
+        new_texel = np.ones(len(unit), bool)
+        new_texel[1:] = owner[1:] != owner[:-1]
+        last = np.ones(len(unit), bool)
+        last[:-1] = new_texel[1:]
+        edge[last] = count
+        before = np.zeros(len(unit), np.int64)
+        before[1:] = edge[:-1]
+        before[new_texel] = 0
+        size = edge - before
+        keep = size > 0
+        unit, size, offset = unit[keep], size[keep], before[keep] + start
+    else:
+        unit = size = offset = np.zeros(0, np.int64)
+    whole = count & (count - 1) == 0  # a power of two: a single unit's block is one piece
+    if not whole:
+        unit = np.concatenate([single, unit])
+        size = np.concatenate([np.full(len(single), count, np.int64), size])
+        offset = np.concatenate([np.full(len(single), start, np.int64), offset])
     # Power-of-two pieces, largest first: bit b of a unit's count is a piece of 2^b samples after
-    # those of the higher bits. A texel inside one triangle takes its whole block as one piece; the
-    # kernel traces equal pieces together.
+    # those of the higher bits.
     bits = int(count).bit_length()
-    pu, ps, pz = [], [], []
+    pu, ps, pz = ([single], [np.full(len(single), start, np.int64)], [np.full(len(single), count, np.int64)]) \
+        if whole else ([], [], [])
     for b in range(bits - 1, -1, -1):
         has = (size >> b) & 1 == 1
         if has.any():
