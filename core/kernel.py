@@ -44,6 +44,10 @@ FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
 #: from the matrices' nonzero entries gathered per ray (a batched product of tiny matrices costs
 #: about 100 ns a row); longer pieces take one product per piece.
 ROW_PIECES = 8
+#: Located pieces of ROW_PIECES samples or more whose candidates' matrices together have at most
+#: this many columns take one product of all of them per piece and keep each sample's own columns;
+#: more candidates go row by row (the product's cost grows with them, the rows' does not).
+ZSELECT_COLUMNS = 36
 #: The nonzero entries (row j of the feature vector, output column c) of each matrix form, grouped
 #: by output column: a position column is M[2, c] + a M[0, c] + b M[1, c], a direction column
 #: f0 M[3, c] + f1 M[4, c] + f2 M[5, c].
@@ -232,7 +236,16 @@ class Kernel:
         coef = tile.coef[unit]
         tri_s = None
         if located:
-            tri_s = self._locate(units, unit, x, k)
+            best = self._locate(units, unit, x, k)
+            pick = units.cand_first[unit][:, None] + best
+            tri_s = units.cand_tri[pick].ravel()
+            m = int(units.cand_first[unit[0] + 1] - units.cand_first[unit[0]])
+            zselect = k >= ROW_PIECES and m * (CURVED_COLUMNS if curved else FLAT_COLUMNS) <= ZSELECT_COLUMNS
+            if not zselect:
+                # row by row: each sample moves to its own triangle's texel space
+                tr = units.cand_coef[pick]
+                a += tr[:, :, 0]
+                b += tr[:, :, 1]
             squares = g
         sq = slice(0, squares)
         if not located:
@@ -253,7 +266,21 @@ class Kernel:
         f1 *= cos_t
         f1 += f0 * sin_t
         f0[...] = t0
-        if located or k < ROW_PIECES:
+        if located and zselect:
+            # Every candidate's matrix (its translation to the texel folded into the constant row)
+            # in one product per piece; each sample keeps its own candidate's columns.
+            cand = units.cand_first[unit][:, None] + np.arange(m)
+            mc = tile.loc_m[tile.loc_slot[units.cand_tri[cand]]]       # (g, m, 6, cols)
+            tr = units.cand_coef[cand]
+            mc[:, :, 2] += tr[:, :, 0, None] * mc[:, :, 0]
+            mc[:, :, 2] += tr[:, :, 1, None] * mc[:, :, 1]
+            cols = mc.shape[3]
+            z = np.matmul(x, np.ascontiguousarray(mc.transpose(0, 2, 1, 3)).reshape(g, 6, m * cols))
+            row = ws.idx[:n]
+            np.multiply(ws.ramp[:n], m, out=row)
+            row += best.reshape(n)
+            y = np.take(z.reshape(n * m, cols), row, axis=0)
+        elif located or k < ROW_PIECES:
             # Row by row, each ray's own triangle's entries (a located sample's, or its piece's).
             if located:
                 table, slot = tile.loc_rows, tile.loc_slot[tri_s]
@@ -390,22 +417,21 @@ class Kernel:
 
     @staticmethod
     def _locate(units, unit, x, k):
-        """Each sample's triangle among its located texel's candidates, at its texel-local position
-        (a, b) = x[..., 0:2] (x: (g, k, 6) feature rows): the candidate whose least edge function
-        there is largest (the one containing the point; the first of equals). Adds that triangle's
-        translation to (a, b) in place and returns the triangles (g * k,). Every piece of the call
-        has the same number of candidates (the baker groups them so), so each piece's arithmetic
-        does not depend on the others."""
+        """Each sample's candidate among its located texel's (an index into the texel's run, (g, k)),
+        at its texel-local position (a, b) = x[..., 0:2] (x: (g, k, 6) feature rows): the
+        candidate whose least edge function there is largest (the one containing the point; the
+        first of equals). Every piece of the call has the same number of candidates (the baker
+        groups them so), so each piece's arithmetic does not depend on the others."""
         g = len(unit)
         first = units.cand_first[unit]
         m = int(units.cand_first[unit[0] + 1] - first[0])
         if m == 1:
-            pick = np.broadcast_to(first[:, None], (g, k))
-        elif k < ROW_PIECES:
-            # Short pieces: candidate by candidate over the samples (the same comparisons).
+            return np.zeros((g, k), np.int64)
+        best = np.zeros((g, k), np.int64)
+        if k < ROW_PIECES:
+            # Short pieces: candidate by candidate over the samples.
             a = x[:, :, 0].reshape(-1)
             b = x[:, :, 1].reshape(-1)
-            best = np.zeros(g * k, np.int64)
             best_d = None
             for c in range(m):
                 e = units.cand_edges[first + c]
@@ -421,21 +447,22 @@ class Kernel:
                     best_d = d
                 else:
                     better = d > best_d
-                    best[better] = c
+                    best.reshape(-1)[better] = c
                     np.maximum(best_d, d, out=best_d)
-            pick = first[:, None] + best.reshape(g, k)
-        else:
-            # Every candidate's three edge functions at every sample: one product [a, b, 1] @ (3, 3m).
-            ec = units.cand_edges[first[:, None] + np.arange(m)]           # (g, m, edge, coef)
-            coef = np.ascontiguousarray(ec.transpose(0, 3, 2, 1)).reshape(g, 3, 3 * m)
-            e = np.matmul(x[:, :, 0:3], coef).reshape(g, k, 3, m)
-            d = np.minimum(e[:, :, 0], e[:, :, 1])
-            np.minimum(d, e[:, :, 2], out=d)
-            pick = first[:, None] + d.argmax(axis=2)
-        tr = units.cand_coef[pick]
-        x[:, :, 0] += tr[:, :, 0]
-        x[:, :, 1] += tr[:, :, 1]
-        return units.cand_tri[pick].ravel()
+            return best
+        # Every candidate's three edge functions at every sample: one product (3m, 3) @ [a, b, 1]^T
+        # per piece, rows (edge, candidate), samples along the last axis.
+        ec = units.cand_edges[first[:, None] + np.arange(m)]           # (g, m, edge, coef)
+        coef = np.ascontiguousarray(ec.transpose(0, 2, 1, 3)).reshape(g, 3 * m, 3)
+        e = np.matmul(coef, x[:, :, 0:3].transpose(0, 2, 1))          # (g, 3m, k)
+        d = np.minimum(e[:, 0:m], e[:, m:2 * m])
+        np.minimum(d, e[:, 2 * m:], out=d)                            # (g, m, k)
+        best_d = d[:, 0].copy()
+        for c in range(1, m):
+            better = d[:, c] > best_d
+            best[better] = c
+            np.maximum(best_d, d[:, c], out=best_d)
+        return best
 
 
 class _Workspace:
