@@ -174,8 +174,9 @@ def equal_error(ctx):
                             min(c, cyc[spp][2]) if rep else c)
             if spp in cfg["mc_spp"]:
                 for source in SOURCES:
+                    # replicates=1: what the add-on bakes without an error map or adaptive sampling.
                     r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=threads,
-                                       max_distance=DISTANCE, source=source, seed=5)
+                                       max_distance=DISTANCE, source=source, seed=5, replicates=1)
                     if rep == 0:
                         fixed[source][spp] = r
                     else:

@@ -211,6 +211,28 @@ def table(data):
                     f"{v['mean_error']:+.6f}"] for k, v in st["sources"].items()])
         L.append("")
 
+    ad = r.get("adaptive")
+    if ad:
+        L.append("5c. Adaptive sampling against fixed sample counts (issue 16; process CPU seconds at equal RMSE, "
+                 "adaptive / fixed: below 1 pays)")
+        rows = []
+        for sc in ad["scenes"]:
+            for a in sc["adaptive"]:
+                rows.append([sc["scene"], a["target_error"], _fmt(a["rmse"], ".5f"), _fmt(a["mean_samples"], ".0f"),
+                             f"{100 * a['at_min']:.0f}%", _fmt(a["miss"], ".3f"), _fmt(a["cpu_seconds"], ".2f"),
+                             _fmt(a["fixed_cpu_seconds"], ".2f"), _fmt(a["ratio"], ".2f")])
+        L += _grid(["scene", "target", "RMSE", "spp", "at min", "miss > t", "cpu s", "fixed cpu s", "ratio"], rows)
+        disk = next((sc for sc in ad["scenes"] if "gain_bound_independent" in sc), None)
+        if disk:
+            L.append(f"  disk (every texel partly occluded): no allocation gains more than E[var]/E[sd]^2 = "
+                     f"{disk['gain_bound_independent']:.3f} for independent samples")
+        cost = ad.get("replicate_cost", {})
+        if cost:
+            L.append("  the error model's cost: RMSE with replicates=2 over replicates=1 at equal rays (disk scene): "
+                     + "; ".join(f"{src} " + ", ".join(f"{x['ratio']:.2f}@{x['samples']}" for x in rows_)
+                                 for src, rows_ in cost.items()))
+        L.append("")
+
     dv = r.get("device")
     if dv:
         L.append(f"6. Threads on the device machine ({dv.get('machine', '?')}; measured {dv.get('when', '?')}, "
@@ -226,8 +248,8 @@ def table(data):
 
     tg = data.get("targets")
     if tg:
-        L.append("Targets (issue 13; 'before': results/baseline.json, the core before this kernel (run of 2026-11-23), "
-                 "or the issue's own figures where that run did not measure them)")
+        L.append("Targets (issues 13 and 16; 'before': results/baseline.json, the core before issue 13's kernel (run of "
+                 "2026-11-23), or the issue's own figures where that run did not measure them)")
         L += _grid(["target", "wanted", "before", "now", "met"],
                    [[t["name"], t["target"], t.get("before", "-"), t["value"], "yes" if t["met"] else "NO"] for t in tg])
     return "\n".join(L)

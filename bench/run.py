@@ -43,6 +43,8 @@ FULL = dict(
     tri_n=(71, 224, 707), tri_res=512, tri_spp=16,
     mem_res=4096, mem_spp=4,
     stat_res=32, stat_spp=(16, 32, 64, 128, 256, 512, 1024),
+    adaptive=dict(res=128, fixed=(16, 32, 64, 128, 256, 512, 1024), targets=(0.04, 0.02, 0.01, 0.005), cap=4096,
+                  ref_spp=8192, repeats=2, cost_spp=(64, 256, 1024), cost_seeds=3),
 )
 QUICK = dict(
     FULL,
@@ -57,9 +59,11 @@ QUICK = dict(
     tri_n=(71, 224), tri_res=256, tri_spp=8,
     mem_res=0,
     stat_res=16, stat_spp=(16, 64, 256),
+    adaptive=dict(res=48, fixed=(16, 64, 256), targets=(0.04, 0.01), cap=1024, ref_spp=2048, repeats=1,
+                  cost_spp=(64,), cost_seeds=1),
 )
 SECTIONS = ("equal_samples", "dense", "equal_error", "agreement", "ceiling", "threads", "resolution", "triangles",
-            "memory", "statistics")
+            "memory", "statistics", "adaptive")
 DEVICE_RESULTS = RESULTS / "device.json"
 SCENE_COPY = Path(__file__).resolve().parent / "data" / "scene_suzanne.npz"
 
@@ -190,6 +194,29 @@ def targets(res, before=None):
         add(f"peak memory of a {mem['resolution']}^2 bake", "< 1.5 GB", f"{mem['peak_rss_mib'] * 2**20 / 1e9:.2f} GB",
             mem["peak_rss_mib"] * 2**20 < 1.5e9,
             was=f"{o['peak_rss_mib'] * 2**20 / 1e9:.2f} GB" if "peak_rss_mib" in o else "-")
+    ad = res.get("adaptive")
+    if ad:
+        for sc in ad["scenes"]:
+            ratios = [a["ratio"] for a in sc["adaptive"] if a["ratio"] is not None]
+            if not ratios:
+                continue
+            wanted = "<= 1.0" if sc["scene"] == "disk" else "<= 0.6"
+            limit = 1.0 if sc["scene"] == "disk" else 0.6
+            add(f"adaptive / best fixed CPU time at equal RMSE, {sc['scene']} (worst target)", wanted,
+                f"{max(ratios):.2f} (best {min(ratios):.2f})", max(ratios) <= limit)
+            misses = [a["miss"] for a in sc["adaptive"]]
+            add(f"adaptive: texels more than the target off, {sc['scene']}", "<= 5%",
+                f"{100 * max(misses):.1f}% at worst", max(misses) <= 0.05)
+    ee = res.get("equal_error")
+    if ee and ee.get("fitted"):
+        fit = {k: v for k, v in ee["fitted"].items() if isinstance(v, dict) and v.get("ratio") is not None}
+        if "sobol" in fit:
+            add("equal error vs Cycles' 128 spp, defaults (Sobol', fixed samples)", "<= 0.35x",
+                f"{fit['sobol']['ratio']:.2f}x", fit["sobol"]["ratio"] <= 0.35)
+        best = min(fit, key=lambda k: fit[k]["ratio"], default=None)
+        if best:
+            add(f"equal error vs Cycles' 128 spp, best settings ({best})", "<= 0.2x",
+                f"{fit[best]['ratio']:.2f}x", fit[best]["ratio"] <= 0.2)
     dv = res.get("device")
     add("device runner (bench/device.py) reports 1..16 threads", "ready",
         "measured, see section 7" if dv and dv.get("rows") else "ready; no device machine lent to this task",
@@ -209,12 +236,12 @@ def main(argv=None):
     started = time.time()
     load0 = load_average()
     ctx = Context(cfg, threads)
-    from . import agreement, ceiling, equal, scaling, statistics
+    from . import adaptive, agreement, ceiling, equal, scaling, statistics
 
     runners = {"equal_samples": equal.equal_samples, "dense": equal.dense_equal_samples,
                "equal_error": equal.equal_error, "agreement": agreement.agreement, "ceiling": ceiling.ceiling,
                "threads": scaling.threads, "resolution": scaling.resolution, "triangles": scaling.triangles,
-               "memory": scaling.memory, "statistics": statistics.statistics}
+               "memory": scaling.memory, "statistics": statistics.statistics, "adaptive": adaptive.adaptive}
     before = _previous(args.quick)
     res = {}
     for name in SECTIONS:

@@ -32,6 +32,7 @@ the same rays. Independent randomisations of a texel for an error estimate are
 ``TexelPattern.keys(texels, replicate=r)``.
 """
 
+import copy
 import threading
 
 import numpy as np
@@ -152,6 +153,13 @@ class TileContext:
                 self.loc_rows = _row_table(self.loc_m, CURVED_ENTRIES if self.located_curved else FLAT_ENTRIES)
                 self.loc_pos = np.full(len(table.P0), -1, np.int64)
                 self.loc_pos[ctris] = np.arange(len(ctris))  # triangle id -> row of gn, eps
+        self.replicate = 0
+
+    def for_replicate(self, keys, replicate):
+        """The same tile with the keys of another replicate (everything else is shared)."""
+        other = copy.copy(self)
+        other.keys, other.replicate = keys, replicate
+        return other
 
 
 def _per_piece(values, k):
@@ -379,7 +387,7 @@ class Kernel:
                                   texels=np.repeat(tile.texel_ids[tex], k),
                                   samples=(self.pattern.block_samples(e, o, first, k) if aligned or not self.pattern.xor
                                            else start[:, None] + ws.ramp[None, :k]).ravel(),
-                                  seconds=clock.wall, cpu_seconds=clock.cpu))
+                                  seconds=clock.wall, cpu_seconds=clock.cpu, replicate=tile.replicate))
         if value.dtype == bool and weight is None:
             s1 = value.view(np.uint8).reshape(g, k).sum(axis=1, dtype=np.int64).astype(np.float64)
             return s1, s1, n, clock.wall, clock.cpu

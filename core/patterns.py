@@ -191,7 +191,14 @@ class TexelPattern:
         base = hash64(self.seed, t, np.uint64(replicate))
         low = np.uint64(0xFFFFFFFF)
         h = _extend(base, _TAG_PATTERN, tmp)
-        pattern = _below(h, self.patterns).astype(np.int64)
+        if replicate:
+            # A texel's replicates take distinct patterns (consecutive ones from replicate 0's: each
+            # pattern is an independent randomisation), so that replicates are independent of each
+            # other; the reordering, shifts and turn are the replicate's own.
+            h0 = _extend(hash64(self.seed, t, np.uint64(0)), _TAG_PATTERN, np.empty_like(tmp))
+            pattern = (_below(h0, self.patterns).astype(np.int64) + int(replicate)) % self.patterns
+        else:
+            pattern = _below(h, self.patterns).astype(np.int64)
         h &= low
         if self.xor:
             order = h >> np.uint64(32 - (self.length.bit_length() - 1))

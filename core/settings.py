@@ -23,6 +23,11 @@ MAX_RESOLUTION = 65536
 MAX_SAMPLES = 1 << 20
 #: Samples of one texel traced in one piece; more are traced in pieces of this many.
 SAMPLE_PIECE = 1 << 16
+#: Most independent randomisations (replicates) a texel's samples may be split into.
+MAX_REPLICATES = 16
+#: Tiles are multiples of this side, so that the blocks error estimates are pooled in
+#: (core.estimators.POOL_BLOCK) never straddle two tiles.
+TILE_MULTIPLE = 16
 
 
 def _positive_int(value, what, lo=1):
@@ -73,10 +78,11 @@ class BakeSettings:
     falloff: float
     tile_size: int
     chunk_rays: int
+    replicates: int = 2
 
     @classmethod
     def from_arguments(cls, resolution, samples, min_samples, target_error, max_distance, distribution, source,
-                       margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays):
+                       margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays, replicates=2):
         w, h = _resolution(resolution)
         samples = _positive_int(samples, "samples")
         if samples > MAX_SAMPLES:
@@ -105,11 +111,22 @@ class BakeSettings:
         seed = _positive_int(seed, "seed", lo=0)
         threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
         chunk_rays = _positive_int(chunk_rays, "chunk_rays")
-        tile_size = auto_tile_size(w, h, samples, threads) if tile_size is None else _positive_int(tile_size, "tile_size")
+        if tile_size is None:
+            # Adaptive bakes rarely reach their cap: size tiles for a typical texel's samples (the
+            # geometric mean of the minimum and the cap), or they come out tiny and costly.
+            typical = samples if target_error == 0 else max(min(min_samples, samples),
+                                                            int(math.sqrt(min(min_samples, samples) * samples)))
+            tile_size = auto_tile_size(w, h, typical, threads)
+        tile_size = _positive_int(tile_size, "tile_size")
+        tile_size = -(-tile_size // TILE_MULTIPLE) * TILE_MULTIPLE
+        replicates = _positive_int(replicates, "replicates")
+        if replicates > MAX_REPLICATES:
+            raise SettingsError(f"replicates must be at most {MAX_REPLICATES}, got {replicates}")
+        replicates = min(replicates, samples)  # a replicate needs a sample
         return cls(width=w, height=h, samples=samples, min_samples=min(min_samples, samples),
                    target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
                    margin=margin, seed=seed, threads=threads, ignore_backfaces=bool(ignore_backfaces),
-                   falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays)
+                   falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays, replicates=replicates)
 
     @property
     def adaptive(self):
@@ -125,17 +142,26 @@ class BakeSettings:
         """The largest value a sample's term takes (2 cos(theta) V for uniform directions)."""
         return 2.0 if self.distribution == "uniform" else 1.0
 
+    @property
+    def replicate_samples(self):
+        """The most samples one replicate of a texel takes."""
+        return -(-self.samples // self.replicates)
+
     def pool_points(self):
-        """Points the sample pool holds: no more patterns than texels, at most :data:`POOL_POINTS`."""
-        span = pattern_span(self.source, self.samples)
-        texels = 1 << max(0, (self.width * self.height - 1).bit_length())
-        return max(span, min(POOL_POINTS, texels * span))
+        """Points the sample pool holds: at least one pattern per replicate (a texel's replicates
+        draw distinct patterns, see core.patterns), no more patterns than texels' replicates, at most
+        :data:`POOL_POINTS` beyond that."""
+        span = pattern_span(self.source, self.replicate_samples)
+        texels = 1 << max(0, (self.width * self.height * self.replicates - 1).bit_length())
+        return max(span * self.replicates, min(POOL_POINTS, texels * span))
 
     def metadata(self, max_distance_world):
         return {"samples": self.samples, "min_samples": self.min_samples, "target_error": self.target_error,
                 "sample_source": self.source, "distribution": self.distribution, "seed": self.seed,
                 "max_distance": max_distance_world, "falloff": self.falloff,
-                "ignore_backfaces": self.ignore_backfaces, "margin": self.margin,
+                "ignore_backfaces": self.ignore_backfaces, "margin": self.margin, "replicates": self.replicates,
+                "error_estimate": ("replicates" if self.replicates > 1
+                                   else "independent" if self.source == "independent" else "bound"),
                 "resolution": f"{self.width}x{self.height}"}
 
 
@@ -162,7 +188,7 @@ def available_memory():
         return None
 
 
-def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, source="sobol"):
+def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, source="sobol", replicates=1):
     """Peak bytes a bake needs: output planes, margin work, per-thread chunks, the sample pool, triangles.
 
     A chunk holds at most ``max(chunk_rays, SAMPLE_PIECE)`` rays (a texel with more samples is
@@ -175,8 +201,8 @@ def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, so
     margin_work = texels * (4 + 4 + 1 + 1)      # dilation values, masks, frontier
     per_ray = 200                               # feature rows, outputs, indices and results of a chunk
     chunks = threads * max(chunk_rays, min(samples, SAMPLE_PIECE)) * per_ray
-    span = pattern_span(source, samples)
-    pool = max(span, min(POOL_POINTS, texels * span)) * 64
+    span = pattern_span(source, -(-samples // replicates))
+    pool = max(span * replicates, min(POOL_POINTS, texels * replicates * span)) * 64
     units = threads * (256 * 256) * 4 * 600     # a tile's units, at most 256^2 texels of a few units
     tris = triangles * 300                      # texel-space corners, affine maps, Embree buffers
     return planes + margin_work + chunks + pool + min(units, texels * 4 * 600 * threads) + tris
@@ -191,5 +217,5 @@ def auto_tile_size(width, height, samples, threads):
     return int(min(max(min(side, enough), 16), 256))
 
 
-__all__ = ["BakeSettings", "DISTRIBUTIONS", "MAX_RESOLUTION", "MAX_SAMPLES", "SAMPLE_PIECE", "available_memory",
+__all__ = ["BakeSettings", "DISTRIBUTIONS", "MAX_RESOLUTION", "MAX_SAMPLES", "MAX_REPLICATES", "SAMPLE_PIECE", "available_memory",
            "estimate_memory", "auto_tile_size", "pattern_span"]

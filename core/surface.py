@@ -210,22 +210,33 @@ def allocate(units, texels, start, count, seed, texel_ids):
         unit, size, offset = unit[keep], size[keep], before[keep] + start
     else:
         unit = size = offset = np.zeros(0, np.int64)
-    whole = count & (count - 1) == 0  # a power of two: a single unit's block is one piece
-    if not whole:
+    # A block of a power of two samples aligned to its size: a single unit's block is one piece
+    # (what the loop below would cut it into), without the loop.
+    whole = count & (count - 1) == 0 and start % count == 0
+    if whole:
+        pu, ps, pz = [single], [np.full(len(single), start, np.int64)], [np.full(len(single), count, np.int64)]
+    else:
+        pu, ps, pz = [], [], []
         unit = np.concatenate([single, unit])
         size = np.concatenate([np.full(len(single), count, np.int64), size])
         offset = np.concatenate([np.full(len(single), start, np.int64), offset])
-    # Power-of-two pieces, largest first: bit b of a unit's count is a piece of 2^b samples after
-    # those of the higher bits.
-    bits = int(count).bit_length()
-    pu, ps, pz = ([single], [np.full(len(single), start, np.int64)], [np.full(len(single), count, np.int64)]) \
-        if whole else ([], [], [])
-    for b in range(bits - 1, -1, -1):
-        has = (size >> b) & 1 == 1
-        if has.any():
-            pu.append(unit[has])
-            ps.append(offset[has] + ((size[has] >> (b + 1)) << (b + 1)))
-            pz.append(np.full(int(has.sum()), 1 << b, np.int64))
+    # Power-of-two pieces, each aligned to its own size (the kernel gathers an aligned block of a
+    # xor-ordered pattern as whole rows; an unaligned one row by row): from each piece's start, the
+    # largest power of two that divides it and still fits. From 0 that is largest first (120 samples
+    # from 0: 64, 32, 16, 8); from an adaptive round's start it climbs (samples 8 to 128: 8, 16, 32,
+    # 64).
+    pos, left = offset.copy(), size.copy()
+    while len(left):
+        low = np.where(pos > 0, pos & -pos, 1 << 62)  # the largest power of two dividing pos
+        high = np.left_shift(1, np.floor(np.log2(np.maximum(left, 1))).astype(np.int64))  # the largest that fits
+        piece = np.minimum(low, high)
+        pu.append(unit)
+        ps.append(pos.copy())
+        pz.append(piece)
+        pos = pos + piece
+        left = left - piece
+        more = left > 0
+        unit, pos, left = unit[more], pos[more], left[more]
     if not pu:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
     return np.concatenate(pu), np.concatenate(ps), np.concatenate(pz)

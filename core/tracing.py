@@ -33,8 +33,9 @@ class RayBatch:
     occluded : (n,) bool, Embree's answer (before samples below the surface or in contact are
         counted as occluded).
     texels : (n,) int64, the flat texel index (row * width + column) each ray belongs to.
-    samples : (n,) int64, each ray's sample index within its texel.
+    samples : (n,) int64, each ray's sample index within its texel's replicate.
     seconds, cpu_seconds : wall and thread CPU time of the Embree call.
+    replicate : which of the texels' independent replicates (see core.estimators) the rays belong to.
     """
 
     origins: np.ndarray
@@ -45,6 +46,7 @@ class RayBatch:
     samples: np.ndarray
     seconds: float
     cpu_seconds: float
+    replicate: int = 0
 
 
 def embree_scene(meshes):

@@ -210,13 +210,16 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     max_bytes = id_name_max_bytes()
     image_names = {}
     for obj in targets:
-        name = settings.image_name_for(obj.name, max_bytes)
-        if name in image_names:
-            raise ExtractError(
-                f"{image_names[name]} and {obj.name} would both bake into image {name!r}; "
-                "put {object} into the image name"
-            )
-        image_names[name] = obj.name
+        names = [settings.image_name_for(obj.name, max_bytes)]
+        if settings.error_map:
+            names.append(settings.stderr_image_name_for(obj.name, max_bytes))
+        for name in names:
+            if name in image_names:
+                raise ExtractError(
+                    f"{image_names[name]} and {obj.name} would both bake into image {name!r}; "
+                    "put {object} into the image name"
+                )
+            image_names[name] = obj.name
 
     if settings.occluders == "VISIBLE":
         pool = list(_visible_geometry(depsgraph, view_layer or depsgraph.view_layer))

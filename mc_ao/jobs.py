@@ -186,6 +186,7 @@ def settings_record(settings):
         "resolution": f"{w}x{h}",
         "occluders": settings.occluders.lower(),
         "uv_map": settings.uv_map,
+        "replicates": int(kw["replicates"]),
     }
 
 

@@ -361,37 +361,53 @@ class BakeSession:
             return
         self.finished.append(i)
         self.results.append(result)
-        saved = None
+        saved = {}
         if self.output_dir is not None:
             saved = self._save(job, result)
-            if saved is None:  # reported as an error; counted in the summary, which comes after it
+            if not saved:  # reported as an error; counted in the summary, which comes after it
                 self.unsummarised_errors += 1
-        self._keep(job, result, saved)
+        self._keep(job, job.image_name, result.ao, saved.get("ao"))
+        if self.settings.error_map:
+            self._error_map(job, result, saved.get("stderr"))
         _redraw(context)
         for note in baking.input_notes(result):
             self._warn(f"{job.object_name}: {note}")
         self._summarise(summary(job, result))
 
-    def _keep(self, job, result, saved):
+    def _keep(self, job, image_name, values, saved, float_buffer=None):
         """Make a finished image survive save, reopen and undo: its saved file, else packed pixels.
 
-        ``saved`` is the path of the file the bake was just saved to, or None.
+        ``values`` are the image's (H, W) values; ``saved`` is the path of the file the bake was just
+        saved to, or None.
         """
+        float_buffer = self.settings.float_buffer if float_buffer is None else float_buffer
         if saved is not None and self.settings.link_to_file:
             try:
                 relative = self.settings.output_dir.startswith("//")
-                images.use_file(bpy.data.images[job.image_name], saved, relative=relative)
+                images.use_file(bpy.data.images[image_name], saved, relative=relative)
                 return
             except (images.ImageError, RuntimeError) as exc:
                 self._warn(f"{job.object_name}: {exc}; its pixels are packed into the .blend file instead")
         try:
             if saved is not None and self.settings.link_to_file:  # the pixels, after use_file failed
-                images.finish_image(job.image_name, result.ao, self.settings.float_buffer)
-            images.pack(bpy.data.images[job.image_name])
+                images.finish_image(image_name, values, float_buffer)
+            images.pack(bpy.data.images[image_name])
         except images.ImageError as exc:
             self._warn(
                 f"{job.object_name}: {exc}; save the image (Image > Save As) before closing the .blend file"
             )
+
+    def _error_map(self, job, result, saved):
+        """The finished job's standard error into its own float image "<image>_stderr", kept like the AO."""
+        name = self.settings.stderr_image_name_for(job.object_name, baking.id_name_max_bytes())
+        h, w = result.stderr.shape
+        try:
+            images.prepare_image(name, w, h, float_buffer=True)
+            images.finish_image(name, result.stderr, True)
+        except images.ImageError as exc:
+            self._warn(f"{job.object_name}: the error map was not kept: {exc}")
+            return
+        self._keep(job, name, result.stderr, saved, float_buffer=True)
 
     def _save(self, job, result):
         """Write the finished job's file into the output folder; report where, or why not."""
@@ -412,14 +428,17 @@ class BakeSession:
             )
         if written:
             self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
-        return written[0] if written and not failures else None
+        if failures or not written:
+            return {}
+        f = files[0]
+        return {"ao": f.path, "stderr": f.stderr_path} if f.stderr_path else {"ao": f.path}
 
     def _output_files(self):
         """image name -> its OutputFile list, over all of this bake's jobs (distinct, safe names)."""
         if getattr(self, "_files", None) is None:
             self._files = jobs.output_files(
                 self.output_dir, [j.image_name for j in self.run.jobs],
-                [(self.settings.file_format, self.settings.file_bits)],
+                [(self.settings.file_format, self.settings.file_bits)], stderr=self.settings.error_map,
             )
         return self._files
 

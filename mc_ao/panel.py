@@ -174,6 +174,7 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
             col.prop(settings, "uv_map", icon="GROUP_UVS")
         col.prop(settings, "image_name", **_placeholder("<object>_AO"))
         col.prop(settings, "float_buffer")
+        col.prop(settings, "error_map")
 
 
 class VIEW3D_PT_mc_ao_output(_McAoPanel, bpy.types.Panel):

@@ -34,8 +34,9 @@ class McAoSettings(bpy.types.PropertyGroup):
     target_error: FloatProperty(
         name="Noise Threshold",
         description=(
-            "Stop sampling a texel once the half-width of its 95% confidence interval is below this; "
-            "0 turns adaptive sampling off"
+            "Adaptive sampling: stop a texel once its AO is known to within this, 95% of the time "
+            "(0.01: +-0.01). Open and fully occluded areas stop at Min Samples, noisy ones take up to "
+            "Samples. 0 turns adaptive sampling off"
         ),
         default=_DEFAULTS.target_error, min=0.0, max=1.0, soft_max=0.1, step=0.1, precision=4,
     )
@@ -145,6 +146,15 @@ class McAoSettings(bpy.types.PropertyGroup):
     ignore_backfaces: BoolProperty(
         name="Ignore Backfaces", description="Rays that hit the back of a face pass through it",
         default=_DEFAULTS.ignore_backfaces,
+    )
+    error_map: BoolProperty(
+        name="Error Map",
+        description=(
+            'Also keep how far each texel\'s AO may be off (its standard error) in the image "<image>_stderr", '
+            "and in <file>_stderr.exr with Save to File. The error holds for every sampler: texels then draw "
+            "two independent sample sets, about 1.2 times the noise of one at the same samples"
+        ),
+        default=_DEFAULTS.error_map,
     )
 
 

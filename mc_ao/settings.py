@@ -39,6 +39,7 @@ class BakeSettings:
     seed: int = 0
     threads: int = 0  # 0 = the add-on preferences' default (whose 0 = all cores)
     ignore_backfaces: bool = False
+    error_map: bool = False  # also keep each texel's standard error: image "<image>_stderr", file "<stem>_stderr.exr"
 
     @classmethod
     def from_properties(cls, props, **overrides):
@@ -52,7 +53,12 @@ class BakeSettings:
         """(width, height) of the image in pixels."""
         return self.resolution, self.height or self.resolution
 
-    def image_name_for(self, object_name, max_bytes=None):
+    def stderr_image_name_for(self, object_name, max_bytes=None):
+        """The name of the image the standard error of ``object_name``'s bake goes into (with
+        ``error_map``): its AO image's name + "_stderr", fitted to ``max_bytes`` the same way."""
+        return self.image_name_for(object_name, max_bytes, suffix="_stderr")
+
+    def image_name_for(self, object_name, max_bytes=None, suffix=""):
         """The name of the image that ``object_name`` bakes into: "<object>_AO" or the Image setting.
 
         max_bytes: the longest name the image can have, in bytes of UTF-8 (Blender's ID names: 63
@@ -63,7 +69,7 @@ class BakeSettings:
         object always gets the same image, different objects different ones. This is not a file
         name: files get theirs from mc_ao.jobs.output_files().
         """
-        template = self.image_name or "{object}_AO"
+        template = (self.image_name or "{object}_AO") + suffix
         name = template.replace("{object}", object_name)
         if max_bytes is None or len(name.encode("utf-8", "surrogatepass")) <= max_bytes:
             return name
@@ -73,6 +79,14 @@ class BakeSettings:
         if count and room > 0:
             return template.replace("{object}", _clip_utf8(object_name, room) + tag)
         return _clip_utf8(name, max_bytes - len(tag)) + tag  # the template's own text is too long
+
+    @property
+    def replicates(self):
+        """Independent randomisations per texel (core.bake_ao's ``replicates``): 2 where the bake's
+        error is used (adaptive sampling stops on it, the error map shows it), for an error estimate
+        that holds for every sample source; else 1, the least noise for the rays (measured: Sobol'
+        1.16-1.20 times the RMSE at equal rays with 2)."""
+        return 2 if self.error_map or self.target_error > 0 else 1
 
     @property
     def file_bits(self):
@@ -99,6 +113,7 @@ class BakeSettings:
             seed=self.seed,
             threads=threads,
             ignore_backfaces=self.ignore_backfaces,
+            replicates=self.replicates,
         )
 
 

@@ -129,7 +129,9 @@ def make_parser(with_blend):
                         help="sample type of the files: png 8|16, exr half|float, tif 8|16|float "
                              "(default: 8-bit PNG and TIFF, half EXR)")
     parser.add_argument("--stderr", action="store_true",
-                        help="also write each texel's standard error to <image>_stderr.exr")
+                        help="also write each texel's standard error to <image>_stderr.exr (the error the "
+                             "bake makes, for every sample source: texels draw two independent randomisations, "
+                             "about 1.2 times the noise of one at equal rays)")
     parser.add_argument("--samples", type=int, default=128,
                         help="rays per texel, 1 to 1048576 (default: 128)")
     parser.add_argument("--min-samples", type=int, default=16,
@@ -308,7 +310,7 @@ def settings_from(args):
         source=args.source.upper(), distribution=args.distribution.upper(),
         occluders=args.occluders.upper(), uv_map=args.uv_map, margin=args.margin,
         image_name=args.image_name, seed=args.seed, threads=args.threads,
-        ignore_backfaces=args.ignore_backfaces,
+        ignore_backfaces=args.ignore_backfaces, error_map=args.stderr,
     )
     problems = []
     for field, message in jobs.check_settings(settings):

@@ -117,26 +117,39 @@ def test_result_does_not_depend_on_tiling_or_chunking():
 def test_adaptive_sampling_stops_open_texels_early_and_converges_the_rest():
     big = plane(-1.0, -1.0, 2.0, 2.0)
     target = 0.05
-    # An all-open texel proves AO > 1 - target after about 2.7 / target samples: 64 here. With
-    # min_samples at that, open texels stop at the minimum.
-    r = bake_ao(big, [lid_mesh()], resolution=32, samples=1024, min_samples=64, target_error=target,
+    # Texels whose whole window sees no variance (the open plane around the lid's shadow, limited
+    # by the distance) stop at the minimum; the shadow's texels go on until their interval is
+    # within the target.
+    r = bake_ao(big, [lid_mesh()], resolution=32, samples=1024, min_samples=16, target_error=target,
                 max_distance=0.5, margin=0)
     open_ = r.ao == 1.0
-    assert open_.sum() > 100 and np.all(r.samples[open_] == 64)
+    assert open_.sum() > 100 and np.median(r.samples[open_]) == 16
     under = r.ao < 0.9
-    assert under.any() and np.all(r.samples[under] > 64)
-    assert r.rays < 0.5 * 1024 * 32 * 32
-    # Every texel either reached the cap or has an interval within the target.
-    from core.bake import interval_half_width
-
-    n, m = r.samples.astype(float), r.ao.astype(float)
-    half = interval_half_width(n, m, None, 1.959963984540054, binary=True, bound=1.0)
-    assert np.all((r.samples == 1024) | (half <= target + 1e-9))
+    assert under.any() and np.all(r.samples[under] > 16)
+    assert r.rays < 0.25 * 1024 * 32 * 32
+    # Texels stop on their interval at the time (pooled over neighbours that may go on sampling, so
+    # the final error map can differ a little): nearly every texel reached the cap or the target.
+    assert np.mean((r.samples == 1024) | (1.96 * r.stderr <= target)) > 0.97
 
 
-def test_agreeing_samples_do_not_stop_a_texel_early():
-    # 16 open rays of 16 do not prove AO = 1 to +-0.05: the texel keeps sampling (to 64).
-    r = bake_ao(plane(), resolution=8, samples=1024, min_samples=16, target_error=0.05, margin=0)
+@pytest.mark.parametrize("source", ["independent", "sobol"])
+def test_agreeing_samples_beside_varying_ones_do_not_stop_a_texel_early(source):
+    # A plane under a large lid at h = 0.3 with the AO distance d = 0.3077: AO = (h / d)^2 = 0.95
+    # everywhere. With 16 independent samples, 44% of the texels see no hit at all; such a texel is
+    # 0.05 off, more than the target 0.03. It must not stop on its own agreeing samples: it takes
+    # the variance of its neighbours, whose samples vary, and keeps sampling.
+    h, d, target = 0.3, 0.3077, 0.03
+    r = bake_ao(plane(), [lid_mesh(BIG_LID)], resolution=32, samples=4096, min_samples=16, target_error=target,
+                max_distance=d, margin=0, seed=9, source=source)
+    assert r.samples.min() > 16
+    miss = np.mean(np.abs(r.ao - (h / d) ** 2) > target)
+    assert miss <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / r.ao.size), miss
+
+
+def test_without_replicates_agreeing_samples_do_not_stop_a_texel_early():
+    # One randomisation per texel: the interval is Agresti and Coull's, 16 open rays of 16 do not
+    # prove AO = 1 to +-0.05: the texel keeps sampling (to 64).
+    r = bake_ao(plane(), resolution=8, samples=1024, min_samples=16, target_error=0.05, margin=0, replicates=1)
     assert np.all(r.samples == 64) and np.all(r.ao == 1.0)
 
 
@@ -196,7 +209,8 @@ def test_progress_is_monotone_and_ends_at_one():
 
 def test_on_tile_reports_final_blocks():
     blocks = []
-    r = bake_ao(plane(), [lid_mesh()], resolution=20, samples=8, tile_size=8, margin=0,
+    # Tiles are multiples of 16 texels (the blocks error estimates are pooled in): 8 becomes 16.
+    r = bake_ao(plane(), [lid_mesh()], resolution=40, samples=8, tile_size=8, margin=0,
                 on_tile=lambda rows, cols, block: blocks.append((rows, cols, block)))
     assert len(blocks) == 9
     for rows, cols, block in blocks:

@@ -9,7 +9,8 @@ import pytest
 
 from core import Mesh, bake_ao, warps
 from core.patterns import TexelPattern
-from core.settings import pattern_span
+from core.estimators import replicate_samples
+from core.settings import BakeSettings, pattern_span
 from chi2 import SUITE_ALPHA, chi2_test, sidak
 from scenes import plane
 
@@ -22,8 +23,10 @@ def record(mesh, **kw):
     batches = []
 
     def keep(b):
-        batches.append({k: np.array(getattr(b, k)) for k in ("origins", "directions", "tfar", "occluded",
-                                                              "texels", "samples")})
+        batch = {k: np.array(getattr(b, k)) for k in ("origins", "directions", "tfar", "occluded", "texels",
+                                                       "samples")}
+        batch["replicate"] = np.full(len(b.texels), b.replicate)
+        batches.append(batch)
 
     r = bake_ao(mesh, threads=1, margin=0, on_rays=keep, **kw)
     return {k: np.concatenate([b[k] for b in batches]) for k in batches[0]}, r
@@ -40,12 +43,15 @@ class _Drawn:
 
 
 @pytest.mark.parametrize("source", SOURCES)
-def test_every_sample_of_every_texel_is_traced_once(source):
-    rays, r = record(plane(), resolution=W, samples=24, source=source)
-    key = rays["texels"] * 1000 + rays["samples"]
-    assert np.unique(key).size == key.size == W * W * 24
-    assert set(np.unique(rays["samples"])) == set(range(24))
-    assert r.rays == key.size
+@pytest.mark.parametrize("replicates", [1, 2, 3])
+def test_every_sample_of_every_texel_is_traced_once(source, replicates):
+    # 25 samples: with 2 replicates, replicate 0 takes 13 and replicate 1 takes 12; with 3, 9, 8, 8.
+    rays, r = record(plane(), resolution=W, samples=25, source=source, replicates=replicates)
+    key = (rays["texels"] * 8 + rays["replicate"]) * 1000 + rays["samples"]
+    assert np.unique(key).size == key.size == W * W * 25
+    for rep, cap in enumerate(replicate_samples(25, replicates)):
+        assert set(np.unique(rays["samples"][rays["replicate"] == rep])) == set(range(cap))
+    assert r.rays == key.size and np.all(r.samples == 25)
 
 
 @pytest.mark.parametrize("source", SOURCES)
@@ -59,21 +65,26 @@ def test_rays_are_the_patterns_points_through_the_warps(source, distribution):
     rays, _ = record(plane(), resolution=W, samples=samples, source=source, distribution=distribution, seed=5)
     col, row = rays["texels"] % W, rays["texels"] // W
     simple = np.abs(col - row) > 1  # away from the plane's diagonal, where texels are split
-    pattern = TexelPattern(source, 5, samples, pool_points=min(1 << 18, 256 * pattern_span(source, samples)))
-    t, i = rays["texels"][simple], rays["samples"][simple]
-    u = np.stack([pattern.points(np.array([a]), int(b), 1)[0, 0] for a, b in zip(t[:4000], i[:4000])])
+    s = BakeSettings.from_arguments(W, samples, 16, 0.0, float("inf"), distribution, source, 0, 5, 1, False, 0.0,
+                                    None, 1 << 16)
+    pattern = TexelPattern(source, 5, s.replicate_samples, pool_points=s.pool_points())
+    t, i, rep = rays["texels"][simple][:4000], rays["samples"][simple][:4000], rays["replicate"][simple][:4000]
+    assert set(np.unique(rep)) == {0, 1}  # two replicates by default, each its own randomisation
+    u = np.stack([pattern.points(np.array([a]), int(b), 1, replicate=int(c))[0, 0] for a, b, c in zip(t, i, rep)])
     # The baker works in a frame centred on the target and scaled to its size: the unit plane maps
     # to [-0.5, 0.5]^2, so compare in that frame.
     org = rays["origins"][simple][:4000]
-    np.testing.assert_allclose(org[:, 0] + 0.5, ((t[:4000] % W) + u[:, 2]) / W, atol=2e-6)
-    np.testing.assert_allclose(org[:, 1] + 0.5, ((t[:4000] // W) + u[:, 3]) / W, atol=2e-6)
+    np.testing.assert_allclose(org[:, 0] + 0.5, ((t % W) + u[:, 2]) / W, atol=2e-6)
+    np.testing.assert_allclose(org[:, 1] + 0.5, ((t // W) + u[:, 3]) / W, atol=2e-6)
     assert np.all(org[:, 2] > 0) and np.all(org[:, 2] < 1e-5)  # pushed off the surface, barely
     if distribution == "cosine":
         local = warps.sample_cosine_hemisphere_polar(u[:, :2])
     else:
         local = np.stack(warps.uniform_hemisphere_xyz(u[:, 0], u[:, 1]), axis=1)
-    keys = pattern.keys(t[:4000])
-    c, s = keys.cos_turn, keys.sin_turn
+    c, s = np.zeros(len(t)), np.zeros(len(t))
+    for r in (0, 1):
+        keys = pattern.keys(t[rep == r], replicate=r)
+        c[rep == r], s[rep == r] = keys.cos_turn, keys.sin_turn
     want = np.stack([c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1], local[:, 2]], axis=1)
     np.testing.assert_allclose(rays["directions"][simple][:4000], want, atol=2e-6)
 
@@ -216,14 +227,16 @@ def test_split_texels_share_samples_by_area_on_average_over_seeds():
         tri = frag.sub_tri[frag.sub_start[k]:frag.sub_start[k + 1]]
         share = np.diff(np.concatenate([[0.0], frag.sub_cdf[frag.sub_start[k]:frag.sub_start[k + 1]]]))
         lower[frag.texels[k]] = share[tri == 0].sum()  # area fraction of triangle 0
-    counts = {t: [] for t in lower}
+    # Each replicate allocates its own samples (from a seed of its own): count per (texel, replicate).
+    counts = {(t, r): [] for t in lower for r in (0, 1)}
     for seed in range(bakes):
-        rays, _ = record(seamed_plane(), resolution=(w_, h_), samples=samples, seed=seed)
+        rays, _ = record(seamed_plane(), resolution=(w_, h_), samples=2 * samples, seed=seed)
         x = (rays["origins"][:, 0] + 0.5) * w_
         y = (rays["origins"][:, 1] + 0.5) * h_
         in0 = y * w_ < x * h_  # triangle 0 lies below the diagonal from (0, 0) to (W, H)
-        for t in lower:
-            counts[t].append(int(in0[rays["texels"] == t].sum()))
+        for t, r in counts:
+            counts[t, r].append(int(in0[(rays["texels"] == t) & (rays["replicate"] == r)].sum()))
+    lower = {(t, r): lower[t] for t, r in counts}
     frac = np.array([samples * lower[t] for t in lower])
     mean = np.array([np.mean(counts[t]) for t in lower])
     spread = np.array([max(np.ptp(counts[t]), 0) for t in lower])
@@ -263,3 +276,16 @@ def test_smooth_split_and_adaptive_bakes_are_bit_identical_for_any_threads_tiles
     b = bake_ao(mesh, [lid], threads=2, tile_size=8, chunk_rays=333, **args)
     for name in ("ao", "stderr", "samples", "mask"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+
+def test_replicates_allocate_a_split_texels_samples_independently():
+    # Each replicate is an independent randomisation, the share of a split texel's samples between
+    # its pieces included: replicate 1 does not repeat replicate 0's allocation.
+    rays, _ = record(plane(), resolution=(16, 13), samples=8, seed=1)
+    x = (rays["origins"][:, 0] + 0.5) * 16
+    y = (rays["origins"][:, 1] + 0.5) * 13
+    in0 = y * 16 < x * 13
+    split = np.unique(rays["texels"][np.abs(x - y * 16 / 13) < 2])
+    counts = np.array([[int(in0[(rays["texels"] == t) & (rays["replicate"] == r)].sum()) for r in (0, 1)]
+                       for t in split])
+    assert len(split) > 10 and np.mean(counts[:, 0] != counts[:, 1]) > 0.1

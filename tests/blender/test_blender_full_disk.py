@@ -153,7 +153,10 @@ def test_the_operator_on_a_full_disk_reports_the_error_not_saved(bpy, scene, dis
         "Error: Ground: the bake is in image 'Ground_AO', but its file was not saved (any file already "
         f"there is unchanged): could not write '{disk / name}': no space left on the device\n"
     )
-    assert "saved" not in out.replace("not saved", "")
+    # No line says the file was saved. Blender 4.2's own writer reports its failure too ("Image
+    # '.mc_ao_save' could not be saved to '<the temporary file>'"), a negative that stays allowed.
+    said = out.replace("could not be saved", "").replace("not saved", "")
+    assert "saved" not in said, out
     assert_unchanged(disk, [name])
     assert listing(disk) == [name]
     assert "Ground_AO" in bpy.data.images and ".mc_ao_save" not in bpy.data.images
