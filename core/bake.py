@@ -42,7 +42,7 @@ from . import raster as R
 from .raster import bin_triangles, prepare, rasterize_tile
 from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE, BakeSettings, auto_tile_size,
                        available_memory, estimate_memory)
-from .surface import SurfaceTable, allocate, build_units, contact_texels
+from .surface import LOCATED, SQUARE, TRIANGLE, SurfaceTable, allocate, build_units, contact_texels
 from .tracing import Tracer
 from . import highpoly as _highpoly
 
@@ -167,6 +167,8 @@ class _TileBaker:
         self.bent = bent
         self.caps = replicate_samples(settings.samples, settings.replicates)
         self.seeds = allocation_seeds(settings)
+        # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
+        self.located_curved = bool(uvtris is not None and np.any(table.smooth[uvtris.valid]))
 
     def bake(self, key, tri_ids):
         """(fragments, estimates, direction sums or None) of the tile ``key``'s texels."""
@@ -179,14 +181,16 @@ class _TileBaker:
             return frag, TexelEstimates(0, s.replicates), None
         units = build_units(frag, self.table, s.width)
         contact = contact_texels(frag, self.table, s.width, self.tracer, s.samples)
-        est, sums = self.trace(units, frag.texels, contact, frag.texels % s.width, frag.texels // s.width)
+        est, sums = self.trace(units, frag.texels, contact, frag.texels % s.width, frag.texels // s.width,
+                               tris=tri_ids)
         return frag, est, sums
 
-    def trace(self, units, texel_ids, contact, x, y):
+    def trace(self, units, texel_ids, contact, x, y, tris=None):
         """Trace the plan's rounds, in every replicate, for sample units ``units`` of the texels
         ``texel_ids`` (global ids: they key the texels' random choices); ``contact`` per texel, probe
         its samples for contact; ``x``, ``y`` where the error model pools each texel's variance
-        (:func:`core.estimators.window_sums`). Texels need not be texels: mesh vertices are units of
+        (:func:`core.estimators.window_sums`); ``tris`` the units' triangles, ascending (a superset is
+        fine; None: found from the units). Texels need not be texels: mesh vertices are units of
         their own (:mod:`core.vertices`). Returns (TexelEstimates, direction sums (n, 3) over all
         replicates, or None)."""
         s, shared = self.s, self.shared
@@ -195,7 +199,8 @@ class _TileBaker:
         sums = np.zeros((n_tex, 3)) if self.bent else None
         if n_tex == 0:
             return est, sums
-        tile = TileContext(self.table, units, self.pattern.keys(texel_ids), texel_ids, contact, self.tracer.offset)
+        tile = TileContext(self.table, units, self.pattern.keys(texel_ids), texel_ids, contact, self.tracer.offset,
+                           located_curved=self.located_curved, tris=tris)
         tiles = [tile] + [tile.for_replicate(self.pattern.keys(texel_ids, r), r) for r in range(1, s.replicates)]
         for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
             for r, (tile_r, cap) in enumerate(zip(tiles, self.caps)):
@@ -213,24 +218,37 @@ class _TileBaker:
     def _trace(self, tile, units, est, sums, replicate, texels, start, count):
         s, shared = self.s, self.shared
         unit, first, size = allocate(units, texels, start, count, self.seeds[replicate], tile.texel_ids)
-        # Equal pieces go through the kernel together, squares before triangles, in a fixed order
-        # (so every texel's sums are added in the same order however the pieces are chunked).
+        # Equal pieces go through the kernel together, squares before triangles, located texels
+        # apart, in a fixed order (so every texel's sums are added in the same order however the
+        # pieces are chunked).
         kind = units.kind[unit].astype(np.int64)
-        curved = self.table.smooth[units.tri[unit]]
-        group = (size * 2 + curved) * 2 + kind
-        order = np.argsort(group, kind="stable")
-        unit, first, size, group, kind = unit[order], first[order], size[order], group[order] // 2, kind[order]
-        bounds = np.flatnonzero(np.diff(group)) + 1
-        for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
+        located = kind == LOCATED
+        curved = np.where(located, self.located_curved, self.table.smooth[units.tri[unit]])
+        # Located texels go by their number of candidates too (each piece's location is then
+        # the same arithmetic whatever else shares its call).
+        cands = units.cand_first[unit + 1] - units.cand_first[unit]
+        # One integer per piece: (size, curved, located, candidates) says its call, the last bit
+        # puts squares before pieces of triangles; a stable sort keeps each texel's pieces in order.
+        span = int(cands.max()) + 1 if len(cands) else 1
+        key = (((np.log2(size).astype(np.int64) * 2 + curved) * 2 + located) * span + cands) * 2 + (kind == TRIANGLE)
+        if len(key) and key.max() < 1 << 16:
+            order = np.argsort(key.astype(np.uint16), kind="stable")  # a radix sort
+        else:
+            order = np.argsort(key, kind="stable")
+        unit, first, size, kind, curved, cands, key = (unit[order], first[order], size[order], kind[order],
+                                                       curved[order], cands[order], key[order])
+        bounds = np.flatnonzero(np.diff(key >> 1)) + 1
+        for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(size)]])):
             k = int(size[lo])
-            curved = bool(self.table.smooth[units.tri[unit[lo]]])
-            step = max(1, s.chunk_rays // k)
+            # A located call holds 3 * candidates edge values per sample: bound it like the rays.
+            step = max(1, s.chunk_rays // (k * max(1, int(cands[lo]) // 2)))
             for c0 in range(lo, hi, step):
                 shared.check()
                 c = slice(c0, min(c0 + step, hi))
-                squares = int(np.count_nonzero(kind[c] == 0))
+                squares = int(np.count_nonzero(kind[c] == SQUARE))
                 vec = None if sums is None else np.empty((c.stop - c.start, 3))
-                s1, s2, rays, sec, cpu = self.kernel.run(tile, curved, unit[c], first[c], k, squares, vectors=vec)
+                s1, s2, rays, sec, cpu = self.kernel.run(tile, bool(curved[lo]), unit[c], first[c], k, squares,
+                                                         located=bool(kind[lo] == LOCATED), vectors=vec)
                 est.add(units.texel[unit[c]], k, s1, s2, replicate)
                 if vec is not None:
                     np.add.at(sums, units.texel[unit[c]], vec)
@@ -435,11 +453,12 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         rect = min(tile, w - tx * tile) * min(tile, h - ty * tile)
         shared.advance(rect * s.samples - len(frag.texels) * s.samples)
         if len(frag.texels):
-            rows, cols = frag.texels // w, frag.texels % w
-            ao[rows, cols] = np.clip(est.mean, 0.0, 1.0)
-            se[rows, cols] = errors.stderr(est, cols, rows)
-            count[rows, cols] = est.n
-            mask[rows, cols] = True
+            t = frag.texels
+            rows, cols = t // w, t % w
+            ao.reshape(-1)[t] = np.clip(est.mean, 0.0, 1.0)
+            se.reshape(-1)[t] = errors.stderr(est, cols, rows)
+            count.reshape(-1)[t] = est.n
+            mask.reshape(-1)[t] = True
             if sums is not None:
                 tri = bent_mod.primary_pieces(frag, w)
                 weights = bent_mod.barycentric(table.corners_xy, tri, cols + 0.5, rows + 0.5)
@@ -477,7 +496,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
 
     miss, missed, extra = baker.finish(mask) if stage is not None else (None, 0, {})
     if s.margin > 0:
-        ao = dilate(ao, mask, s.margin)
+        ao = dilate(ao, mask, s.margin, threads=s.threads)
     if bent is not None:
         bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, dilate)
     seconds = time.perf_counter() - t_start

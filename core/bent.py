@@ -87,8 +87,24 @@ def primary_pieces(frag, width):
     """Per covered texel of a tile (:class:`core.raster.TileFragments`), the triangle whose map its
     frame comes from: the one covering it whole, else the piece that holds its centre, else its
     largest piece. Returns (n,) triangle ids."""
+    from .raster import LOCATED
+
     tri = frag.full_tri.copy()
     if not np.any(tri < 0):
+        return tri
+    located = tri == LOCATED
+    if np.any(located):
+        # A located texel (covered once by several triangles): the candidate holding its centre,
+        # the one whose least edge function at (1/2, 1/2) is largest.
+        e = frag.loc_edges
+        d = (e[:, :, 0] * 0.5 + e[:, :, 1] * 0.5 + e[:, :, 2]).min(axis=1)
+        owner = np.repeat(np.arange(len(tri)), np.diff(frag.loc_start))
+        order = np.lexsort((-d, owner))
+        first = np.ones(len(order), bool)
+        first[1:] = owner[order][1:] != owner[order][:-1]
+        best = order[first]
+        tri[owner[best]] = frag.loc_tri[best]
+    if not len(frag.sub_texel):
         return tri
     xy = frag.sub_xy
     a, b, c = xy[:, 0], xy[:, 1], xy[:, 2]

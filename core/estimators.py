@@ -91,9 +91,16 @@ class TexelEstimates:
         Pieces are added one after another in the order given, so a texel's sums do not depend on
         how its pieces were grouped into calls (floating-point addition is not associative).
         """
-        np.add.at(self.rn[replicate], rows, n)
-        np.add.at(self.rs1[replicate], rows, s1)
-        np.add.at(self.rs2[replicate], rows, s2)
+        rows = np.asarray(rows)
+        rn, rs1, rs2 = self.rn[replicate], self.rs1[replicate], self.rs2[replicate]
+        if len(rows) < 2 or np.all(rows[1:] > rows[:-1]):  # each texel once: plain indexed adds
+            rn[rows] += n
+            rs1[rows] += s1
+            rs2[rows] += s2
+            return
+        np.add.at(rn, rows, n)
+        np.add.at(rs1, rows, s1)
+        np.add.at(rs2, rows, s2)
 
     @property
     def n(self):

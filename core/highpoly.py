@@ -434,7 +434,7 @@ class HighPolyBaker:
         ty, tx = key
         x0, y0 = tx * s.tile_size, ty * s.tile_size
         x1, y1 = min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height)
-        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1)
+        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1, locate=False)
         n_tex = len(frag.texels)
         est = TexelEstimates(n_tex, s.replicates)
         est.points = np.zeros(n_tex, np.int64)   # sample points cast per texel (all replicates)
@@ -710,7 +710,7 @@ class HighPolyStage:
                 raise BakeCancelled("the bake was cancelled before it started")
             x0, y0 = tx * s.tile_size, ty * s.tile_size
             frag = rasterize_tile(self.uvtris, bins[(ty, tx)], s.width, s.height, x0, y0,
-                                  min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height))
+                                  min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height), locate=False)
             full = frag.full_tri >= 0
             t_full = frag.full_tri[full]
             xy_full = np.stack([frag.texels[full] % s.width, frag.texels[full] // s.width], axis=1) + 0.5

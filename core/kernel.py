@@ -41,13 +41,36 @@ from . import warps
 from .tracing import FAR, Clock, RayBatch
 
 FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
+#: Pieces shorter than this (and located samples, each on its own triangle) are computed row by row
+#: from the matrices' nonzero entries gathered per ray (a batched product of tiny matrices costs
+#: about 100 ns a row); longer pieces take one product per piece.
+ROW_PIECES = 8
+#: Located pieces of ROW_PIECES samples or more whose candidates' matrices together have at most
+#: this many columns take one product of all of them per piece and keep each sample's own columns;
+#: more candidates go row by row (the product's cost grows with them, the rows' does not).
+ZSELECT_COLUMNS = 36
+#: The nonzero entries (row j of the feature vector, output column c) of each matrix form, grouped
+#: by output column: a position column is M[2, c] + a M[0, c] + b M[1, c], a direction column
+#: f0 M[3, c] + f1 M[4, c] + f2 M[5, c].
+_POSITION_ROWS, _DIRECTION_ROWS = (2, 0, 1), (3, 4, 5)
+FLAT_ENTRIES = tuple((c, _POSITION_ROWS if c < 3 else _DIRECTION_ROWS) for c in range(FLAT_COLUMNS))
+CURVED_ENTRIES = tuple((c, _POSITION_ROWS if c in (0, 1, 2, 3, 4, 5, 9) else _DIRECTION_ROWS)
+                       for c in range(CURVED_COLUMNS))
 
 
-def triangle_matrices(table, tris, offset):
+def _row_table(m, entries):
+    """The matrices ``m`` (T, 6, cols) as a float32 table (entries, T) of their nonzero entries."""
+    js = [j for c, rows in entries for j in rows]
+    cs = [c for c, rows in entries for _ in rows]
+    return np.ascontiguousarray(m[:, js, cs].T)
+
+
+def triangle_matrices(table, tris, offset, curved_all=False):
     """Per triangle of ``tris`` (unique ids), the float32 matrix (6, 6) (flat-shaded) or (6, 11)
-    (smooth-shaded) taking a feature row to what its rays need; returns (flat, curved, slot), slot
-    mapping a triangle id to its row in the array of its kind (-1 for triangles not in ``tris``)."""
-    smooth = table.smooth[tris]
+    (smooth-shaded, or every triangle with ``curved_all``: a flat triangle's normal is constant)
+    taking a feature row to what its rays need; returns (flat, curved, slot, gn, eps), slot mapping
+    a triangle id to its row in the array of its kind (-1 for triangles not in ``tris``)."""
+    smooth = table.smooth[tris] | bool(curved_all)
     # The ray offset: from the largest |coordinate| on the triangle (at a corner: |.|_inf is convex).
     eps = offset(np.abs(table.corners[tris]).max(axis=(1, 2)))
     fn = table.FN[tris]
@@ -89,20 +112,47 @@ def triangle_matrices(table, tris, offset):
 
 
 class TileContext:
-    """What the kernel needs of one tile: its units, its texels' keys, its triangles' matrices."""
+    """What the kernel needs of one tile: its units, its texels' keys, its triangles' matrices.
 
-    def __init__(self, table, units, keys, texel_ids, contact, offset):
+    ``located_curved``: located samples (each on its own triangle) take every triangle's matrix in
+    the smooth-shaded form when True (a bake-wide choice: any smooth triangle in the target), in the
+    flat form otherwise.
+    """
+
+    def __init__(self, table, units, keys, texel_ids, contact, offset, located_curved=True, tris=None):
         self.units = units
         self.keys = keys
         self.texel_ids = texel_ids      # global flat texel index of each of the tile's texels
         self.contact = contact          # per tile texel: probe its samples for contact
-        tris = np.unique(units.tri)
+        # ``tris``: the tile's triangles, ascending (a superset of its units' is fine).
+        tris = np.unique(units.tri) if tris is None else np.asarray(tris, np.int64)
         self.flat_m, self.curved_m, self.slot, gn, eps = triangle_matrices(table, tris, offset)
         self.smooth = table.smooth
         # The geometric normal and offset of each unit (for contact probes).
         pos = np.searchsorted(tris, units.tri)
         self.unit_gn, self.unit_eps = gn[pos], eps[pos]
         self.coef = units.coef.astype(np.float32)
+        self.flat_rows = _row_table(self.flat_m, FLAT_ENTRIES)
+        self.curved_rows = _row_table(self.curved_m, CURVED_ENTRIES)
+        # Located samples: one matrix per candidate triangle, all in one form.
+        self.located_curved = bool(located_curved)
+        cand = units.cand_tri if units.cand_tri is not None else np.zeros(0, np.int64)
+        if len(cand):
+            native = bool(np.all(table.smooth[cand] == self.located_curved))
+            if native:  # the located form is every candidate's own form: share the matrices
+                self.loc_m = self.curved_m if self.located_curved else self.flat_m
+                self.loc_rows = self.curved_rows if self.located_curved else self.flat_rows
+                self.loc_slot, self.loc_gn, self.loc_eps = self.slot, gn, eps
+                self.loc_pos = np.full(len(table.P0), -1, np.int64)
+                self.loc_pos[tris] = np.arange(len(tris))
+            else:
+                ctris = np.unique(cand)
+                flat, curved, self.loc_slot, self.loc_gn, self.loc_eps = triangle_matrices(
+                    table, ctris, offset, curved_all=self.located_curved)
+                self.loc_m = curved if self.located_curved else flat
+                self.loc_rows = _row_table(self.loc_m, CURVED_ENTRIES if self.located_curved else FLAT_ENTRIES)
+                self.loc_pos = np.full(len(table.P0), -1, np.int64)
+                self.loc_pos[ctris] = np.arange(len(ctris))  # triangle id -> row of gn, eps
         self.replicate = 0
 
     def for_replicate(self, keys, replicate):
@@ -115,6 +165,8 @@ class TileContext:
 def _per_piece(values, k):
     """Per-piece values (g,) as (g, 1) to broadcast over a piece's k samples, or repeated (g, k) when
     k is small (numpy's inner loops are slow on a short broadcast axis)."""
+    if k == 1:
+        return values.reshape(-1, 1)
     return values[:, None] if k >= 8 else np.repeat(values, k).reshape(len(values), k)
 
 
@@ -145,10 +197,12 @@ class Kernel:
             ws = self._local.ws = _Workspace(n)
         return ws
 
-    def run(self, tile, curved, unit, start, size, squares, vectors=None):
+    def run(self, tile, curved, unit, start, size, squares, located=False, vectors=None):
         """Trace the aligned blocks of ``size`` samples from ``start`` (per piece) of each piece's ``unit``;
         the first ``squares`` pieces are texel squares, the rest pieces of triangles; all pieces'
-        triangles flat-shaded (``curved`` False) or all smooth-shaded.
+        triangles flat-shaded (``curved`` False) or all smooth-shaded. With ``located``, every piece
+        is a located texel's square, each sample on its own triangle (``curved``: the tile's
+        ``located_curved``).
 
         Returns (s1, s2, rays, seconds, cpu_seconds): per piece the sum of its samples' terms and of
         their squares (float64), the rays traced, and the time spent inside Embree.
@@ -191,11 +245,25 @@ class Kernel:
             np.copyto(dst, xu[:, :, c], casting="unsafe")
             dst *= np.float32(2.0 ** -32)
         # (u, v) -> the triangle's texel space: a translation for squares, Heitz's map and the
-        # piece's corners for pieces of triangles.
+        # piece's corners for pieces of triangles; located samples find their triangle first.
         coef = tile.coef[unit]
+        tri_s = None
+        if located:
+            best = self._locate(units, unit, x, k)
+            pick = units.cand_first[unit][:, None] + best
+            tri_s = units.cand_tri[pick].ravel()
+            m = int(units.cand_first[unit[0] + 1] - units.cand_first[unit[0]])
+            zselect = k >= ROW_PIECES and m * (CURVED_COLUMNS if curved else FLAT_COLUMNS) <= ZSELECT_COLUMNS
+            if not zselect:
+                # row by row: each sample moves to its own triangle's texel space
+                tr = units.cand_coef[pick]
+                a += tr[:, :, 0]
+                b += tr[:, :, 1]
+            squares = g
         sq = slice(0, squares)
-        a[sq] += _per_piece(coef[sq, 0], k)
-        b[sq] += _per_piece(coef[sq, 3], k)
+        if not located:
+            a[sq] += _per_piece(coef[sq, 0], k)
+            b[sq] += _per_piece(coef[sq, 3], k)
         if squares < g:
             tr = slice(squares, g)
             u, v = warps.square_to_triangle(a[tr], b[tr])
@@ -211,11 +279,37 @@ class Kernel:
         f1 *= cos_t
         f1 += f0 * sin_t
         f0[...] = t0
-        m = (tile.curved_m if curved else tile.flat_m)[tile.slot[units.tri[unit]]]
-        cols = m.shape[2]
-        y = ws.y[:n * cols].reshape(g, k, cols)
-        np.matmul(x, m, out=y)
-        y = y.reshape(n, cols)
+        if located and zselect:
+            # Every candidate's matrix (its translation to the texel folded into the constant row)
+            # in one product per piece; each sample keeps its own candidate's columns.
+            cand = units.cand_first[unit][:, None] + np.arange(m)
+            mc = tile.loc_m[tile.loc_slot[units.cand_tri[cand]]]       # (g, m, 6, cols)
+            tr = units.cand_coef[cand]
+            mc[:, :, 2] += tr[:, :, 0, None] * mc[:, :, 0]
+            mc[:, :, 2] += tr[:, :, 1, None] * mc[:, :, 1]
+            cols = mc.shape[3]
+            z = np.matmul(x, np.ascontiguousarray(mc.transpose(0, 2, 1, 3)).reshape(g, 6, m * cols))
+            row = ws.idx[:n]
+            np.multiply(ws.ramp[:n], m, out=row)
+            row += best.reshape(n)
+            y = np.take(z.reshape(n * m, cols), row, axis=0)
+        elif located or k < ROW_PIECES:
+            # Row by row, each ray's own triangle's entries (a located sample's, or its piece's).
+            if located:
+                table, slot = tile.loc_rows, tile.loc_slot[tri_s]
+            else:
+                table = tile.curved_rows if curved else tile.flat_rows
+                slot = tile.slot[units.tri[unit]]
+                if k > 1:
+                    slot = np.repeat(slot, k)
+            y = self._rows(table, CURVED_ENTRIES if curved else FLAT_ENTRIES, slot, xf, ws)
+            cols = y.shape[1]
+        else:
+            m = (tile.curved_m if curved else tile.flat_m)[tile.slot[units.tri[unit]]]
+            cols = m.shape[2]
+            y = ws.y[:n * cols].reshape(g, k, cols)
+            np.matmul(x, m, out=y)
+            y = y.reshape(n, cols)
         origins = y[:, 0:3]
         tfar = ws.tfar[:n]
         below = ws.below[:n]
@@ -284,8 +378,12 @@ class Kernel:
             if near.any():
                 # Samples where another object's face lies on the surface are occluded (see Tracer).
                 sel = np.flatnonzero(np.repeat(near, k))
-                piece = unit[sel // k]
-                gn, eps = tile.unit_gn[piece], tile.unit_eps[piece]
+                if located:
+                    row = tile.loc_pos[tri_s[sel]]
+                    gn, eps = tile.loc_gn[row], tile.loc_eps[row]
+                else:
+                    piece = unit[sel // k]
+                    gn, eps = tile.unit_gn[piece], tile.unit_eps[piece]
                 touch = self.tracer.contact(origins[sel].astype(np.float64) - gn * eps[:, None], gn, eps)
         if touch is not None and touch.any():
             value[sel[touch]] = 0
@@ -305,6 +403,81 @@ class Kernel:
             term *= weight
         term = term.reshape(g, k)
         return term.sum(axis=1), (term * term).sum(axis=1), n, clock.wall, clock.cpu
+
+
+    @staticmethod
+    def _rows(table, entries, slot, xf, ws):
+        """Y = X M row by row: (n, cols), a view of (cols, n) columns computed from the entries
+        ``table[:, slot]`` of each row's matrix."""
+        n = len(slot)
+        g = np.take(table, slot, axis=1)  # (entries, n)
+        y = ws.y[:len(entries) * n].reshape(len(entries), n)
+        tmp = ws.f2[:n]
+        i = 0
+        for c, rows in entries:
+            out = y[c]
+            if rows[0] == 2:  # position: M[2] + a M[0] + b M[1]
+                np.multiply(xf[:, 0], g[i + 1], out=out)
+                out += g[i]
+                np.multiply(xf[:, 1], g[i + 2], out=tmp)
+                out += tmp
+            else:  # direction: f0 M[3] + f1 M[4] + f2 M[5]
+                np.multiply(xf[:, 3], g[i], out=out)
+                np.multiply(xf[:, 4], g[i + 1], out=tmp)
+                out += tmp
+                np.multiply(xf[:, 5], g[i + 2], out=tmp)
+                out += tmp
+            i += 3
+        return y.T
+
+    @staticmethod
+    def _locate(units, unit, x, k):
+        """Each sample's candidate among its located texel's (an index into the texel's run, (g, k)),
+        at its texel-local position (a, b) = x[..., 0:2] (x: (g, k, 6) feature rows): the
+        candidate whose least edge function there is largest (the one containing the point; the
+        first of equals). Every piece of the call has the same number of candidates (the baker
+        groups them so), so each piece's arithmetic does not depend on the others."""
+        g = len(unit)
+        first = units.cand_first[unit]
+        m = int(units.cand_first[unit[0] + 1] - first[0])
+        if m == 1:
+            return np.zeros((g, k), np.int64)
+        best = np.zeros((g, k), np.int64)
+        if k < ROW_PIECES:
+            # Short pieces: candidate by candidate over the samples.
+            a = x[:, :, 0].reshape(-1)
+            b = x[:, :, 1].reshape(-1)
+            best_d = None
+            for c in range(m):
+                e = units.cand_edges[first + c]
+                if k > 1:
+                    e = np.repeat(e, k, axis=0)
+                d = None
+                for j in range(3):
+                    v = e[:, j, 0] * a
+                    v += e[:, j, 1] * b
+                    v += e[:, j, 2]
+                    d = v if d is None else np.minimum(d, v, out=d)
+                if best_d is None:
+                    best_d = d
+                else:
+                    better = d > best_d
+                    best.reshape(-1)[better] = c
+                    np.maximum(best_d, d, out=best_d)
+            return best
+        # Every candidate's three edge functions at every sample: one product (3m, 3) @ [a, b, 1]^T
+        # per piece, rows (edge, candidate), samples along the last axis.
+        ec = units.cand_edges[first[:, None] + np.arange(m)]           # (g, m, edge, coef)
+        coef = np.ascontiguousarray(ec.transpose(0, 2, 1, 3)).reshape(g, 3 * m, 3)
+        e = np.matmul(coef, x[:, :, 0:3].transpose(0, 2, 1))          # (g, 3m, k)
+        d = np.minimum(e[:, 0:m], e[:, m:2 * m])
+        np.minimum(d, e[:, 2 * m:], out=d)                            # (g, m, k)
+        best_d = d[:, 0].copy()
+        for c in range(1, m):
+            better = d[:, c] > best_d
+            best[better] = c
+            np.maximum(best_d, d[:, c], out=best_d)
+        return best
 
 
 def _direction_sums(directions, value, weight, g, k, out):

@@ -73,12 +73,33 @@ def hash64(*keys):
     """Hash integer keys (arrays broadcast together) into uint64, one mixing round per key."""
     # 0-d arrays, not numpy scalars: array arithmetic wraps silently, scalar arithmetic warns.
     h = np.array(0x2545F4914F6CDD1D, dtype=np.uint64)
+    tmp = None
     with np.errstate(over="ignore"):
         for k in keys:
             k = np.asarray(k)
             k = k.astype(np.uint64) if k.dtype != np.uint64 else k
-            h = _mix(np.add(h ^ k, _GOLDEN))
+            h = np.bitwise_xor(h, k)  # a new array: the keys are never written
+            h += _GOLDEN
+            if h.ndim == 0:
+                h = _mix(h)
+            else:
+                if tmp is None or tmp.shape != h.shape:
+                    tmp = np.empty_like(h)
+                _mix_into(h, tmp)
     return h
+
+
+def _mix_into(x, tmp):
+    """:func:`_mix` of the uint64 array ``x`` in place (``tmp``: scratch of its shape)."""
+    np.right_shift(x, np.uint64(30), out=tmp)
+    x ^= tmp
+    x *= _M1
+    np.right_shift(x, np.uint64(27), out=tmp)
+    x ^= tmp
+    x *= _M2
+    np.right_shift(x, np.uint64(31), out=tmp)
+    x ^= tmp
+    return x
 
 
 def hash_uniform(*keys):

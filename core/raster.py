@@ -1,15 +1,34 @@
-"""UV rasterisation: which surface every texel covers, as exact pieces of triangles.
+"""UV rasterisation: which surface every texel covers, and how its samples find it.
 
 Texel space: x = u * W, y = v * H, texel (row i, column j) is the unit square [j, j+1) x [i, i+1).
 A texel is covered when a UV triangle overlaps its square with positive area, however little (so
-texels cut by a triangle's edge are covered, conservatively). Each (texel, triangle) overlap is the
-texel square clipped by the triangle (Sutherland-Hodgman), split into a fan of sub-triangles, so that
-sample positions can be drawn uniformly over exactly the covered part of the texel and always lie on
-the surface. Texels entirely inside one triangle, the common case, are flagged and skip the clipping.
+texels cut by a triangle's edge are covered, conservatively). Every covered texel is one of three
+kinds, found without clipping anything:
+
+- **inside one triangle** (``full_tri >= 0``): the whole square lies in one triangle and nothing
+  else overlaps it. Most texels of meshes whose triangles are larger than texels.
+- **located** (``full_tri == LOCATED``): triangles cover the square exactly once between them, with
+  no island border or overlap crossing it (triangles smaller than texels, or texels on the edges
+  between triangles of one island). Its samples are spread uniformly over the whole square, and each
+  sample finds the triangle it lies in among the texel's candidates (``loc_*``): exact, with no
+  clipping and no sharing of samples among pieces.
+- **split** (``full_tri == -1``): an island's border or overlapping islands cross the square. It is
+  clipped by each triangle (Sutherland-Hodgman) into sub-triangles, and its samples are shared among
+  them by area (:mod:`core.surface`).
+
+How the kinds are found: each triangle is scanned row by row of texels; in each row the columns its
+area overlaps and the columns it contains entirely are two intervals, from its edges in closed form,
+so the work grows with the triangles' perimeters (in texels) and their count, never with pairs of
+texels and triangles classified one by one. A texel whose only overlapping triangles cross it
+(partial pairs) is covered exactly once when no *border* half-edge crosses it (a half-edge without a
+twin: the same two UV points in the other direction, in another triangle; shared edges of an island
+cancel, so the number of layers covering a point changes only across border edges) and one triangle
+contains a probe point inside it.
 
 Work is organised by tiles of texels: triangles are binned to the tiles their UV bounding boxes
 touch, and each tile is rasterised on its own (in the worker thread that bakes it), which bounds the
-memory of any bake to a tile's worth of fragments.
+memory of any bake to a tile's worth of fragments. Everything a texel gets depends only on the
+texel and the triangles that overlap it, never on the tiling.
 """
 
 from dataclasses import dataclass
@@ -21,6 +40,15 @@ MIN_FRAGMENT_AREA = 1e-9
 #: Coverage above 1 + this (in texel areas) counts as overlapping UV islands in the bake's report;
 #: UV unwrappers leave slivers of 1e-6 to 1e-4 texels where islands touch, which are not worth a word.
 OVERLAP_REPORT_AREA = 1e-3
+#: ``full_tri`` of a located texel (see the module docstring); -1 marks a split texel.
+LOCATED = -2
+#: Where in a texel the layers covering it are counted (texel-local; irrational, so it rarely lies on
+#: an edge; a texel whose probe point lies within ON_EDGE texels of an edge is split instead).
+PROBE = (0.3183098861837907, 0.5772156649015329)
+ON_EDGE = 1e-9
+#: Overlaps thinner than this (texels) do not count: a triangle touching a texel's side or corner up
+#: to rounding neither covers it nor splits it (clipping drops such slivers as well).
+TOUCH = 1e-9
 
 
 @dataclass
@@ -33,6 +61,8 @@ class UVTriangles:
     degenerate: int        # number of triangles with zero UV area (skipped)
     degenerate_space: int  # number of triangles with UV area but zero area in space (skipped)
     outside: int           # number of valid triangles with some UV outside [0, 1]
+    edges: np.ndarray = None  # (T, 3, 3) edge k (corner k -> k + 1 of xy) as (a, b, c): a x + b y + c
+    #                           is the signed distance in texels from its line, positive inside
 
 
 def prepare(mesh, width, height):
@@ -56,14 +86,18 @@ def prepare(mesh, width, height):
     cw = det < 0
     xy_ccw = xy.copy()
     xy_ccw[cw, 1], xy_ccw[cw, 2] = xy[cw, 2], xy[cw, 1]
+    ea, eb, ec = _edges(xy_ccw)
+    norm = np.hypot(ea, eb)
+    norm = np.where(valid[:, None] & (norm > 0), norm, 1.0)
+    edges = np.stack([ea / norm, eb / norm, ec / norm], axis=2)
     uv = mesh.uvs
     outside = int((valid & np.any((uv < 0) | (uv > 1), axis=(1, 2))).sum())
     return UVTriangles(xy_ccw, xy, valid, degenerate=int((~valid).sum()) - degenerate_space,
-                       degenerate_space=degenerate_space, outside=outside)
+                       degenerate_space=degenerate_space, outside=outside, edges=edges)
 
 
 def bin_triangles(tris, width, height, tile):
-    """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array, for tiles touched."""
+    """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array (ascending), for tiles touched."""
     idx = np.flatnonzero(tris.valid)
     xy = tris.xy[idx]
     lo = np.floor(xy.min(axis=1)).astype(np.int64)
@@ -125,11 +159,16 @@ class TileFragments:
     """What one tile's texels cover.
 
     ``texels``: (n,) flat texel indices (row * W + col) of covered texels, sorted.
-    ``full_tri``: (n,) the triangle covering the whole texel, or -1 when the texel is split.
+    ``full_tri``: (n,) the triangle covering the whole texel, -1 for a split texel, :data:`LOCATED`
+    for a located one.
     Sub-triangles of split texels (fans of the clipped polygons), grouped by texel:
     ``sub_texel`` (m,) index into ``texels``, ``sub_tri`` (m,) parent triangle, ``sub_xy`` (m, 3, 2)
     corners in texel space, ``sub_cdf`` (m,) the texel's cumulative area fraction up to and including
     this sub-triangle, ``sub_start`` (n + 1,) offsets of each texel's run.
+    Candidates of located texels, grouped by texel in ascending triangle order: ``loc_tri`` (c,)
+    the triangles overlapping the texel, ``loc_start`` (n + 1,) offsets of each texel's run (empty
+    for other texels), ``loc_edges`` (c, 3, 3) each candidate's edge functions (a, b, c) in
+    texel-local coordinates (the texel's corner at 0), positive inside.
     ``coverage``: (n,) covered area of each texel in texel units (above 1 where UV islands overlap).
     """
 
@@ -141,6 +180,9 @@ class TileFragments:
     sub_cdf: np.ndarray
     sub_start: np.ndarray
     coverage: np.ndarray
+    loc_tri: np.ndarray = None
+    loc_start: np.ndarray = None
+    loc_edges: np.ndarray = None
 
 
 def _edges(xy):
@@ -152,77 +194,293 @@ def _edges(xy):
     return ea, eb, ec
 
 
-def _cells(lo, hi, size):
-    """Enumerate, per row of lo/hi (n, 2) (exclusive hi, in units of ``size``), its grid cells:
-    returns (owner row, cell x, cell y) flattened."""
-    nx = np.maximum(hi[:, 0] - lo[:, 0], 0)
-    ny = np.maximum(hi[:, 1] - lo[:, 1], 0)
-    count = nx * ny
+def _runs(lo, hi):
+    """Expand half-open integer runs [lo, hi) (n,): returns (run index, value) of every element."""
+    count = np.maximum(hi - lo, 0)
     rep = np.repeat(np.arange(len(lo)), count)
-    k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
-    return rep, lo[rep, 0] + k % nx[rep], lo[rep, 1] + k // nx[rep]
+    return rep, lo[rep] + (np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count))
 
 
-def _classify(ea, eb, ec, x, y, size):
-    """Squares [x, x + size] x [y, y + size] against triangles: (inside, outside) masks."""
-    cx = x[:, None] + np.array([0, size, size, 0])
-    cy = y[:, None] + np.array([0, 0, size, size])
-    E = ea[:, :, None] * cx[:, None, :] + eb[:, :, None] * cy[:, None, :] + ec[:, :, None]
-    full = np.all(E >= 0, axis=(1, 2))
-    return full, np.any(np.all(E <= 0, axis=2), axis=1) & ~full
+class _Spans:
+    """Triangles (n, 3, 2) as their x-extent along horizontal lines: corners sorted by y (low,
+    middle, high) and the inverse slopes of the long edge (low -> high) and the two short ones."""
+
+    def __init__(self, xy):
+        order = np.argsort(xy[:, :, 1], axis=1, kind="stable")
+        c = np.take_along_axis(xy, order[:, :, None], axis=1)
+        (self.xl, self.yl), (self.xm, self.ym), (self.xh, self.yh) = c[:, 0].T, c[:, 1].T, c[:, 2].T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.s_long = (self.xh - self.xl) / (self.yh - self.yl)
+            self.s_low = np.where(self.ym > self.yl, (self.xm - self.xl) / (self.ym - self.yl), 0.0)
+            self.s_high = np.where(self.yh > self.ym, (self.xh - self.xm) / (self.yh - self.ym), 0.0)
+
+    def extent(self, i, y):
+        """[lo, hi] of triangles ``i`` along the lines ``y`` (each within its triangle's y-range)."""
+        yl, ym = self.yl[i], self.ym[i]
+        x_long = self.xl[i] + (y - yl) * self.s_long[i]
+        low = y < ym
+        x_short = np.where(low, self.xl[i] + (y - yl) * self.s_low[i], self.xm[i] + (y - ym) * self.s_high[i])
+        return np.minimum(x_long, x_short), np.maximum(x_long, x_short)
 
 
-#: Side of the blocks of texels classified before single texels: whole blocks inside a triangle
-#: skip per-texel work, which is most of a texture for meshes with triangles larger than texels.
-BLOCK = 8
+def _scan(spans, x0, y0, x1, y1):
+    """Per triangle of ``spans``, the texels of the window [x0, x1) x [y0, y1) it overlaps with
+    positive area, as runs along rows: returns (owner, row, overlap lo, overlap hi, full lo, full hi),
+    the full run [full lo, full hi) the texels it contains entirely (inside the overlap run; empty
+    when full lo >= full hi)."""
+    ymin, ymax = spans.yl, spans.yh
+    r_lo = np.maximum(np.floor(ymin + TOUCH), y0).astype(np.int64)
+    r_hi = np.minimum(np.ceil(ymax - TOUCH), y1).astype(np.int64)  # rows r with r < ymax and r + 1 > ymin
+    own, r = _runs(r_lo, r_hi)
+    rf = r.astype(np.float64)
+    ylo, yhi = ymin[own], ymax[own]
+    ya = np.maximum(rf, ylo)
+    yb = np.minimum(rf + 1.0, yhi)
+    lo_a, hi_a = spans.extent(own, ya)
+    lo_b, hi_b = spans.extent(own, yb)
+    # The middle corner strictly inside the strip can stick out further than the strip's two lines.
+    xm, ym = spans.xm[own], spans.ym[own]
+    mid = (ym > ya) & (ym < yb)
+    xmin = np.minimum(np.minimum(lo_a, lo_b), np.where(mid, xm, np.inf))
+    xmax = np.maximum(np.maximum(hi_a, hi_b), np.where(mid, xm, -np.inf))
+    ov_lo = np.maximum(np.floor(xmin + TOUCH), x0).astype(np.int64)
+    ov_hi = np.minimum(np.ceil(xmax - TOUCH), x1).astype(np.int64)
+    # Texels whose four corners are inside (the triangle is convex): the strip lies within its
+    # y-range, and [j, j + 1] within its extent along both lines.
+    inside = (ya <= rf + TOUCH) & (yb >= rf + 1.0 - TOUCH)
+    f_lo = np.maximum(np.ceil(np.maximum(lo_a, lo_b) - TOUCH), ov_lo).astype(np.int64)
+    f_hi = np.minimum(np.floor(np.minimum(hi_a, hi_b) + TOUCH), ov_hi).astype(np.int64)
+    f_hi = np.where(inside, np.maximum(f_hi, f_lo), f_lo)
+    return own, r, ov_lo, ov_hi, f_lo, f_hi
 
 
-def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
-    """Fragments of the texels [x0, x1) x [y0, y1) covered by the triangles ``tri_ids``."""
+def _border_half_edges(xy):
+    """(n, 3) bool: half-edges of the triangles ``xy`` (n, 3, 2), CCW, that have no twin among them
+    (the same two points in the other direction, in exactly one other half-edge): island borders,
+    seams, folds and edges shared by more than two triangles."""
+    n = len(xy)
+    a = xy + 0.0  # -0.0 -> 0.0, so equal points have equal bits
+    b = np.roll(a, -1, axis=1)
+    swap = (a[..., 0] > b[..., 0]) | ((a[..., 0] == b[..., 0]) & (a[..., 1] > b[..., 1]))
+    p = np.where(swap[..., None], b, a).reshape(-1, 2)
+    q = np.where(swap[..., None], a, b).reshape(-1, 2)
+    swap = swap.ravel()
+    border = np.ones(3 * n, bool)
+    if n == 0:
+        return border.reshape(n, 3)
+    bits = np.concatenate([p, q], axis=1).view(np.uint64)
+    h = np.full(3 * n, 0x9E3779B97F4A7C15, np.uint64)
+    with np.errstate(over="ignore"):
+        for c in range(4):  # splitmix64's finaliser after each coordinate
+            h ^= bits[:, c]
+            h ^= h >> np.uint64(30)
+            h *= np.uint64(0xBF58476D1CE4E5B9)
+            h ^= h >> np.uint64(27)
+            h *= np.uint64(0x94D049BB133111EB)
+            h ^= h >> np.uint64(31)
+    m = 3 * n
+    ib = max(1, int(m - 1).bit_length())
+    packed = np.sort(((h >> np.uint64(ib)) << np.uint64(ib)) | np.arange(m, dtype=np.uint64))
+    idx = (packed & np.uint64((1 << ib) - 1)).astype(np.int64)
+    key = packed >> np.uint64(ib)
+    same = key[1:] == key[:-1]
+    start = np.ones(m, bool)
+    start[1:] = ~same
+    first = np.flatnonzero(start)
+    size = np.diff(np.concatenate([first, [m]]))
+    # Pairs with equal hashes: twins when the points are equal and the directions opposite.
+    two = first[size == 2]
+    i, j = idx[two], idx[two + 1]
+    twin = swap[i] != swap[j]
+    for c in (p[:, 0], p[:, 1], q[:, 0], q[:, 1]):
+        twin &= c[i] == c[j]
+    border[i[twin]] = False
+    border[j[twin]] = False
+    # Larger groups (hash collisions or edges shared by more than two triangles): exactly, by points.
+    for f, sz in zip(first[size > 2], size[size > 2]):
+        members = idx[f:f + int(sz)]
+        groups = {}
+        for e in members:
+            groups.setdefault((p[e, 0], p[e, 1], q[e, 0], q[e, 1]), []).append(e)
+        for g in groups.values():
+            if len(g) == 2 and swap[g[0]] != swap[g[1]]:
+                border[g] = False
+    return border.reshape(n, 3)
+
+
+def _crosses(xa, ya, xb, yb, px, py):
+    """Whether segments (xa, ya) -> (xb, yb) meet the open unit squares with lower corners (px, py)."""
+    box = ((np.minimum(xa, xb) < px + 1) & (np.maximum(xa, xb) > px)
+           & (np.minimum(ya, yb) < py + 1) & (np.maximum(ya, yb) > py))
+    dx, dy = xb - xa, yb - ya
+    lo = np.full(len(xa), np.inf)
+    hi = np.full(len(xa), -np.inf)
+    for cx, cy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        s = dx * (py + cy - ya) - dy * (px + cx - xa)
+        lo, hi = np.minimum(lo, s), np.maximum(hi, s)
+    return box & (lo < 0) & (hi > 0)
+
+
+def _row_sums(r, lo, hi, weight, y0, x0, th, tw):
+    """Per texel of the tile's (th, tw) grid, the sum of ``weight`` over the runs [lo, hi) of rows
+    ``r`` that cover it (a difference array along each row, then a running sum)."""
+    base = (r - y0) * (tw + 1) - x0
+    n = th * (tw + 1)
+    d = np.bincount(base + lo, weights=weight, minlength=n) - np.bincount(base + hi, weights=weight, minlength=n)
+    return np.cumsum(d.reshape(th, tw + 1), axis=1)[:, :tw].ravel()
+
+
+def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
+    """Fragments of the texels [x0, x1) x [y0, y1) covered by the triangles ``tri_ids`` (ascending).
+
+    ``locate=False`` splits every texel that is not inside one triangle (the reference the tests
+    compare located texels against).
+    """
+    tri_ids = np.asarray(tri_ids, dtype=np.int64)
     xy = tris.xy[tri_ids]
-    ea_t, eb_t, ec_t = _edges(xy)
-    lo = np.maximum(np.floor(xy.min(axis=1)).astype(np.int64), [x0, y0])
-    hi = np.minimum(np.ceil(xy.max(axis=1)).astype(np.int64), [x1, y1])  # exclusive
+    E = tris.edges[tri_ids]
+    tw, th = x1 - x0, y1 - y0
+    spans = _Spans(xy)
+    own, r, ov_lo, ov_hi, f_lo, f_hi = _scan(spans, x0, y0, x1, y1)
+    has_full = f_hi > f_lo
+    # Partial runs: the overlap less the full run (two runs when there is one, else the overlap).
+    p_lo = np.concatenate([ov_lo, np.where(has_full, f_hi, ov_hi)])
+    p_hi = np.concatenate([np.where(has_full, f_lo, ov_hi), ov_hi])
+    p_own, p_r = np.concatenate([own, own]), np.concatenate([r, r])
+    live = np.flatnonzero(p_hi > p_lo)
+    live = live[np.argsort(p_own[live], kind="stable")]  # triangle by triangle: candidates come ascending
+    p_lo, p_hi, p_own, p_r = p_lo[live], p_hi[live], p_own[live], p_r[live]
+    # Counts per texel without listing the texels of full runs (most of a texture): how many
+    # triangles contain it, the sum of their indices (the triangle when there is one), how many cross it.
+    fsel = np.flatnonzero(has_full)
+    one = np.ones(len(fsel))
+    n_full = _row_sums(r[fsel], f_lo[fsel], f_hi[fsel], one, y0, x0, th, tw)
+    id_sum = _row_sums(r[fsel], f_lo[fsel], f_hi[fsel], own[fsel].astype(np.float64), y0, x0, th, tw)
+    n_part = _row_sums(p_r, p_lo, p_hi, np.ones(len(p_lo)), y0, x0, th, tw)
+    kind = np.full(tw * th, -1, np.int64)  # per local texel: triangle, -1 split, LOCATED
+    simple = (n_full == 1) & (n_part == 0)
+    kind[simple] = tri_ids[np.rint(id_sum[simple]).astype(np.int64)]
 
-    # Level 1: blocks of BLOCK x BLOCK texels (clipped to each triangle's texel bounding box).
-    blo = (lo - [x0, y0]) // BLOCK
-    bhi = -(-(hi - [x0, y0]) // BLOCK)
-    owner, bx, by = _cells(blo, bhi, 1)
-    bx, by = x0 + bx * BLOCK, y0 + by * BLOCK
-    b_full, b_out = _classify(ea_t[owner], eb_t[owner], ec_t[owner], bx.astype(float), by.astype(float), BLOCK)
-    # Texels of full blocks are full; texels of partial blocks are classified one by one.
-    def texels_of(sel):
-        o = owner[sel]
-        t_lo = np.maximum(np.stack([bx[sel], by[sel]], 1), lo[o])
-        t_hi = np.minimum(np.stack([bx[sel], by[sel]], 1) + BLOCK, hi[o])
-        r, px, py = _cells(t_lo, t_hi, 1)
-        return o[r], px, py
+    # Partial pairs, texel by texel of each run.
+    pr, p_x = _runs(p_lo, p_hi)
+    p_tri, p_y = p_own[pr], p_r[pr]
+    part_local = (p_y - y0) * tw + (p_x - x0)
 
-    f_tri, f_x, f_y = texels_of(b_full)
-    p_tri, px, py = texels_of(~b_full & ~b_out)
-    ea, eb, ec = ea_t[p_tri], eb_t[p_tri], ec_t[p_tri]
-    full, out = _classify(ea, eb, ec, px.astype(float), py.astype(float), 1)
-    part = ~full & ~out
-    f_tri = np.concatenate([f_tri, p_tri[full]])
-    f_x = np.concatenate([f_x, px[full]])
-    f_y = np.concatenate([f_y, py[full]])
+    # Located texels: only partial pairs, covered exactly once (no border half-edge crosses them and
+    # exactly one triangle contains the probe point).
+    cand = (n_full == 0) & (n_part > 0)
+    loc_pair = np.zeros(len(p_tri), bool)
+    if locate and cand.any():
+        sel = np.flatnonzero(cand[part_local])
+        st, sx, sy, sl = p_tri[sel], p_x[sel], p_y[sel], part_local[sel]
+        ok = np.ones(tw * th, bool)
+        border = _border_half_edges(xy)
+        bsel = np.flatnonzero(border.any(axis=1)[st])
+        if len(bsel):
+            hit = np.zeros(len(bsel), bool)
+            xb = xy[st[bsel]]
+            for k in range(3):
+                a_, b_ = xb[:, k], xb[:, (k + 1) % 3]
+                hit |= border[st[bsel], k] & _crosses(a_[:, 0], a_[:, 1], b_[:, 0], b_[:, 1], sx[bsel], sy[bsel])
+            ok[sl[bsel[hit]]] = False
+        # Layers at the probe point: triangles containing it (and none within ON_EDGE of it).
+        qx, qy = sx + PROBE[0], sy + PROBE[1]
+        yq = np.clip(qy, spans.yl[st], spans.yh[st])
+        lo, hi = spans.extent(st, yq)
+        d = np.minimum(np.minimum(qx - lo, hi - qx), np.minimum(qy - spans.yl[st], spans.yh[st] - qy))
+        inside = np.bincount(sl, weights=d > ON_EDGE, minlength=tw * th)
+        near = np.bincount(sl, weights=np.abs(d) <= ON_EDGE, minlength=tw * th)
+        located = cand & ok & (inside == 1) & (near == 0)
+        kind[located] = LOCATED
+        loc_pair[sel] = located[sl]
 
-    # Clip the texel square by the three edges for the partial pairs.
-    # Only the edges that cut a texel clip it (usually one): each pass takes the pairs it cuts.
-    ip = np.flatnonzero(part)
-    poly = np.zeros((len(ip), 7, 2))
-    cx = px[ip, None] + np.array([0.0, 1.0, 1.0, 0.0])
-    cy = py[ip, None] + np.array([0.0, 0.0, 1.0, 1.0])
+    # Split texels: their partial pairs are clipped; a texel full for a triangle that also meets
+    # others (overlapping UVs) takes that triangle's square as two sub-triangles.
+    covered_any = (n_full + n_part) > 0
+    split = covered_any & (kind == -1)
+    clip = np.flatnonzero(split[part_local])
+    ctri, cx_, cy_ = p_tri[clip], p_x[clip], p_y[clip]
+    sub_xy, sub_area, sub_t, sub_pair = _clip_pairs(xy, E, ctri, cx_, cy_)
+    sub_tri = tri_ids[sub_t]
+    sub_local = (cy_[sub_pair] - y0) * tw + (cx_[sub_pair] - x0)
+    if split.any() and len(fsel):
+        # Full runs reaching a split texel (texels of overlapping islands): their texels there.
+        row_split = np.cumsum(np.concatenate([np.zeros((th, 1), np.int64), split.reshape(th, tw)], axis=1), axis=1)
+        rr = r[fsel] - y0
+        reach = row_split[rr, f_hi[fsel] - x0] > row_split[rr, f_lo[fsel] - x0]
+        fr, f_x = _runs(f_lo[fsel[reach]], f_hi[fsel[reach]])
+        f_tri, f_y = own[fsel[reach]][fr], r[fsel[reach]][fr]
+        f_local = (f_y - y0) * tw + (f_x - x0)
+        keep = split[f_local]
+        f_tri, f_local = f_tri[keep], f_local[keep]
+        fx, fy = (f_local % tw + x0).astype(float), (f_local // tw + y0).astype(float)
+        sq_a = np.stack([fx, fy], 1)
+        sq_b = np.stack([fx + 1, fy], 1)
+        sq_c = np.stack([fx + 1, fy + 1], 1)
+        sq_d = np.stack([fx, fy + 1], 1)
+        sub_xy = np.concatenate([sub_xy, np.stack([sq_a, sq_b, sq_c], 1), np.stack([sq_a, sq_c, sq_d], 1)])
+        extra_tri = tri_ids[f_tri]
+        sub_tri = np.concatenate([sub_tri, extra_tri, extra_tri])
+        sub_area = np.concatenate([sub_area, np.full(2 * len(extra_tri), 0.5)])
+        sub_local = np.concatenate([sub_local, f_local, f_local])
+    # Clipping can find nothing of a texel whose overlap is a sliver: it is not covered then.
+    has_sub = np.zeros(tw * th, bool)
+    has_sub[sub_local] = True
+    covered = np.flatnonzero(covered_any & (~split | has_sub))
+    compact = np.full(tw * th, -1, np.int64)
+    compact[covered] = np.arange(len(covered))
+    texels = (covered // tw + y0) * width + (covered % tw + x0)
+    n = len(covered)
+
+    sub_tex = compact[sub_local]
+    order = np.argsort(sub_tex, kind="stable")
+    sub_tex, sub_tri, sub_xy, sub_area = sub_tex[order], sub_tri[order], sub_xy[order], sub_area[order]
+    full_of = kind[covered]
+    coverage = np.bincount(sub_tex, weights=sub_area, minlength=n)
+    coverage[full_of != -1] = 1.0
+    sub_start = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(sub_tex, minlength=n), out=sub_start[1:])
+    csum = np.cumsum(sub_area)
+    run_base = np.concatenate([[0.0], csum])[sub_start[:-1]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sub_cdf = (csum - run_base[sub_tex]) / coverage[sub_tex]
+    if len(sub_cdf):
+        last = sub_start[1:][sub_start[1:] > sub_start[:-1]] - 1
+        sub_cdf[last] = 1.0
+
+    # Candidates of located texels, by texel, in ascending triangle order (pairs come triangle by
+    # triangle, and the tile's triangles are ascending).
+    li = np.flatnonzero(loc_pair)
+    loc_tex = compact[part_local[li]]
+    order = np.argsort(loc_tex, kind="stable")
+    li, loc_tex = li[order], loc_tex[order]
+    lt = p_tri[li]
+    e = E[lt]
+    e[:, :, 2] += e[:, :, 0] * p_x[li, None] + e[:, :, 1] * p_y[li, None]
+    loc_start = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(loc_tex, minlength=n), out=loc_start[1:])
+    return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage,
+                         loc_tri=tri_ids[lt], loc_start=loc_start, loc_edges=e)
+
+
+def _clip_pairs(xy, E, tri, px, py):
+    """Clip texel squares (lower corners ``px``, ``py``) by the triangles ``xy[tri]``: fan
+    sub-triangles (m, 3, 2), their areas, and the pair each came from (index into ``tri``)."""
+    n = len(tri)
+    poly = np.zeros((n, 7, 2))
+    cx = px[:, None] + np.array([0.0, 1.0, 1.0, 0.0])
+    cy = py[:, None] + np.array([0.0, 0.0, 1.0, 1.0])
     poly[:, :4, 0], poly[:, :4, 1] = cx, cy
-    cnt = np.full(len(ip), 4)
+    cnt = np.full(n, 4)
     # A triangle inside the texel is its own fragment (meshes with triangles smaller than texels).
-    txy = tris.xy[tri_ids[p_tri[ip]]]
-    within = np.all((txy.min(axis=1) >= np.stack([px[ip], py[ip]], 1))
-                    & (txy.max(axis=1) <= np.stack([px[ip], py[ip]], 1) + 1), axis=1)
+    txy = xy[tri]
+    corner = np.stack([px, py], 1)
+    within = np.all((txy.min(axis=1) >= corner) & (txy.max(axis=1) <= corner + 1), axis=1)
     poly[within, :3] = txy[within]
     cnt[within] = 3
     for e in range(3):
-        a_e, b_e, c_e = ea[ip, e], eb[ip, e], ec[ip, e]
+        a_e, b_e, c_e = E[tri, e, 0], E[tri, e, 1], E[tri, e, 2]
+        # Only the edges that cut a texel clip it (usually one): each pass takes the pairs it cuts.
         cuts = np.flatnonzero(~within & np.any(a_e[:, None] * cx + b_e[:, None] * cy + c_e[:, None] < 0, axis=1))
         if not len(cuts):
             continue
@@ -242,55 +500,9 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1):
                       - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
     fan_area = np.where(fan_ok, np.abs(fan_area), 0.0)
     real = fan_area.sum(axis=1) > MIN_FRAGMENT_AREA
-    ip, fan_ok, fan_area, b, c, a = ip[real], fan_ok[real], fan_area[real], b[real], c[real], a[real]
+    ip = np.flatnonzero(real)
+    fan_ok, fan_area, b, c, a = fan_ok[real], fan_area[real], b[real], c[real], a[real]
     fan_ok &= fan_area > 0
     rr, kk = np.nonzero(fan_ok)
     sub_xy = np.stack([a[rr, 0], b[rr, kk], c[rr, kk]], axis=1)
-    sub_area = fan_area[rr, kk]
-    sub_tri = tri_ids[p_tri[ip[rr]]]
-    sub_local = (py[ip[rr]] - y0) * (x1 - x0) + (px[ip[rr]] - x0)
-
-    # Compact the tile's texels without sorting: count fragments per local texel index.
-    tw, th = x1 - x0, y1 - y0
-    full_local = (f_y - y0) * tw + (f_x - x0)
-    n_full = np.bincount(full_local, minlength=tw * th)
-    n_sub = np.bincount(sub_local, minlength=tw * th) if len(sub_local) else np.zeros(tw * th, np.int64)
-    covered = np.flatnonzero(n_full + n_sub)
-    compact = np.full(tw * th, -1, np.int64)
-    compact[covered] = np.arange(len(covered))
-    texels = (covered // tw + y0) * width + (covered % tw + x0)
-
-    # A texel with exactly one full fragment and nothing else keeps the fast path; a texel that is
-    # full for one triangle and touched by others (overlapping UVs) is split into sub-triangles.
-    simple_local = (n_full == 1) & (n_sub == 0)
-    full_of = np.full(len(covered), -1, dtype=np.int64)
-    fs = simple_local[full_local]
-    full_of[compact[full_local[fs]]] = tri_ids[f_tri[fs]]
-    sub_tex = compact[sub_local]
-    nf = ~fs
-    if nf.any():
-        fx, fy = f_x[nf].astype(float), f_y[nf].astype(float)
-        sq_a = np.stack([fx, fy], 1)
-        sq_b = np.stack([fx + 1, fy], 1)
-        sq_c = np.stack([fx + 1, fy + 1], 1)
-        sq_d = np.stack([fx, fy + 1], 1)
-        sub_xy = np.concatenate([sub_xy, np.stack([sq_a, sq_b, sq_c], 1), np.stack([sq_a, sq_c, sq_d], 1)])
-        extra_tri = tri_ids[f_tri[nf]]
-        sub_tri = np.concatenate([sub_tri, extra_tri, extra_tri])
-        sub_area = np.concatenate([sub_area, np.full(2 * len(extra_tri), 0.5)])
-        extra_tex = compact[full_local[nf]]
-        sub_tex = np.concatenate([sub_tex, extra_tex, extra_tex])
-
-    order = np.argsort(sub_tex, kind="stable")
-    sub_tex, sub_tri, sub_xy, sub_area = sub_tex[order], sub_tri[order], sub_xy[order], sub_area[order]
-    coverage = np.bincount(sub_tex, weights=sub_area, minlength=len(covered))
-    coverage[full_of >= 0] = 1.0
-    sub_start = np.searchsorted(sub_tex, np.arange(len(covered) + 1))
-    csum = np.cumsum(sub_area)
-    run_base = np.concatenate([[0.0], csum])[sub_start[:-1]]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sub_cdf = (csum - run_base[sub_tex]) / coverage[sub_tex]
-    if len(sub_cdf):
-        last = sub_start[1:][sub_start[1:] > sub_start[:-1]] - 1
-        sub_cdf[last] = 1.0
-    return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage)
+    return sub_xy, fan_area[rr, kk], tri[ip[rr]], ip[rr]

@@ -8,7 +8,11 @@ position coordinates to the triangle's texel space:
 
 - a texel inside one triangle is one unit, a square: (u, v) in [0, 1)^2 is the point's position in
   the texel (u2, u3 of the sample pattern), and the map is a translation to the texel's corner;
-- a texel split among triangles (an island edge, or triangles smaller than texels) has one unit per
+- a located texel (covered exactly once by several triangles, :data:`core.raster.LOCATED`) is one
+  unit too, a square whose samples each find their own triangle: the candidate whose edge functions
+  at (u, v) are least negative (the one containing the point), and then that triangle's translation
+  to the texel's corner (``cand_*``);
+- a texel split among triangles (an island's border or overlapping islands cross it) has one unit per
   piece of triangle inside it (the rasteriser's sub-triangles): (u, v) are the weights of the
   piece's corners 0 and 1 from Heitz's square-to-triangle map of (u2, u3)
   (:func:`core.warps.square_to_triangle`), corner 2 the origin.
@@ -30,7 +34,7 @@ import numpy as np
 
 from .patterns import hash_uniform
 
-SQUARE, TRIANGLE = 0, 1
+SQUARE, TRIANGLE, LOCATED = 0, 1, 2
 _TAG_ALLOCATE = 21
 
 
@@ -89,10 +93,13 @@ class SurfaceTable:
 class Units:
     """The sample units of one tile, sorted by texel (see the module docstring).
 
-    kind : SQUARE or TRIANGLE; texel : the unit's texel, as an index into the tile's texel list;
-    tri : its triangle; first : (n_texels + 1,) units of texel k are first[k]:first[k + 1];
-    cdf : cumulative area fraction of the texel's covered area up to and including the unit;
-    coef : (U, 6) float64, (A0, A1, A2, B0, B1, B2) of the map above.
+    kind : SQUARE, TRIANGLE or LOCATED; texel : the unit's texel, as an index into the tile's texel
+    list; tri : its triangle (a located unit's first candidate); first : (n_texels + 1,) units of
+    texel k are first[k]:first[k + 1]; cdf : cumulative area fraction of the texel's covered area up
+    to and including the unit; coef : (U, 6) float64, (A0, A1, A2, B0, B1, B2) of the map above.
+    Candidates of located units: cand_first (U + 1,) offsets (empty runs for other units), cand_tri
+    (c,) triangles, cand_edges (c, 3, 3) float32 edge functions (a, b, c) in texel-local
+    coordinates, cand_coef (c, 2) float32 the translation (A0, B0) to each candidate's texel space.
     """
 
     kind: np.ndarray
@@ -101,34 +108,72 @@ class Units:
     first: np.ndarray
     cdf: np.ndarray
     coef: np.ndarray
+    cand_first: np.ndarray = None
+    cand_tri: np.ndarray = None
+    cand_edges: np.ndarray = None
+    cand_coef: np.ndarray = None
 
     def __len__(self):
         return len(self.kind)
 
 
 def build_units(frag, table, width):
-    """The units of a tile's fragments."""
-    simple = np.flatnonzero(frag.full_tri >= 0)
-    tri_s = frag.full_tri[simple]
+    """The units of a tile's fragments, in texel order (a split texel's sub-triangles in theirs)."""
+    from .raster import LOCATED as _LOCATED
+
+    n = len(frag.texels)
+    full = frag.full_tri
+    # Units per texel: one for a texel inside one triangle or located, its sub-triangles' count else.
+    per = np.where(full != -1, 1, np.diff(frag.sub_start))
+    first = np.zeros(n + 1, np.int64)
+    np.cumsum(per, out=first[1:])
+    U = int(first[-1])
+    kind = np.empty(U, np.int8)
+    tri = np.empty(U, np.int64)
+    cdf = np.ones(U)
+    coef = np.zeros((U, 6))
+    simple = np.flatnonzero(full >= 0)
+    at = first[simple]
+    tri_s = full[simple]
     tex = frag.texels[simple]
     # Squares: a translation to the texel's corner.
-    coef_s = np.zeros((len(simple), 6))
-    coef_s[:, 0] = (tex % width) - table.origin[tri_s, 0]
-    coef_s[:, 1] = 1.0
-    coef_s[:, 3] = (tex // width) - table.origin[tri_s, 1]
-    coef_s[:, 5] = 1.0
+    kind[at] = SQUARE
+    tri[at] = tri_s
+    coef[at, 0] = (tex % width) - table.origin[tri_s, 0]
+    coef[at, 1] = 1.0
+    coef[at, 3] = (tex // width) - table.origin[tri_s, 1]
+    coef[at, 5] = 1.0
+    # Located texels: a square each; its candidates' translations.
+    loc = np.flatnonzero(full == _LOCATED)
+    loc_start = frag.loc_start if frag.loc_start is not None else np.zeros(n + 1, np.int64)
+    cand_tri = frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64)
+    per_c = loc_start[loc + 1] - loc_start[loc]
+    cand_tex = np.repeat(frag.texels[loc], per_c)
+    cand_coef = np.stack([(cand_tex % width) - table.origin[cand_tri, 0],
+                          (cand_tex // width) - table.origin[cand_tri, 1]], axis=1).astype(np.float32)
+    at = first[loc]
+    kind[at] = LOCATED
+    tri[at] = cand_tri[loc_start[loc]] if len(loc) else 0
+    coef[at, 1] = 1.0
+    coef[at, 5] = 1.0
     # Sub-triangles: corner 2 plus the weights of corners 0 and 1 times the edges to them.
     tri_t = frag.sub_tri
+    at = first[frag.sub_texel] + (np.arange(len(tri_t)) - frag.sub_start[frag.sub_texel])
     c = frag.sub_xy - table.origin[tri_t][:, None, :]
-    coef_t = np.stack([c[:, 2, 0], c[:, 0, 0] - c[:, 2, 0], c[:, 1, 0] - c[:, 2, 0],
-                       c[:, 2, 1], c[:, 0, 1] - c[:, 2, 1], c[:, 1, 1] - c[:, 2, 1]], axis=1)
-    kind = np.concatenate([np.full(len(simple), SQUARE, np.int8), np.full(len(tri_t), TRIANGLE, np.int8)])
-    texel = np.concatenate([simple, frag.sub_texel]).astype(np.int64)
-    order = np.argsort(texel, kind="stable")  # sub-triangles keep their order within a texel
-    return Units(kind=kind[order], texel=texel[order], tri=np.concatenate([tri_s, tri_t])[order],
-                 first=np.searchsorted(texel[order], np.arange(len(frag.texels) + 1)),
-                 cdf=np.concatenate([np.ones(len(simple)), frag.sub_cdf])[order],
-                 coef=np.concatenate([coef_s, coef_t])[order])
+    kind[at] = TRIANGLE
+    tri[at] = tri_t
+    cdf[at] = frag.sub_cdf
+    coef[at] = np.stack([c[:, 2, 0], c[:, 0, 0] - c[:, 2, 0], c[:, 1, 0] - c[:, 2, 0],
+                         c[:, 2, 1], c[:, 0, 1] - c[:, 2, 1], c[:, 1, 1] - c[:, 2, 1]], axis=1)
+    texel = np.repeat(np.arange(n), per)
+    # Candidate runs follow the units: located units in texel order are the fragments' runs.
+    cand_count = np.zeros(U, np.int64)
+    cand_count[first[loc]] = per_c
+    cand_first = np.zeros(U + 1, np.int64)
+    np.cumsum(cand_count, out=cand_first[1:])
+    edges = frag.loc_edges if frag.loc_edges is not None else np.zeros((0, 3, 3))
+    return Units(kind=kind, texel=texel, tri=tri, first=first, cdf=cdf, coef=coef, cand_first=cand_first,
+                 cand_tri=cand_tri, cand_edges=edges.astype(np.float32), cand_coef=cand_coef)
 
 
 def allocate(units, texels, start, count, seed, texel_ids):
@@ -138,36 +183,52 @@ def allocate(units, texels, start, count, seed, texel_ids):
     where each texel goes from its own count to its own next count).
 
     Returns (unit, piece start, piece size) arrays: every unit's share of the block, cut into pieces
-    whose sizes are powers of two (the kernel traces equal pieces together).
+    whose sizes are powers of two (the kernel traces equal pieces together). A texel of one unit
+    (inside one triangle, or located) takes the whole block; the units of a split texel share it.
     """
     texels = np.asarray(texels, dtype=np.int64)
     start = np.broadcast_to(np.asarray(start, dtype=np.int64), texels.shape)
     count = np.broadcast_to(np.asarray(count, dtype=np.int64), texels.shape)
-    lo, hi = units.first[texels], units.first[texels + 1]
-    per = hi - lo
-    unit = np.repeat(lo, per) + (np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per))
-    owner = np.repeat(texels, per)
-    multi = np.repeat(per > 1, per)
-    first, count = np.repeat(start, per), np.repeat(count, per)
-    # Systematic sampling among a split texel's units: the first sample past each unit's cumulative share.
-    phi = hash_uniform(seed, texel_ids[owner], first.astype(np.uint64), _TAG_ALLOCATE)
-    edge = np.clip(np.ceil(units.cdf[unit] * count - phi), 0, count).astype(np.int64)
-    last = np.ones(len(unit), bool)
-    last[:-1] = owner[1:] != owner[:-1]
-    edge[last] = count[last]
-    before = np.zeros(len(unit), np.int64)
-    before[1:] = edge[:-1]
-    before[np.concatenate([[True], owner[1:] != owner[:-1]])] = 0
-    size = np.where(multi, edge - before, count)
-    offset = np.where(multi, before, 0)
-    keep = size > 0
-    unit, size, offset = unit[keep], size[keep], offset[keep] + first[keep]
+    lo = units.first[texels]
+    per = units.first[texels + 1] - lo
+    one = (per == 1) & (count > 0)
+    single, s_start, s_count = lo[one], start[one], count[one]
+    multi = (per > 1) & (count > 0)
+    mt = texels[multi]
+    if len(mt):
+        lo_m, per_m = lo[multi], per[multi]
+        unit = np.repeat(lo_m, per_m) + (np.arange(per_m.sum()) - np.repeat(np.cumsum(per_m) - per_m, per_m))
+        owner = np.repeat(mt, per_m)
+        first, cnt = np.repeat(start[multi], per_m), np.repeat(count[multi], per_m)
+        # Systematic sampling among a split texel's units: the first sample past each unit's cumulative share.
+        phi = hash_uniform(seed, texel_ids[owner], first.astype(np.uint64), _TAG_ALLOCATE)
+        edge = np.clip(np.ceil(units.cdf[unit] * cnt - phi), 0, cnt).astype(np.int64)
+        new_texel = np.ones(len(unit), bool)
+        new_texel[1:] = owner[1:] != owner[:-1]
+        last = np.ones(len(unit), bool)
+        last[:-1] = new_texel[1:]
+        edge[last] = cnt[last]
+        before = np.zeros(len(unit), np.int64)
+        before[1:] = edge[:-1]
+        before[new_texel] = 0
+        size = edge - before
+        keep = size > 0
+        unit, size, offset = unit[keep], size[keep], before[keep] + first[keep]
+    else:
+        unit = size = offset = np.zeros(0, np.int64)
+    # A block of a power of two samples aligned to its size: a single unit's block is one piece
+    # (what the loop below would cut it into), without the loop. Other blocks join the loop.
+    whole = ((s_count & (s_count - 1)) == 0) & (s_start % s_count == 0)
+    pu, ps, pz = [single[whole]], [s_start[whole]], [s_count[whole]]
+    rest = ~whole
+    unit = np.concatenate([single[rest], unit])
+    size = np.concatenate([s_count[rest], size])
+    offset = np.concatenate([s_start[rest], offset])
     # Power-of-two pieces, each aligned to its own size (the kernel gathers an aligned block of a
     # xor-ordered pattern as whole rows; an unaligned one row by row): from each piece's start, the
     # largest power of two that divides it and still fits. From 0 that is largest first (120 samples
     # from 0: 64, 32, 16, 8); from an adaptive round's start it climbs (samples 8 to 128: 8, 16, 32,
-    # 64). A texel inside one triangle takes a round's block as one piece where it can.
-    pu, ps, pz = [], [], []
+    # 64).
     pos, left = offset.copy(), size.copy()
     while len(left):
         low = np.where(pos > 0, pos & -pos, 1 << 62)  # the largest power of two dividing pos
@@ -198,7 +259,8 @@ def contact_texels(frag, table, width, tracer, samples):
         return np.zeros(n_tex, bool)
     # Only triangles whose bounding box, grown by twice the largest offset, meets an occluder's can
     # touch one: the probes go to their texels alone.
-    tris = np.unique(np.concatenate([frag.full_tri[frag.full_tri >= 0], frag.sub_tri]))
+    loc_tri = frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64)
+    tris = np.unique(np.concatenate([frag.full_tri[frag.full_tri >= 0], frag.sub_tri, loc_tri]))
     corners3 = table.corners[tris]
     grow = 2.0 * tracer.offset(np.abs(corners3).max(axis=(1, 2)))[:, None]
     near = np.zeros(len(table.P0), bool)
@@ -206,6 +268,13 @@ def contact_texels(frag, table, width, tracer, samples):
     candidates = np.zeros(n_tex, bool)
     candidates[frag.full_tri >= 0] = near[frag.full_tri[frag.full_tri >= 0]]
     candidates[frag.sub_texel[near[frag.sub_tri]]] = True
+    # A located texel's samples may lie on any of its candidates: each sample is probed (its own
+    # triangle's normal) when one of them is near an occluder.
+    located = np.zeros(n_tex, bool)
+    if len(loc_tri):
+        owner = np.repeat(np.arange(n_tex), np.diff(frag.loc_start))
+        located[owner[near[loc_tri]]] = True
+        candidates |= located
     if not candidates.any():
         return candidates
     if samples <= 8:
@@ -226,7 +295,7 @@ def contact_texels(frag, table, width, tracer, samples):
     own = np.concatenate([own_s, own_p])
     pos = table.position(tri, xy[:, 0], xy[:, 1])
     hit = tracer.contact(pos, table.FN[tri])
-    return np.bincount(own[hit], minlength=n_tex) > 0
+    return (np.bincount(own[hit], minlength=n_tex) > 0) | located
 
 
-__all__ = ["FLAT_TURN", "SQUARE", "TRIANGLE", "SurfaceTable", "Units", "build_units", "allocate", "contact_texels"]
+__all__ = ["SQUARE", "TRIANGLE", "LOCATED", "SurfaceTable", "Units", "build_units", "allocate", "contact_texels"]

@@ -219,7 +219,9 @@ def _units(ids):
     coef[:, 1] = coef[:, 5] = 1.0
     local = np.arange(m, dtype=np.int64)
     return Units(kind=np.full(m, SQUARE, np.int8), texel=local, tri=np.asarray(ids, np.int64),
-                 first=np.arange(m + 1, dtype=np.int64), cdf=np.ones(m), coef=coef)
+                 first=np.arange(m + 1, dtype=np.int64), cdf=np.ones(m), coef=coef,
+                 cand_first=np.zeros(m + 1, np.int64), cand_tri=np.zeros(0, np.int64),
+                 cand_edges=np.zeros((0, 3, 3), np.float32), cand_coef=np.zeros((0, 2), np.float32))
 
 
 def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_samples=16, target_error=0.0,

@@ -293,3 +293,35 @@ def test_a_block_resting_on_the_surface_occludes_it_completely(samples):
     g = bake_ao(plane(), [box((0.3, 0.3, 0.002), (0.7, 0.7, 0.6))], resolution=32, samples=samples,
                 max_distance=0.001, margin=0)
     assert np.all(g.ao == 1.0)
+
+
+@pytest.mark.parametrize("margin", [3, 16])
+def test_margin_does_not_depend_on_the_number_of_threads(margin):
+    # The margin is computed in bands of rows (each with `margin` rows of its neighbours) when
+    # threads allow: any number of bands gives the same texels as one, and the first ring is the
+    # mean of its covered 8-neighbours.
+    from core.margin import dilate
+
+    rng = np.random.default_rng(margin)
+    mask = np.zeros((400, 300), bool)
+    for _ in range(40):
+        y, x = rng.integers(0, 400), rng.integers(0, 300)
+        mask[y:y + rng.integers(1, 40), x:x + rng.integers(1, 40)] = True
+    values = np.where(mask, rng.random((400, 300)), 0).astype(np.float32)
+    one = dilate(values, mask, margin, threads=1)
+    for threads in (2, 3, 5):
+        assert np.array_equal(dilate(values, mask, margin, threads=threads), one), threads
+    assert np.array_equal(one[mask], values[mask])
+    ring = ~mask & (np.pad(mask, 1)[:-2, :-2] | np.pad(mask, 1)[:-2, 1:-1] | np.pad(mask, 1)[:-2, 2:]
+                    | np.pad(mask, 1)[1:-1, :-2] | np.pad(mask, 1)[1:-1, 2:]
+                    | np.pad(mask, 1)[2:, :-2] | np.pad(mask, 1)[2:, 1:-1] | np.pad(mask, 1)[2:, 2:])
+    pv, pm = np.pad(values.astype(float), 1), np.pad(mask, 1).astype(float)
+    s = sum(pv[1 + dy:401 + dy, 1 + dx:301 + dx] * pm[1 + dy:401 + dy, 1 + dx:301 + dx]
+            for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+    c = sum(pm[1 + dy:401 + dy, 1 + dx:301 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+    np.testing.assert_allclose(one[ring], (s / np.maximum(c, 1))[ring], rtol=1e-6)
+    reach = mask.copy()
+    for _ in range(margin):  # texels within `margin` (8-neighbour steps) of a covered one
+        p = np.pad(reach, 1)
+        reach = reach | p[:-2, :-2] | p[:-2, 1:-1] | p[:-2, 2:] | p[1:-1, :-2] | p[1:-1, 2:] | p[2:, :-2] | p[2:, 1:-1] | p[2:, 2:]
+    assert np.all(one[~reach] == 0) and np.all(one[reach & ~mask] > 0)

@@ -172,12 +172,23 @@ def test_the_chi_square_of_traced_rays_can_fail():
     assert p < CHI2_ALPHA
 
 
+def seamed_plane():
+    """The unit plane with a UV seam along its diagonal: triangle 1's UVs shrink towards its centroid
+    by a factor 1 - 1e-7, so the diagonal is an island border and the texels it crosses are split
+    (clipped, their samples shared by area), not located; positions in space are the plane's."""
+    p = plane()
+    uv = p.uvs.copy()
+    c = uv[1].mean(axis=0)
+    uv[1] = c + (uv[1] - c) * (1 - 1e-7)
+    return Mesh(p.positions, p.triangles, uv, name="seamed")
+
+
 def test_split_texels_share_samples_by_area_and_cover_each_piece():
-    # The plane's diagonal splits texels into two triangles of known area. Systematic sampling
-    # gives each piece its area's share of every texel's samples to within one, and the samples of
-    # a piece lie inside it.
+    # The seamed plane's diagonal splits texels into two triangles of known area. Systematic
+    # sampling gives each piece its area's share of every texel's samples to within one, and the
+    # samples of a piece lie inside it.
     samples = 64
-    rays, _ = record(plane(), resolution=W, samples=samples, seed=2)
+    rays, _ = record(seamed_plane(), resolution=W, samples=samples, seed=2)
     x = (rays["origins"][:, 0] + 0.5) * W
     y = (rays["origins"][:, 1] + 0.5) * W
     col, row = rays["texels"] % W, rays["texels"] // W
@@ -206,20 +217,20 @@ def test_directions_below_the_face_count_as_occluded():
 def test_split_texels_share_samples_by_area_on_average_over_seeds():
     # A texel split into pieces of area fractions w gets count * w samples in each on average over
     # the per-texel random numbers (to within one in every bake): the allocation is unbiased. A
-    # resolution of 16 x 13 makes the plane's diagonal cut texels unevenly.
+    # resolution of 16 x 13 makes the seamed plane's diagonal cut texels unevenly.
     from core.raster import prepare, rasterize_tile
 
     w_, h_, samples, bakes = 16, 13, 4, 48
-    frag = rasterize_tile(prepare(plane(), w_, h_), np.array([0, 1]), w_, h_, 0, 0, w_, h_)
+    frag = rasterize_tile(prepare(seamed_plane(), w_, h_), np.array([0, 1]), w_, h_, 0, 0, w_, h_)
     lower = {}
-    for k in np.flatnonzero(frag.full_tri < 0):  # texels the diagonal cuts
+    for k in np.flatnonzero(frag.full_tri == -1):  # texels the diagonal cuts (and the seam's other edges)
         tri = frag.sub_tri[frag.sub_start[k]:frag.sub_start[k + 1]]
         share = np.diff(np.concatenate([[0.0], frag.sub_cdf[frag.sub_start[k]:frag.sub_start[k + 1]]]))
         lower[frag.texels[k]] = share[tri == 0].sum()  # area fraction of triangle 0
     # Each replicate allocates its own samples (from a seed of its own): count per (texel, replicate).
     counts = {(t, r): [] for t in lower for r in (0, 1)}
     for seed in range(bakes):
-        rays, _ = record(plane(), resolution=(w_, h_), samples=2 * samples, seed=seed)
+        rays, _ = record(seamed_plane(), resolution=(w_, h_), samples=2 * samples, seed=seed)
         x = (rays["origins"][:, 0] + 0.5) * w_
         y = (rays["origins"][:, 1] + 0.5) * h_
         in0 = y * w_ < x * h_  # triangle 0 lies below the diagonal from (0, 0) to (W, H)
