@@ -292,22 +292,28 @@ def test_replicates_allocate_a_split_texels_samples_independently():
 
 
 
-def test_an_adaptive_rounds_per_texel_counts_allocate_as_each_texel_alone():
+@pytest.mark.parametrize("locate", [False, True])
+def test_an_adaptive_rounds_per_texel_counts_allocate_as_each_texel_alone(locate):
     """One pass per adaptive round: allocating every texel's own [start, start + count) at once gives
-    each texel exactly the pieces it gets alone (split texels, whose units share by hash, included)."""
+    each texel exactly the pieces it gets alone: split texels (clipped: their units share by hash)
+    and texels of one unit (a whole aligned power-of-two block or not)."""
     from core.raster import prepare, rasterize_tile
     from core.surface import SurfaceTable, allocate, build_units
 
     mesh = plane()
-    uvtris = prepare(mesh, 8, 8)
-    units = build_units(rasterize_tile(uvtris, np.arange(len(mesh.triangles)), 8, 8, 0, 0, 8, 8),
-                        SurfaceTable.build(mesh, uvtris), 8)
+    uvtris = prepare(mesh, 16, 16)
+    units = build_units(rasterize_tile(uvtris, np.arange(len(mesh.triangles)), 16, 16, 0, 0, 16, 16, locate=locate),
+                        SurfaceTable.build(mesh, uvtris), 16)
     n_tex = len(units.first) - 1
-    assert np.any(np.diff(units.first) > 1)  # the diagonal splits texels
+    assert np.any(np.diff(units.first) > 1) != locate  # the diagonal's texels: split, or located
     rng = np.random.default_rng(4)
     texels = np.sort(rng.choice(n_tex, n_tex // 2 + 4, replace=False))
     start = rng.integers(0, 1000, len(texels))
     count = rng.integers(1, 200, len(texels))  # odd counts: a split texel's share depends on its hash
+    # and aligned power-of-two blocks for half the texels of one unit (one piece each)
+    whole = (rng.random(len(texels)) < 0.5) & (np.diff(units.first)[texels] == 1)
+    count[whole] = 2 ** rng.integers(0, 8, whole.sum())
+    start[whole] = count[whole] * rng.integers(0, 8, whole.sum())
     ids = np.arange(n_tex, dtype=np.uint64) * np.uint64(7) + np.uint64(3)
     together = allocate(units, texels, start, count, np.uint64(11), ids)
     alone = [allocate(units, texels[i:i + 1], int(start[i]), int(count[i]), np.uint64(11), ids)
