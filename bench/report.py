@@ -222,10 +222,11 @@ def table(data):
                              f"{100 * a['at_min']:.0f}%", _fmt(a["miss"], ".3f"), _fmt(a["cpu_seconds"], ".2f"),
                              _fmt(a["fixed_cpu_seconds"], ".2f"), _fmt(a["ratio"], ".2f")])
         L += _grid(["scene", "target", "RMSE", "spp", "at min", "miss > t", "cpu s", "fixed cpu s", "ratio"], rows)
-        disk = next((sc for sc in ad["scenes"] if "gain_bound_independent" in sc), None)
-        if disk:
-            L.append(f"  disk (every texel partly occluded): no allocation gains more than E[var]/E[sd]^2 = "
-                     f"{disk['gain_bound_independent']:.3f} for independent samples")
+        bounds = [sc for sc in ad["scenes"] if "gain_bound_independent" in sc]
+        if bounds:
+            L.append("  the best any allocation can do (independent samples: n proportional to each texel's sd), as a "
+                     "share of the fixed count's samples, E[sd]^2/E[var]: "
+                     + ", ".join(f"{sc['scene']} {1 / sc['gain_bound_independent']:.2f}" for sc in bounds))
         cost = ad.get("replicate_cost", {})
         if cost:
             L.append("  the error model's cost: RMSE with replicates=2 over replicates=1 at equal rays (disk scene): "
