@@ -154,6 +154,33 @@ def allocation_seeds(settings):
                                          for r in range(1, settings.replicates)]
 
 
+def _run_all(work, items, threads, shared, progress):
+    """work(item) for every item, on ``threads`` threads; the first error stops the others and is
+    raised, a cancel (``shared.stop``) raises BakeCancelled; progress reaches 1 at the end. Shared by
+    the texel bake and the vertex bake (core.vertices)."""
+
+    def guarded(item):
+        try:
+            work(item)
+        except _Stop:
+            pass
+        except BaseException:
+            shared.stop.set()
+            raise
+
+    if threads == 1 or len(items) <= 1:
+        for item in items:
+            guarded(item)
+    else:
+        with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="mc_ao") as pool:
+            for f in [pool.submit(guarded, item) for item in items]:
+                f.result()
+    if shared.stop.is_set():
+        raise BakeCancelled("the bake was cancelled; nothing was written")
+    if progress is not None:
+        progress(1.0)
+
+
 class _TileBaker:
     """Bakes one tile: rasterise, build its sample units, trace the plan's rounds, estimate.
 
@@ -473,26 +500,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                 with shared.lock:
                     on_tile(r, c, ao[r, c].copy())
 
-    def guarded(key):
-        try:
-            work(key)
-        except _Stop:
-            pass
-        except BaseException:
-            shared.stop.set()
-            raise
-
-    if s.threads == 1 or len(keys) <= 1:
-        for key in keys:
-            guarded(key)
-    else:
-        with ThreadPoolExecutor(max_workers=s.threads, thread_name_prefix="mc_ao") as pool:
-            for f in [pool.submit(guarded, key) for key in keys]:
-                f.result()
-    if shared.stop.is_set():
-        raise BakeCancelled("the bake was cancelled; nothing was written")
-    if progress is not None:
-        progress(1.0)
+    _run_all(work, keys, s.threads, shared, progress)
 
     miss, missed, extra = baker.finish(mask) if stage is not None else (None, 0, {})
     if s.margin > 0:

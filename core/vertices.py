@@ -18,13 +18,12 @@ for them differ only by noise.
 """
 
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ._version import __version__
-from .bake import _cancelled, _normalized_scene, _Shared, _Stop, _TileBaker
+from .bake import _cancelled, _normalized_scene, _run_all, _Shared, _TileBaker
 from .errors import BakeCancelled, MeshError, SettingsError
 from .estimators import ErrorModel
 from .kernel import Kernel
@@ -302,26 +301,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
             v = np.where((length > 0)[:, None], sums, n[ids])
             bent[ids] = v / np.linalg.norm(v, axis=1)[:, None]
 
-    def guarded(ids):
-        try:
-            work(ids)
-        except _Stop:
-            pass
-        except BaseException:
-            shared.stop.set()
-            raise
-
-    if s.threads == 1 or len(blocks) <= 1:
-        for ids in blocks:
-            guarded(ids)
-    else:
-        with ThreadPoolExecutor(max_workers=s.threads, thread_name_prefix="mc_ao") as pool_:
-            for f in [pool_.submit(guarded, ids) for ids in blocks]:
-                f.result()
-    if shared.stop.is_set():
-        raise BakeCancelled("the bake was cancelled; nothing was written")
-    if progress is not None:
-        progress(1.0)
+    _run_all(work, blocks, s.threads, shared, progress)
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=shared.rays)
     for key in ("margin", "resolution"):
         metadata.pop(key, None)
