@@ -33,7 +33,7 @@ import numpy as np
 from . import bent as bent_mod
 from ._version import __version__
 from .errors import BakeCancelled, BakeMemoryError, MeshError, SettingsError
-from .estimators import ErrorModel, SamplingPlan, TexelEstimates, interval_half_width, replicate_samples
+from .estimators import ErrorModel, SamplingPlan, TexelEstimates, interval_half_width
 from .kernel import Kernel, TileContext
 from .margin import dilate
 from .mesh import Mesh
@@ -192,7 +192,6 @@ class _TileBaker:
         self.pattern, self.s, self.shared = pattern, settings, shared
         self.plan = SamplingPlan(settings)
         self.bent = bent
-        self.caps = replicate_samples(settings.samples, settings.replicates)
         self.seeds = allocation_seeds(settings)
         # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
         self.located_curved = bool(uvtris is not None and np.any(table.smooth[uvtris.valid]))
@@ -230,14 +229,8 @@ class _TileBaker:
                            located_curved=self.located_curved, tris=tris)
         tiles = [tile] + [tile.for_replicate(self.pattern.keys(texel_ids, r), r) for r in range(1, s.replicates)]
         for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
-            for r, (tile_r, cap) in enumerate(zip(tiles, self.caps)):
-                c = np.minimum(count, cap - start)  # replicate r's own share of the samples
-                if np.ndim(c):
-                    some = c > 0
-                    if np.any(some):
-                        self._trace(tile_r, units, est, sums, r, texels[some], start[some], c[some])
-                elif c > 0:
-                    self._trace(tile_r, units, est, sums, r, texels, start, c)
+            for r, t, a, c in self.plan.shares(start, count, texels):
+                self._trace(tiles[r], units, est, sums, r, t, a, c)
         # Credit the work the adaptive stop saved, so progress reaches 1.
         shared.advance(n_tex * s.samples - int(est.n.sum()))
         return est, sums

@@ -321,6 +321,18 @@ class SamplingPlan:
         grow = np.clip(power, 2 * n, self.MAX_GROWTH * n)
         return np.where(half > self.target, np.minimum(grow, self.cap), n).astype(np.int64)
 
+    def shares(self, start, count, texels):
+        """Each replicate's own part of a round (start, count, texels from :meth:`rounds`): yields
+        (replicate, texels, start, count) for the replicates with samples left below their cap."""
+        for r, cap in enumerate(self.caps):
+            c = np.minimum(count, cap - start)
+            if np.ndim(c):
+                some = c > 0
+                if np.any(some):
+                    yield r, texels[some], start[some], c[some]
+            elif c > 0:
+                yield r, texels, start, c
+
     def rounds(self, est, texels, x, y):
         if not len(texels):
             return

@@ -412,7 +412,6 @@ class HighPolyBaker:
         self.pattern, self.s, self.shared, self.on_rays = pattern, settings, shared, on_rays
         self.g = stage.g
         self.plan = SamplingPlan(settings, grouped=True)
-        self.caps = replicate_samples(settings.samples, settings.replicates)
         # Per replicate, the seed that splits texels' points among their units (core.bake.allocation_seeds).
         self.seeds = [np.uint64(settings.seed)] * settings.replicates if seeds is None else list(seeds)
         self.uniform = settings.distribution == "uniform"
@@ -456,14 +455,8 @@ class HighPolyBaker:
             texels = texels[keep]
             if not len(texels):
                 continue
-            for r, (tile, cap) in enumerate(zip(tiles, self.caps)):
-                c = np.minimum(count, cap - start)  # replicate r's own share of the samples
-                if np.ndim(c):
-                    some = c > 0
-                    if np.any(some):
-                        done += self._trace(tile, est, r, texels[some], start[some], c[some])
-                elif c > 0:
-                    done += self._trace(tile, est, r, texels, start, c)
+            for r, t, a, c in self.plan.shares(start, count, texels):
+                done += self._trace(tiles[r], est, r, t, a, c)
         shared.advance(n_tex * s.samples - done)  # what the adaptive stop and the misses saved
         return frag, est, None
 
