@@ -36,17 +36,10 @@ def _record_rays(target, occluders, **kw):
 
 
 def embree_scene(meshes):
-    from embreex import rtcore_scene
-    from embreex.mesh_construction import TriangleMesh
+    """The committed Embree scene the bake itself builds of ``meshes`` (core.tracing)."""
+    from core.tracing import embree_scene as build
 
-    P = np.concatenate([m.positions for m in meshes]).astype(np.float32)
-    offs = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
-    F = np.concatenate([m.triangles + o for m, o in zip(meshes, offs)]).astype(np.int32)
-    scene = rtcore_scene.EmbreeScene()
-    TriangleMesh(scene, P, F)
-    scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), query="OCCLUDED",
-              dists=np.ones(1, np.float32))
-    return scene
+    return build(meshes)[0]
 
 
 def _replay(scene, chunks, threads):

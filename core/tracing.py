@@ -52,17 +52,39 @@ class RayBatch:
 def embree_scene(meshes):
     """A committed Embree scene of ``meshes`` (one geometry), and its positions."""
     from embreex import rtcore_scene
-    from embreex.mesh_construction import TriangleMesh
 
     positions = np.concatenate([m.positions for m in meshes])
     offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
     tris = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
     scene = rtcore_scene.EmbreeScene()
-    mesh = TriangleMesh(scene, positions.astype(np.float32), tris.astype(np.int32))
+    geometry = add_triangles(scene, positions, tris)
     # Commit (build the BVH) now, once, before any worker thread traces.
     scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), query="OCCLUDED",
               dists=np.ones(1, np.float32))
-    return scene, mesh, positions
+    return scene, geometry, positions
+
+
+def add_triangles(scene, positions, triangles):
+    """Attach a triangle geometry of ``positions`` (V, 3) and ``triangles`` (T, 3) to an embreex
+    scene not yet committed; returns what keeps it alive (or None).
+
+    embreex's ``TriangleMesh`` copies the arrays into Embree element by element through Python
+    indexing, about 1.4 us per triangle (1.4 s of a 1M-triangle bake, more than Embree's own BVH
+    build). The same copy is done here with Embree's C API (``rtcSetNewGeometryBuffer`` and one
+    memmove per buffer) on the library embreex itself loaded, see :mod:`core.embree_upload`;
+    where that is not available (another platform's layout, an embreex that changed) the binding's
+    own path is used, with the same result.
+    """
+    from . import embree_upload
+
+    p32 = np.ascontiguousarray(positions, dtype=np.float32)
+    t32 = np.ascontiguousarray(triangles, dtype=np.uint32)
+    if embree_upload.available():
+        embree_upload.attach_triangles(scene, p32, t32)
+        return None
+    from embreex.mesh_construction import TriangleMesh
+
+    return TriangleMesh(scene, p32, t32.astype(np.int32))
 
 
 class Tracer:
@@ -199,4 +221,4 @@ class Clock:
         return False
 
 
-__all__ = ["RayBatch", "Tracer", "embree_scene", "EPS_SCENE", "EPS_POSITION", "FAR"]
+__all__ = ["RayBatch", "Tracer", "add_triangles", "embree_scene", "EPS_SCENE", "EPS_POSITION", "FAR"]

@@ -1,0 +1,122 @@
+"""The C-API upload of triangle meshes into Embree (core.embree_upload) against embreex's own
+TriangleMesh: the same scene for Embree, so the same answer to every ray, and the bake is the same
+either way."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core import Mesh, bake_ao, embree_upload
+from core.tracing import embree_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _binding_scene(positions, triangles):
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    scene = rtcore_scene.EmbreeScene()
+    TriangleMesh(scene, np.asarray(positions, np.float32), np.asarray(triangles, np.int32))
+    return scene
+
+
+def _grid(n, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 1, n + 1)
+    u, v = np.meshgrid(t, t)
+    z = 0.1 * np.sin(7 * u + rng.uniform(0, 6)) * np.cos(5 * v)
+    positions = np.stack([u, v, z], -1).reshape(-1, 3)
+    a = (np.arange(n)[None, :] + (n + 1) * np.arange(n)[:, None]).ravel()
+    tris = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+    uvs = positions[:, :2][tris]
+    return positions, tris, uvs
+
+
+def test_available_here():
+    """Where embreex's wheel is installed (CI, the add-on's wheels), the fast path is on; if this fails,
+    reason() says what changed in embreex."""
+    assert embree_upload.available(), embree_upload.reason()
+
+
+def test_same_answers_as_the_binding():
+    """Intersections (primitive, distance, barycentrics) and occlusion agree ray for ray."""
+    positions, tris, _ = _grid(60)
+    mesh = Mesh(positions, tris, None, name="grid")
+    mine = embree_scene([mesh])[0]
+    theirs = _binding_scene(positions, tris)
+    rng = np.random.default_rng(3)
+    n = 50_000
+    org = np.column_stack([rng.uniform(-0.2, 1.2, (n, 2)), rng.uniform(-0.5, 0.5, n)]).astype(np.float32)
+    dirs = rng.normal(size=(n, 3)).astype(np.float32)
+    a = mine.run(org, dirs, output=True)
+    b = theirs.run(org, dirs, output=True)
+    for key in ("primID", "geomID", "tfar", "u", "v", "Ng"):
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    assert 0.1 < (a["primID"] >= 0).mean() < 0.9  # both hits and misses were asked
+    occ_a = mine.run(org, dirs, query="OCCLUDED", dists=np.full(n, 0.3, np.float32))
+    occ_b = theirs.run(org, dirs, query="OCCLUDED", dists=np.full(n, 0.3, np.float32))
+    np.testing.assert_array_equal(occ_a >= 0, occ_b >= 0)
+
+
+def test_several_meshes_and_vertex_offsets():
+    """Meshes concatenated into one geometry: triangle k of the second mesh is found as primitive
+    len(first) + k, at the position of the second mesh's vertices."""
+    p1, t1, _ = _grid(3)
+    p2 = p1 + [0, 0, 1.0]
+    mine = embree_scene([Mesh(p1, t1, None, name="a"), Mesh(p2, t1, None, name="b")])[0]
+    org = np.array([[0.3, 0.3, 2.0], [0.3, 0.3, 0.5]], np.float32)
+    out = mine.run(org, np.array([[0, 0, -1]], np.float32), output=True)
+    assert out["primID"][0] >= len(t1) and out["primID"][1] < len(t1)
+    np.testing.assert_allclose(out["tfar"], [2.0 - 1.0 - 0.1 * np.sin(7 * 0.3) * np.cos(1.5), 0.5], atol=0.2)
+
+
+def test_bake_identical_with_either_upload(monkeypatch):
+    """The bake does not know which path built its scene: bit-identical AO."""
+    positions, tris, uvs = _grid(40)
+    lid = Mesh(np.array([[0, 0, 0.3], [1, 0, 0.3], [1, 1, 0.3], [0, 1, 0.3]]) * [0.6, 0.6, 1] + [0.2, 0.2, 0],
+               np.array([[0, 1, 2], [0, 2, 3]]), None, name="lid")
+    target = Mesh(positions, tris, uvs, name="grid")
+    kw = dict(resolution=32, samples=16, threads=1, max_distance=0.5, seed=5)
+    fast = bake_ao(target, [lid], **kw).ao
+    monkeypatch.setitem(embree_upload._state, "ok", False)
+    slow = bake_ao(target, [lid], **kw).ao
+    np.testing.assert_array_equal(fast, slow)
+
+
+def test_refuses_a_committed_scene_and_bad_indices():
+    positions, tris, _ = _grid(2)
+    scene = _binding_scene(positions, tris)
+    scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))  # commits
+    with pytest.raises(ValueError, match="committed"):
+        embree_upload.attach_triangles(scene, positions, tris)
+    from embreex import rtcore_scene
+
+    with pytest.raises(ValueError, match="vertex that does not exist"):
+        embree_upload.attach_triangles(rtcore_scene.EmbreeScene(), positions, tris + len(positions))
+
+
+def test_layout_check_refuses_other_objects():
+    """The scene handle is read only from an object laid out as embreex's EmbreeScene."""
+
+    class EmbreeScene:  # same name, different object
+        is_committed = 0
+
+    with pytest.raises(TypeError):
+        embree_upload._scene_handle(EmbreeScene())
+
+
+def test_environment_turns_it_off():
+    """MC_AO_EMBREE_UPLOAD=0: embreex's own path, said why, and the bake still runs."""
+    code = ("import numpy as np; from core import embree_upload as u; from core.tracing import embree_scene; "
+            "from core import Mesh; print(u.available(), u.reason()); "
+            "s = embree_scene([Mesh(np.eye(3), np.array([[0, 1, 2]]), None, name='t')])[0]; "
+            "print(s.run(np.array([[0.2, 0.2, 1.0]], np.float32), np.array([[0, 0, -1]], np.float32))[0])")
+    env = {"MC_AO_EMBREE_UPLOAD": "0", "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True)
+    lines = out.stdout.split("\n")
+    assert lines[0] == "False turned off by MC_AO_EMBREE_UPLOAD=0"
+    assert lines[1] == "0"  # the ray hits triangle 0
