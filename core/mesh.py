@@ -41,6 +41,38 @@ def _check_finite(arr, what, name):
                         f"({kind} first at index {tuple(int(i) for i in first)})")
 
 
+def corner_positions(positions, triangles):
+    """positions[triangles] (T, 3, 3), by np.take: numpy's fancy indexing of a (V, 3) array by a
+    (T, 3) index array is 3 to 6 times slower (0.3-0.5 s for a million triangles)."""
+    return np.take(positions, triangles.reshape(-1), axis=0).reshape(len(triangles), 3, positions.shape[1])
+
+
+def cross(a, b):
+    """a x b for (n, 3) arrays, the same floating-point operations as np.cross in half its time."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), np.result_type(a, b))
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[:, j], b[:, k], out=out[:, i])
+        out[:, i] -= a[:, k] * b[:, j]
+    return out
+
+
+def face_geometry(corners):
+    """(areas (T,), unit face normals (T, 3), zero for degenerate triangles) of corners (T, 3, 3)."""
+    c = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(c, axis=1)
+    ok = length > 0
+    c /= np.where(ok, length, 1.0)[:, None]
+    c[~ok] = 0.0
+    return 0.5 * length, c
+
+
+def repeat_corners(face_values):
+    """(T, 3) per-face values as (T, 3, 3) per corner (np.repeat along a new axis, faster)."""
+    out = np.empty((len(face_values), 3, face_values.shape[1]), face_values.dtype)
+    out[:] = face_values[:, None, :]
+    return out
+
+
 class Mesh:
     """A triangle mesh in world space.
 
@@ -92,8 +124,8 @@ class Mesh:
             uv = _real_array(uvs, "uvs", self.name)
             _check_shape(uv, (T, 3, 2), "uvs (one UV per triangle corner)", self.name)
             _check_finite(uv, "uvs", self.name)
-            far = np.abs(uv) > MAX_UV
-            if far.any():
+            if float(uv.max()) > MAX_UV or float(uv.min()) < -MAX_UV:
+                far = np.abs(uv) > MAX_UV
                 tri = int(np.argwhere(far)[0][0])
                 raise MeshError(
                     f"mesh {self.name!r}: {int(far.any(axis=(1, 2)).sum())} triangles have UV coordinates "
@@ -102,14 +134,10 @@ class Mesh:
                 )
             self.uvs = uv.astype(np.float64)
 
-        corners = self.positions[self.triangles]
-        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        length = np.linalg.norm(cross, axis=1)
-        self.areas = 0.5 * length
-        self.face_normals = np.where(length[:, None] > 0, cross / np.where(length > 0, length, 1.0)[:, None], 0.0)
+        self.areas, self.face_normals = face_geometry(corner_positions(self.positions, self.triangles))
 
         if normals is None:
-            self.normals = np.repeat(self.face_normals[:, None, :], 3, axis=1)
+            self.normals = repeat_corners(self.face_normals)
             self.has_corner_normals = False
         else:
             n = _real_array(normals, "normals", self.name)
@@ -129,13 +157,9 @@ class Mesh:
         """
         out = copy.copy(self)
         out.positions = (self.positions - np.asarray(centre, dtype=np.float64)) / float(scale)
-        corners = out.positions[self.triangles]
-        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        length = np.linalg.norm(cross, axis=1)
-        out.areas = 0.5 * length
-        out.face_normals = np.where(length[:, None] > 0, cross / np.where(length > 0, length, 1.0)[:, None], 0.0)
+        out.areas, out.face_normals = face_geometry(corner_positions(out.positions, self.triangles))
         if not self.has_corner_normals:
-            out.normals = np.repeat(out.face_normals[:, None, :], 3, axis=1)
+            out.normals = repeat_corners(out.face_normals)
         else:
             lost = ~np.any(self.normals != 0, axis=2)  # corners that fell back to a zero face normal
             if lost.any():

@@ -75,7 +75,7 @@ def prepare(mesh, width, height):
     e1 = xy[:, 1] - xy[:, 0]
     e2 = xy[:, 2] - xy[:, 0]
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # twice the signed UV area, in texels
-    scale = np.maximum(np.abs(e1).max(axis=1), np.abs(e2).max(axis=1))
+    scale = np.maximum(np.maximum(np.abs(e1[:, 0]), np.abs(e1[:, 1])), np.maximum(np.abs(e2[:, 0]), np.abs(e2[:, 1])))
     valid = np.abs(det) > 1e-12 * np.maximum(scale * scale, 1e-300)
     valid &= np.abs(det) > 0
     # A triangle with no area in space has no surface (and no normal) to bake.
@@ -89,7 +89,9 @@ def prepare(mesh, width, height):
     ea, eb, ec = _edges(xy_ccw)
     norm = np.hypot(ea, eb)
     norm = np.where(valid[:, None] & (norm > 0), norm, 1.0)
-    edges = np.stack([ea / norm, eb / norm, ec / norm], axis=2)
+    edges = np.empty(ea.shape + (3,))
+    for j, e in enumerate((ea, eb, ec)):
+        np.divide(e, norm, out=edges[:, :, j])
     uv = mesh.uvs
     outside = int((valid & np.any((uv < 0) | (uv > 1), axis=(1, 2))).sum())
     return UVTriangles(xy_ccw, xy, valid, degenerate=int((~valid).sum()) - degenerate_space,
@@ -99,9 +101,9 @@ def prepare(mesh, width, height):
 def bin_triangles(tris, width, height, tile):
     """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array (ascending), for tiles touched."""
     idx = np.flatnonzero(tris.valid)
-    xy = tris.xy[idx]
-    lo = np.floor(xy.min(axis=1)).astype(np.int64)
-    hi = np.ceil(xy.max(axis=1)).astype(np.int64) - 1  # last texel the bbox reaches
+    xy = np.take(tris.xy, idx, axis=0)
+    lo = np.floor(np.minimum(np.minimum(xy[:, 0], xy[:, 1]), xy[:, 2])).astype(np.int64)
+    hi = np.ceil(np.maximum(np.maximum(xy[:, 0], xy[:, 1]), xy[:, 2])).astype(np.int64) - 1  # last texel the bbox reaches
     lo = np.maximum(lo, 0)
     hi = np.minimum(hi, [width - 1, height - 1])
     ok = np.all(hi >= lo, axis=1)
@@ -187,10 +189,15 @@ class TileFragments:
 
 def _edges(xy):
     """Edge functions E_k(x, y) = a_k x + b_k y + c_k >= 0 inside, for CCW triangles (..., 3, 2)."""
-    c0, c1 = xy, np.roll(xy, -1, axis=-2)
-    ea = -(c1[..., 1] - c0[..., 1])
-    eb = c1[..., 0] - c0[..., 0]
-    ec = -(ea * c0[..., 0] + eb * c0[..., 1])
+    ea, eb, ec = (np.empty(xy.shape[:-1], np.result_type(xy, np.float64)) for _ in range(3))
+    for k in range(3):  # edge k: corner k -> corner k + 1 (no rolled copy of the corners)
+        c0, c1 = xy[..., k, :], xy[..., (k + 1) % 3, :]
+        a, b = ea[..., k], eb[..., k]
+        np.subtract(c0[..., 1], c1[..., 1], out=a)
+        np.subtract(c1[..., 0], c0[..., 0], out=b)
+        np.multiply(a, c0[..., 0], out=ec[..., k])
+        ec[..., k] += b * c0[..., 1]
+        np.negative(ec[..., k], out=ec[..., k])
     return ea, eb, ec
 
 
@@ -292,8 +299,9 @@ def _border_half_edges(xy):
     two = first[size == 2]
     i, j = idx[two], idx[two + 1]
     twin = swap[i] != swap[j]
-    for c in (p[:, 0], p[:, 1], q[:, 0], q[:, 1]):
-        twin &= c[i] == c[j]
+    eq = np.take(bits, i, axis=0) == np.take(bits, j, axis=0)  # equal bits: equal points (no -0.0, NaN)
+    for c in range(4):
+        twin &= eq[:, c]
     border[i[twin]] = False
     border[j[twin]] = False
     # Larger groups (hash collisions or edges shared by more than two triangles): exactly, by points.
@@ -455,7 +463,7 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
     order = np.argsort(loc_tex, kind="stable")
     li, loc_tex = li[order], loc_tex[order]
     lt = p_tri[li]
-    e = E[lt]
+    e = np.take(E, lt, axis=0)
     e[:, :, 2] += e[:, :, 0] * p_x[li, None] + e[:, :, 1] * p_y[li, None]
     loc_start = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(loc_tex, minlength=n), out=loc_start[1:])

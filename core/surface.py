@@ -32,10 +32,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .mesh import corner_positions
 from .patterns import hash_uniform
 
 SQUARE, TRIANGLE, LOCATED = 0, 1, 2
 _TAG_ALLOCATE = 21
+
+
+def _smooth(mesh):
+    """Per triangle, whether its corner normals differ from each other or from its face normal."""
+    if not mesh.has_corner_normals:
+        return np.zeros(len(mesh.triangles), bool)
+    N, FN = mesh.normals, mesh.face_normals
+    out = np.zeros(len(N), bool)
+    for c in range(3):
+        out |= N[:, 1, c] != N[:, 0, c]
+        out |= N[:, 2, c] != N[:, 0, c]
+        out |= np.abs(N[:, 0, c] - FN[:, c]) > 1e-7
+    return out
 
 
 @dataclass
@@ -68,7 +82,7 @@ class SurfaceTable:
         # Barycentric weights b1, b2 of corners 1, 2 as linear functions of (x - x0, y - y0).
         d1 = np.stack([e2[:, 1], -e2[:, 0]], axis=1) / safe[:, None]   # d b1 / d(x, y)
         d2 = np.stack([-e1[:, 1], e1[:, 0]], axis=1) / safe[:, None]   # d b2 / d(x, y)
-        P = mesh.positions[mesh.triangles]
+        P = corner_positions(mesh.positions, mesh.triangles)
         N = mesh.normals
         dP1, dP2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
         dN1, dN2 = N[:, 1] - N[:, 0], N[:, 2] - N[:, 0]
@@ -76,9 +90,7 @@ class SurfaceTable:
                    Px=d1[:, 0, None] * dP1 + d2[:, 0, None] * dP2, Py=d1[:, 1, None] * dP1 + d2[:, 1, None] * dP2,
                    N0=N[:, 0].copy(),
                    Nx=d1[:, 0, None] * dN1 + d2[:, 0, None] * dN2, Ny=d1[:, 1, None] * dN1 + d2[:, 1, None] * dN2,
-                   FN=mesh.face_normals, corners=P,
-                   smooth=np.any(np.abs(N - N[:, :1]) > 0, axis=(1, 2)) | np.any(np.abs(N[:, 0] - mesh.face_normals) > 1e-7,
-                                                                                  axis=1))
+                   FN=mesh.face_normals, corners=P, smooth=_smooth(mesh))
 
     def position(self, tri, x, y):
         dx, dy = x - self.origin[tri, 0], y - self.origin[tri, 1]
