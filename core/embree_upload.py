@@ -11,9 +11,9 @@ It needs two things embreex does not publish, both checked before use and at the
 embreex's own ``TriangleMesh`` as the fallback (:func:`available` says which path is taken and
 :func:`reason` why):
 
-- the Embree library embreex itself loaded: on Linux the ``libembree4`` mapped into this process
-  (``/proc/self/maps``), elsewhere the one shipped beside the package (``embreex.libs``,
-  ``embreex/.dylibs``);
+- the Embree library embreex itself loaded (not another one in the process: Blender's ``bpy``
+  module has its own): on Linux the mapped file holding the virtual table of a scene embreex made,
+  elsewhere the one library shipped beside the package (``embreex.libs``, ``embreex/.dylibs``);
 - the scene handle inside an ``EmbreeScene``: its extension type is ``RTCScene scene_i; int
   is_committed; EmbreeDevice device`` after the object header. The layout is verified on every
   scene: the public ``is_committed`` must read back at the offset after the handle, and the
@@ -45,26 +45,49 @@ _lock = threading.Lock()
 _state = {"lib": None, "ok": None, "reason": ""}
 
 
-def _library_path():
-    """Path of the Embree library embreex uses (its extension module already imported), or None."""
-    from embreex import rtcore_scene  # noqa: F401  (loads the library)
+def _mapped_files():
+    """(start, end, path) of every file mapped into this process (Linux), or None elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return None
+    out = []
+    try:
+        with open("/proc/self/maps") as f:
+            for line in f:
+                parts = line.split(None, 5)
+                if len(parts) == 6 and parts[5].startswith("/"):
+                    lo, hi = parts[0].split("-")
+                    out.append((int(lo, 16), int(hi, 16), parts[5].strip()))
+    except OSError:
+        return None
+    return out
 
-    if sys.platform.startswith("linux"):
-        try:
-            with open("/proc/self/maps") as f:
-                for line in f:
-                    parts = line.split(None, 5)
-                    if len(parts) == 6 and "embree4" in Path(parts[5].strip()).name:
-                        return parts[5].strip()
-        except OSError:
-            pass
+
+def _library_path():
+    """Path of the Embree library embreex's extension uses, or None.
+
+    There can be more than one Embree in the process: Blender's ``bpy`` module ships its own
+    ``libembree4.so.4``. On Linux the right one is found by where the C++ object behind a new
+    embreex scene points: its virtual table lies in the library that made it. Elsewhere it is the
+    copy vendored beside the package (``embreex.libs`` on Windows, ``embreex/.dylibs`` on macOS),
+    which the extension's own load path names.
+    """
+    from embreex import rtcore_scene
+
+    maps = _mapped_files()
+    if maps is not None:
+        probe = rtcore_scene.EmbreeScene()
+        vtable = ctypes.c_void_p.from_address(_scene_handle(probe)).value
+        del probe
+        for lo, hi, path in maps:
+            if lo <= vtable < hi:
+                return path if "embree" in Path(path).name else None
+        return None
     import embreex
 
     pkg = Path(embreex.__file__).resolve().parent
-    for folder in (pkg.parent / "embreex.libs", pkg / ".dylibs", pkg):
-        found = sorted(p for p in folder.glob("*embree4*") if p.suffix in (".so", ".4", ".dylib", ".dll")
-                       or ".so." in p.name)
-        if found:
+    for folder in (pkg.parent / "embreex.libs", pkg / ".dylibs"):
+        found = sorted(folder.glob("*embree4*"))
+        if len(found) == 1:
             return str(found[0])
     return None
 

@@ -120,3 +120,28 @@ def test_environment_turns_it_off():
     lines = out.stdout.split("\n")
     assert lines[0] == "False turned off by MC_AO_EMBREE_UPLOAD=0"
     assert lines[1] == "0"  # the ray hits triangle 0
+
+
+def test_blenders_own_embree_is_not_taken():
+    """Blender (and the bpy module) load their own libembree4 before the add-on imports embreex: the
+    upload must call the library embreex's scenes come from, not the first Embree in the process."""
+    pytest.importorskip("bpy")
+    code = ("import bpy, sys; from core import embree_upload as u; "
+            "print(u.available(), u._library_path()); "
+            "print(len({p for _, _, p in (u._mapped_files() or []) if 'embree4' in p}))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    ok, path = out.stdout.splitlines()[0].split(" ", 1)
+    assert ok == "True" and Path(path).parent.name in ("embreex.libs", ".dylibs"), out.stdout
+    if sys.platform.startswith("linux"):
+        assert int(out.stdout.splitlines()[1]) >= 2  # both were there to choose from
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/maps")
+def test_library_is_the_one_that_made_the_scene(monkeypatch):
+    """Another Embree mapped first (as Blender's is) is passed over: the library is the file holding the
+    virtual table of a scene embreex made."""
+    real = embree_upload._mapped_files()
+    other = (0x1000, 0x2000, "/elsewhere/bpy/lib/libembree4.so.4")
+    monkeypatch.setattr(embree_upload, "_mapped_files", lambda: [other] + real)
+    path = embree_upload._library_path()
+    assert path is not None and path != other[2] and "embree" in Path(path).name
