@@ -45,10 +45,21 @@ def default_uv_map(mesh):
     return layers[0].name if len(layers) else None
 
 
-def _foreach(collection, attr, count, width, dtype):
+def _foreach(collection, attr, count, width, dtype, as_type=None):
+    """``collection.foreach_get(attr)`` as a (count, width) array. ``dtype`` must be the property's own
+    type (float32 for coordinates and normals, uint32 for a loop triangle's indices): Blender copies a
+    matching buffer at once and converts any other type element by element (dense.blend's 524k
+    triangles: 0.45 s against 0.02 s); ``as_type`` converts afterwards, exactly."""
     out = np.empty(count * width, dtype=dtype)
     collection.foreach_get(attr, out)
+    if as_type is not None:
+        out = out.astype(as_type)
     return out.reshape(count, width) if width > 1 else out
+
+
+def _rows(a, index):
+    """a[index] for an integer index array (np.take: numpy's fancy indexing is several times slower)."""
+    return np.take(a, index.reshape(-1), axis=0).reshape(index.shape + a.shape[1:])
 
 
 def mesh_arrays(name, mesh, matrix, *, uv_map=None, with_uvs=False, with_normals=False, vertex_normals=False):
@@ -96,14 +107,14 @@ def mesh_arrays(name, mesh, matrix, *, uv_map=None, with_uvs=False, with_normals
     m = np.array(matrix, dtype=np.float64).reshape(4, 4)
     linear = m[:3, :3]
 
-    positions = _foreach(mesh.vertices, "co", len(mesh.vertices), 3, np.float64)
+    positions = _foreach(mesh.vertices, "co", len(mesh.vertices), 3, np.float32, np.float64)
     positions = positions @ linear.T + m[:3, 3]
-    triangles = _foreach(tris, "vertices", n_tris, 3, np.int32)
-    corners = _foreach(tris, "loops", n_tris, 3, np.int32)
+    triangles = _foreach(tris, "vertices", n_tris, 3, np.uint32, np.int32)
+    corners = _foreach(tris, "loops", n_tris, 3, np.uint32, np.int32)
 
     uvs = None
     if uv_layer is not None:
-        uvs = _foreach(uv_layer.uv, "vector", len(mesh.loops), 2, np.float32)[corners]
+        uvs = _rows(_foreach(uv_layer.uv, "vector", len(mesh.loops), 2, np.float32), corners)
 
     normals = None
     if with_normals:
@@ -114,12 +125,12 @@ def mesh_arrays(name, mesh, matrix, *, uv_map=None, with_uvs=False, with_normals
             raise ExtractError(f"{name} has a zero scale, its surface has no normal") from None
         if vertex_normals:
             verts = _foreach(mesh.loops, "vertex_index", len(mesh.loops), 1, np.int32)
-            normals = _foreach(mesh.vertex_normals, "vector", len(mesh.vertices), 3, np.float64)[verts]
+            normals = _rows(_foreach(mesh.vertex_normals, "vector", len(mesh.vertices), 3, np.float32, np.float64), verts)
         else:
-            normals = _foreach(mesh.corner_normals, "vector", len(mesh.loops), 3, np.float64)
+            normals = _foreach(mesh.corner_normals, "vector", len(mesh.loops), 3, np.float32, np.float64)
         normals = normals @ to_world
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-        normals = normals.astype(np.float32)[corners]
+        normals = _rows(normals.astype(np.float32), corners)
 
     if np.linalg.det(linear) < 0:
         # A mirroring transform reverses the winding; swap two corners so that the triangles' own

@@ -113,8 +113,9 @@ def cage_arrays(low_eval, cage_eval, target):
         if cage_mesh is None:
             raise ExtractError(f"the cage object {cage_name} has no mesh")
         cage_topology = _topology(cage_mesh)
-        positions = np.empty(3 * len(cage_mesh.vertices), np.float64)
+        positions = np.empty(3 * len(cage_mesh.vertices), np.float32)  # Blender's own type: one copy
         cage_mesh.vertices.foreach_get("co", positions)
+        positions = positions.astype(np.float64)
     finally:
         cage_eval.to_mesh_clear()
     same = (low_topology[0] == cage_topology[0] and np.array_equal(low_topology[1], cage_topology[1])
