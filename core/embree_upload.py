@@ -11,9 +11,10 @@ It needs two things embreex does not publish, both checked before use and at the
 embreex's own ``TriangleMesh`` as the fallback (:func:`available` says which path is taken and
 :func:`reason` why):
 
-- the Embree library embreex itself loaded (not another one in the process: Blender's ``bpy``
-  module has its own): on Linux the mapped file holding the virtual table of a scene embreex made,
-  elsewhere the one library shipped beside the package (``embreex.libs``, ``embreex/.dylibs``);
+- the Embree library embreex's scenes come from (Blender has its own, and depending on how it was
+  linked embreex calls that one or its vendored copy): on Linux the mapped file holding the virtual
+  table of a scene embreex made, elsewhere the one library shipped beside the package
+  (``embreex.libs``, ``embreex/.dylibs``);
 - the scene handle inside an ``EmbreeScene``: its extension type is ``RTCScene scene_i; int
   is_committed; EmbreeDevice device`` after the object header. The layout is verified on every
   scene: the public ``is_committed`` must read back at the offset after the handle, and the
@@ -65,11 +66,14 @@ def _mapped_files():
 def _library_path():
     """Path of the Embree library embreex's extension uses, or None.
 
-    There can be more than one Embree in the process: Blender's ``bpy`` module ships its own
-    ``libembree4.so.4``. On Linux the right one is found by where the C++ object behind a new
-    embreex scene points: its virtual table lies in the library that made it. Elsewhere it is the
-    copy vendored beside the package (``embreex.libs`` on Windows, ``embreex/.dylibs`` on macOS),
-    which the extension's own load path names.
+    There can be more than one Embree in the process, and the one embreex calls is not always its
+    own: the ``bpy`` module maps Blender's ``libembree4.so.4`` privately and embreex uses its
+    vendored copy, but a Blender executable that links Embree with global symbols (Debian's 4.3,
+    tests/gui/check_embree.py) makes embreex's calls land in Blender's library although the vendored
+    copy is mapped too. On Linux the right one is found by where the C++ object behind a new embreex
+    scene points: its virtual table lies in the library that made it. Elsewhere it is the copy
+    vendored beside the package (``embreex.libs`` on Windows, ``embreex/.dylibs`` on macOS); the
+    self-test, which builds a scene both ways and compares every answer, guards that guess.
     """
     from embreex import rtcore_scene
 
