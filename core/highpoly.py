@@ -85,7 +85,7 @@ import numpy as np
 from . import warps
 from .errors import MeshError, SettingsError
 from .estimators import SamplingPlan, TexelEstimates, replicate_samples
-from .mesh import Mesh
+from .mesh import Mesh, corner_positions
 from .raster import rasterize_tile
 from .surface import SurfaceTable, allocate, build_units
 from .tracing import FAR, Clock, RayBatch, Tracer, embree_scene
@@ -241,7 +241,7 @@ class HighPolyScene:
         highs = s2a.highs
         self.owner = np.repeat(np.arange(len(highs)), [h.triangle_count for h in highs])
         high = _concatenate(highs, "high-poly")
-        self.corners = high.positions[high.triangles]          # (T, 3, 3)
+        self.corners = corner_positions(high.positions, high.triangles)  # (T, 3, 3)
         self.normals = high.normals                            # (T, 3, 3) unit corner normals
         self.face_normals = high.face_normals
         # Occlusion: the high-poly meshes and the occluders, as one mesh (Tracer's contact scene is for a
@@ -301,7 +301,7 @@ class _Contact:
             for j, m in enumerate(others):
                 if j == i or np.any(boxes[j][0] > hi) or np.any(boxes[j][1] < lo):
                     continue
-                corners = m.positions[m.triangles]
+                corners = corner_positions(m.positions, m.triangles)
                 near = np.all((corners.max(axis=1) >= lo) & (corners.min(axis=1) <= hi), axis=1)
                 if near.any():
                     parts.append(corners[near])
@@ -677,11 +677,11 @@ class HighPolyStage:
 
     def _point_rays(self, tri, w):
         m = self.target
-        p = np.einsum("ij,ijk->ik", w, m.positions[m.triangles[tri]])
+        p = np.einsum("ij,ijk->ik", w, corner_positions(m.positions, m.triangles[tri]))
         if self.s2a.cage is None:
             n = np.einsum("ij,ijk->ik", w, m.normals[tri])
             return p, extruded(p, n, m.face_normals[tri], self.s2a.extrusion)
-        c = np.einsum("ij,ijk->ik", w, self.s2a.cage.positions[self.s2a.cage.triangles[tri]])
+        c = np.einsum("ij,ijk->ik", w, corner_positions(self.s2a.cage.positions, self.s2a.cage.triangles[tri]))
         return p, towards(c, p)
 
     def _any_match(self, bins, cancelled):

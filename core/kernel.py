@@ -81,8 +81,7 @@ def triangle_matrices(table, tris, offset, curved_all=False):
     origin = take(table.origin, tris)
     cxy = take(table.corners_xy, tris)
     centre = origin + ((cxy[:, 0] + cxy[:, 1] + cxy[:, 2]) / 3.0 - origin)
-    dx, dy = centre[:, 0] - origin[:, 0], centre[:, 1] - origin[:, 1]
-    nref = take(table.N0, tris) + dx[:, None] * take(table.Nx, tris) + dy[:, None] * take(table.Ny, tris)
+    nref = table.normal(tris, centre[:, 0], centre[:, 1])
     ln = np.linalg.norm(nref, axis=1)
     nref = np.where((ln > 1e-12)[:, None], nref / np.where(ln > 0, ln, 1.0)[:, None], fn)
     gn = np.where((np.einsum("ij,ij->i", fn, nref) < 0)[:, None], -fn, fn)  # to the shading side

@@ -93,12 +93,16 @@ class SurfaceTable:
                    FN=mesh.face_normals, corners=P, smooth=_smooth(mesh))
 
     def position(self, tri, x, y):
-        dx, dy = x - self.origin[tri, 0], y - self.origin[tri, 1]
-        return self.P0[tri] + dx[:, None] * self.Px[tri] + dy[:, None] * self.Py[tri]
+        return self._affine(tri, x, y, self.P0, self.Px, self.Py)
 
     def normal(self, tri, x, y):
-        dx, dy = x - self.origin[tri, 0], y - self.origin[tri, 1]
-        return self.N0[tri] + dx[:, None] * self.Nx[tri] + dy[:, None] * self.Ny[tri]
+        return self._affine(tri, x, y, self.N0, self.Nx, self.Ny)
+
+    def _affine(self, tri, x, y, v0, vx, vy):
+        # np.take: numpy's fancy indexing of these (T, 3) arrays is 2-3 times slower.
+        origin = np.take(self.origin, tri, axis=0)
+        dx, dy = x - origin[:, 0], y - origin[:, 1]
+        return np.take(v0, tri, axis=0) + dx[:, None] * np.take(vx, tri, axis=0) + dy[:, None] * np.take(vy, tri, axis=0)
 
 
 @dataclass

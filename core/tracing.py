@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .mesh import corner_positions
+
 #: Offsets off the surface: relative to the scene's bounding-box diagonal and to |position|.
 EPS_SCENE = 1e-6
 EPS_POSITION = 2.0 ** -18
@@ -109,7 +111,7 @@ class Tracer:
         self.face_normals = np.concatenate([m.face_normals for m in meshes])
         self.contact_scene = embree_scene(meshes[1:])[0] if len(meshes) > 1 else None
         if len(meshes) > 1:
-            corners = np.concatenate([m.positions[m.triangles] for m in meshes[1:]])  # (m, 3, 3)
+            corners = np.concatenate([corner_positions(m.positions, m.triangles) for m in meshes[1:]])  # (m, 3, 3)
             self._occ_lo, self._occ_hi = corners.min(axis=1), corners.max(axis=1)
         lo, hi = positions.min(axis=0), positions.max(axis=0)
         self.extent = float(np.linalg.norm(hi - lo))

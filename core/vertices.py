@@ -27,7 +27,7 @@ from .bake import _cancelled, _normalized_scene, _run_all, _Shared, _TileBaker
 from .errors import BakeCancelled, MeshError, SettingsError
 from .estimators import ErrorModel
 from .kernel import Kernel
-from .mesh import Mesh
+from .mesh import Mesh, corner_positions
 from .patterns import POOL_POINTS, TexelPattern
 from .settings import BakeSettings, pattern_span
 from .surface import SQUARE, SurfaceTable, Units
@@ -136,7 +136,7 @@ def sample_points(mesh, corners, merge=True):
         unit = first.copy()
     t = tri[first]
     p = mesh.positions[vert[first]]
-    corners3 = mesh.positions[mesh.triangles[t]]
+    corners3 = corner_positions(mesh.positions, mesh.triangles[t])
     to_centre = corners3.mean(axis=1) - p
     dist = np.linalg.norm(to_centre, axis=1)
     size = float(np.max(mesh.positions.max(axis=0) - mesh.positions.min(axis=0)))
