@@ -112,11 +112,7 @@ class BakeSettings:
         threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
         chunk_rays = _positive_int(chunk_rays, "chunk_rays")
         if tile_size is None:
-            # Adaptive bakes rarely reach their cap: size tiles for a typical texel's samples (the
-            # geometric mean of the minimum and the cap), or they come out tiny and costly.
-            typical = samples if target_error == 0 else max(min(min_samples, samples),
-                                                            int(math.sqrt(min(min_samples, samples) * samples)))
-            tile_size = auto_tile_size(w, h, typical, threads)
+            tile_size = auto_tile_size(w, h, threads)
         tile_size = _positive_int(tile_size, "tile_size")
         tile_size = -(-tile_size // TILE_MULTIPLE) * TILE_MULTIPLE
         replicates = _positive_int(replicates, "replicates")
@@ -208,7 +204,7 @@ def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, so
     return planes + margin_work + chunks + pool + min(units, texels * 4 * 600 * threads) + tris
 
 
-def auto_tile_size(width, height, samples, threads):
+def auto_tile_size(width, height, threads):
     """Texels per tile side: about two tiles per thread, a multiple of TILE_MULTIPLE, at most 256.
 
     Every tile costs its own rasterising and, per group of equal pieces, its own kernel calls (about
@@ -216,8 +212,8 @@ def auto_tile_size(width, height, samples, threads):
     out the threads' shares. Measured on the bench's Suzanne scene, 2 threads (wall seconds, tile
     side): 128^2 x 128 spp 0.84 (32) / 0.52 (64) / 0.67 (128); 256^2 x 128 2.74 / 1.42 / 1.05 (128) /
     1.87 (256); 512^2 x 128 6.41 / 3.57 / 2.92 (128) / 2.95 (256); 1024^2 x 16 13.7 / 5.1 / 2.6 /
-    1.97 (256). ``samples`` no longer matters: tiles are traced in chunks of ``chunk_rays``, so a
-    tile's sample count bounds neither memory nor the granularity of progress and cancel.
+    1.97 (256). The sample count does not enter: tiles are traced in chunks of ``chunk_rays``, so a
+    tile's samples bound neither memory nor the granularity of progress and cancel.
     """
     side = math.sqrt(width * height / (2 * max(1, threads)))
     side = -(-int(math.ceil(side)) // TILE_MULTIPLE) * TILE_MULTIPLE

@@ -409,7 +409,7 @@ def test_a_live_bake_draws_its_tiles_over_the_previous_pixels(bpy, scene, hold_b
     changed = np.any(live != old, axis=2)
     from core.settings import auto_tile_size
 
-    side = auto_tile_size(64, 64, scene.mc_ao.samples, 1)
+    side = auto_tile_size(64, 64, 1)
     assert side < 64  # more than one tile
     assert changed.any()  # the first tile is in ...
     assert 0 < changed.sum() <= side * side  # ... and only the first tile
