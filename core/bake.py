@@ -225,22 +225,28 @@ class _TileBaker:
         sums = np.zeros((n_tex, 3)) if self.bent else None
         if n_tex == 0:
             return est, sums
-        tile = TileContext(self.table, units, self.pattern.keys(texel_ids), texel_ids, contact, self.tracer.offset,
+        keys = [self.pattern.keys(texel_ids, r) for r in range(s.replicates)]
+        # Every replicate's keys in one tile: a round's pieces of all replicates go through the
+        # kernel together (each call costs about half a millisecond before its first ray).
+        tile = TileContext(self.table, units, TileContext.stacked_keys(keys), texel_ids, contact, self.tracer.offset,
                            located_curved=self.located_curved, tris=tris)
-        tiles = [tile] + [tile.for_replicate(self.pattern.keys(texel_ids, r), r) for r in range(1, s.replicates)]
         for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
-            for r, t, a, c in self.plan.shares(start, count, texels):
-                self._trace(tiles[r], units, est, sums, r, t, a, c)
+            self._trace(tile, units, est, sums, list(self.plan.shares(start, count, texels)))
         # Credit the work the adaptive stop saved, so progress reaches 1.
         shared.advance(n_tex * s.samples - int(est.n.sum()))
         return est, sums
 
-    def _trace(self, tile, units, est, sums, replicate, texels, start, count):
+    def _trace(self, tile, units, est, sums, shares):
+        """Trace one round: ``shares`` the (replicate, texels, start, count) of each replicate."""
         s, shared = self.s, self.shared
-        unit, first, size = allocate(units, texels, start, count, self.seeds[replicate], tile.texel_ids)
+        if not shares:
+            return
+        parts = [allocate(units, texels, start, count, self.seeds[r], tile.texel_ids) for r, texels, start, count in shares]
+        unit, first, size = (np.concatenate([p[i] for p in parts]) for i in range(3))
+        rep = np.repeat(np.array([r for r, *_ in shares], np.int64), [len(p[0]) for p in parts])
         # Equal pieces go through the kernel together, squares before triangles, located texels
         # apart, in a fixed order (so every texel's sums are added in the same order however the
-        # pieces are chunked).
+        # pieces are chunked); a replicate's pieces keep their order among each other.
         kind = units.kind[unit].astype(np.int64)
         located = kind == LOCATED
         curved = np.where(located, self.located_curved, self.table.smooth[units.tri[unit]])
@@ -255,8 +261,9 @@ class _TileBaker:
             order = np.argsort(key.astype(np.uint16), kind="stable")  # a radix sort
         else:
             order = np.argsort(key, kind="stable")
-        unit, first, size, kind, curved, cands, key = (unit[order], first[order], size[order], kind[order],
-                                                       curved[order], cands[order], key[order])
+        unit, first, size, kind, curved, cands, key, rep = (unit[order], first[order], size[order], kind[order],
+                                                            curved[order], cands[order], key[order], rep[order])
+        several = len(shares) > 1
         bounds = np.flatnonzero(np.diff(key >> 1)) + 1
         for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(size)]])):
             k = int(size[lo])
@@ -268,10 +275,18 @@ class _TileBaker:
                 squares = int(np.count_nonzero(kind[c] == SQUARE))
                 vec = None if sums is None else np.empty((c.stop - c.start, 3))
                 s1, s2, rays, sec, cpu = self.kernel.run(tile, bool(curved[lo]), unit[c], first[c], k, squares,
-                                                         located=bool(kind[lo] == LOCATED), vectors=vec)
-                est.add(units.texel[unit[c]], k, s1, s2, replicate)
+                                                         located=bool(kind[lo] == LOCATED), vectors=vec,
+                                                         replicates=rep[c])
+                texel = units.texel[unit[c]]
+                if several:
+                    for r, *_ in shares:
+                        sel = rep[c] == r
+                        if sel.any():
+                            est.add(texel[sel], k, s1[sel], s2[sel], r)
+                else:
+                    est.add(texel, k, s1, s2, shares[0][0])
                 if vec is not None:
-                    np.add.at(sums, units.texel[unit[c]], vec)
+                    np.add.at(sums, texel, vec)
                 shared.advance(rays, rays, sec, cpu)
 
 

@@ -150,31 +150,46 @@ def window_sums(values, x, y):
     if m == 0:
         return np.zeros((k, 0))
     B, r = POOL_BLOCK, POOL_RADIUS
+    x = np.asarray(x, dtype=np.int64)
+    y = np.asarray(y, dtype=np.int64)
     bx, by = x // B, y // B
     bx0, by0 = int(bx.min()), int(by.min())
     nbx, nby = int(bx.max()) - bx0 + 1, int(by.max()) - by0 + 1
-    # Dense blocks (k, nby, nbx, B + 2r + 1, B + 2r + 1) with a border of zeros, then window sums
-    # from a summed-area table: O(1) per texel whatever the window.
+    # Dense blocks (nby, nbx, B + 2r + 1, B + 2r + 1) per row of ``values``, with a border of zeros,
+    # then window sums from a summed-area table: O(1) per texel whatever the window. Each texel's
+    # place is one flat index; its window's corners are that index plus constant offsets.
     side = B + 2 * r + 1
-    dense = np.zeros((k, nby, nbx, side, side))
-    iy, ix = by - by0, bx - bx0
-    py, px = y % B + r + 1, x % B + r + 1
-    dense[:, iy, ix, py, px] = values
-    dense = dense.cumsum(axis=3).cumsum(axis=4)
-    y1, x1, y0, x0 = py + r, px + r, py - r - 1, px - r - 1
-    return (dense[:, iy, ix, y1, x1] - dense[:, iy, ix, y0, x1] - dense[:, iy, ix, y1, x0]
-            + dense[:, iy, ix, y0, x0])
+    size = nby * nbx * side * side
+    at = ((by - by0) * nbx + (bx - bx0)) * (side * side) + (y % B + r + 1) * side + (x % B + r + 1)
+    dense = np.zeros((k, nby * nbx, side, side))
+    flat = dense.reshape(k, size)
+    for j in range(k):
+        flat[j, at] = values[j]
+    np.cumsum(dense, axis=2, out=dense)
+    np.cumsum(dense, axis=3, out=dense)
+    out = np.empty((k, m))
+    hi, lo = r * side + r, (r + 1) * side + r + 1  # offsets of the (y1, x1) and (y0, x0) corners,
+    # added in the order y1x1 - y0x1 - y1x0 + y0x0
+    for j in range(k):
+        f = flat[j]
+        o = out[j]
+        np.take(f, at + hi, out=o)
+        o -= np.take(f, at - ((r + 1) * side - r))  # (y0, x1)
+        o -= np.take(f, at + (r * side - r - 1))    # (y1, x0)
+        o += np.take(f, at - lo)                    # (y0, x0)
+    return out
 
 
-def pooled_variance(v, dof, n, x, y):
+def pooled_variance(v, dof, n, x, y, also=()):
     """Each texel's variance pooled over its window (see the module docstring), and its degrees of
     freedom: the mean of the window's variances ``v`` (each of the mean of ``n`` samples, with ``dof``
-    degrees of freedom, which weigh it) scaled to the texel's own ``n``."""
-    (total, weight) = window_sums([dof * v * n, dof], x, y)
+    degrees of freedom, which weigh it) scaled to the texel's own ``n``. ``also``: more rows to sum
+    over the same windows in the same pass, returned after those two."""
+    (total, weight, *more) = window_sums([dof * v * n, dof, *also], x, y)
     weight = np.rint(weight)
     with np.errstate(invalid="ignore", divide="ignore"):
         pooled = np.where(weight > 0, np.maximum(total, 0.0) / (np.maximum(weight, 1.0) * np.maximum(n, 1)), 0.0)
-    return pooled, weight
+    return (pooled, weight, *more) if also else (pooled, weight)
 
 
 class ErrorModel:
@@ -212,9 +227,8 @@ class ErrorModel:
             # replicate missed the high-poly surface, core.highpoly) has no spread of its own: no
             # degrees of freedom, so it takes its neighbours' variance and gives them none.
             v, dof = est.replicate_variance(), np.where(np.all(est.rn > 0, axis=0), self.replicates - 1.0, 0.0)
-        pooled, pooled_dof = pooled_variance(v, dof, n, x, y)
         if not self.binary:
-            return pooled, pooled_dof
+            return pooled_variance(v, dof, n, x, y)
         # Binary terms. Texels whose samples all agree (an open texel, one under a resting object)
         # say nothing about the variance of a texel whose samples vary beside them: a texel whose
         # samples vary pools over the window's texels whose samples vary only. A texel whose samples
@@ -223,7 +237,7 @@ class ErrorModel:
         k = np.rint(np.clip(est.mean, 0.0, 1.0) * nn)
         varying = (k > 0) & (k < nn)
         w = np.where(varying, dof, 0.0)
-        total, weight = window_sums([w * v * nn, w], x, y)
+        pooled, pooled_dof, total, weight = pooled_variance(v, dof, n, x, y, also=(w * v * nn, w))
         weight = np.rint(weight)
         with np.errstate(invalid="ignore", divide="ignore"):
             own = np.where(weight > 0, np.maximum(total, 0.0) / (np.maximum(weight, 1.0) * nn), 0.0)

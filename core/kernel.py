@@ -162,6 +162,17 @@ class TileContext:
                 self.loc_pos = np.full(len(table.P0), -1, np.int64)
                 self.loc_pos[ctris] = np.arange(len(ctris))  # triangle id -> row of gn, eps
         self.replicate = 0
+        self.texels = len(texel_ids)
+
+    @staticmethod
+    def stacked_keys(keys):
+        """The keys of several replicates of the same texels as one TexelKeys: replicate r's texel t
+        at row r * len(texels) + t (what :meth:`Kernel.run` reads with ``replicates``)."""
+        from .patterns import TexelKeys
+
+        if len(keys) == 1:
+            return keys[0]
+        return TexelKeys(*(np.concatenate([getattr(k, f) for k in keys]) for f in TexelKeys.__slots__))
 
     def for_replicate(self, keys, replicate):
         """The same tile with the keys of another replicate (everything else is shared)."""
@@ -205,7 +216,7 @@ class Kernel:
             ws = self._local.ws = _Workspace(n)
         return ws
 
-    def run(self, tile, curved, unit, start, size, squares, located=False, vectors=None):
+    def run(self, tile, curved, unit, start, size, squares, located=False, vectors=None, replicates=None):
         """Trace the aligned blocks of ``size`` samples from ``start`` (per piece) of each piece's ``unit``;
         the first ``squares`` pieces are texel squares, the rest pieces of triangles; all pieces'
         triangles flat-shaded (``curved`` False) or all smooth-shaded. With ``located``, every piece
@@ -219,13 +230,18 @@ class Kernel:
         samples' unit directions each weighted by the sample's term (V for cosine directions,
         2 cos(theta) V for uniform ones, times the falloff): the bent-normal estimator, from the same
         rays (:mod:`core.bent`).
+
+        ``replicates``: None (every piece is of ``tile.replicate``, whose keys are ``tile.keys``), or
+        per piece the replicate it belongs to, ``tile.keys`` then holding every replicate's keys
+        (:meth:`TileContext.stacked_keys`): pieces of all replicates in one call.
         """
         units, keys = tile.units, tile.keys
         g, k = len(unit), int(size)
         n = g * k
         ws = self._workspace(n)
         tex = units.texel[unit]
-        e, o = keys.pattern[tex], keys.order[tex]
+        kt = tex if replicates is None else tex + replicates * tile.texels  # the pieces' rows of keys
+        e, o = keys.pattern[kt], keys.order[kt]
         first = self.pattern.block_rows(e, o, start, k)
         # Feature rows of the pieces' blocks: consecutive pool rows from each block's first. Blocks
         # of xor-ordered patterns are aligned, so they are whole rows of a (rows / k, k, 6) view.
@@ -245,7 +261,7 @@ class Kernel:
                 np.add(first[:, None], ws.ramp[None, :k], out=idx)
             np.take(feats, idx.reshape(n), axis=0, out=xf)
         xu = x.view(np.uint32)
-        shift = keys.shift[tex]
+        shift = keys.shift[kt]
         a, b = x[:, :, 0], x[:, :, 1]
         for c, dst in ((0, a), (1, b)):
             # The texel's shift of the position coordinate, in place, then to [0, 1) in float32.
@@ -279,8 +295,8 @@ class Kernel:
             a[tr] = _per_piece(ct[:, 0], k) + _per_piece(ct[:, 1], k) * u + _per_piece(ct[:, 2], k) * v
             b[tr] = _per_piece(ct[:, 3], k) + _per_piece(ct[:, 4], k) * u + _per_piece(ct[:, 5], k) * v
         # The texel's turn about the normal: a rotation of the first two direction features.
-        cos_t = _per_piece(keys.cos_turn[tex].astype(np.float32), k)
-        sin_t = _per_piece(keys.sin_turn[tex].astype(np.float32), k)
+        cos_t = _per_piece(keys.cos_turn[kt].astype(np.float32), k)
+        sin_t = _per_piece(keys.sin_turn[kt].astype(np.float32), k)
         f0, f1 = x[:, :, 3], x[:, :, 4]
         t0 = f0 * cos_t
         t0 -= f1 * sin_t
@@ -398,11 +414,17 @@ class Kernel:
         if vectors is not None:
             _direction_sums(directions, value, weight, g, k, vectors)
         if self.on_rays is not None:
-            self.on_rays(RayBatch(origins=origins, directions=directions, tfar=traced_tfar, occluded=hit,
-                                  texels=np.repeat(tile.texel_ids[tex], k),
-                                  samples=(self.pattern.block_samples(e, o, first, k) if aligned or not self.pattern.xor
-                                           else start[:, None] + ws.ramp[None, :k]).ravel(),
-                                  seconds=clock.wall, cpu_seconds=clock.cpu, replicate=tile.replicate))
+            samples = (self.pattern.block_samples(e, o, first, k) if aligned or not self.pattern.xor
+                       else start[:, None] + ws.ramp[None, :k]).ravel()
+            texels = np.repeat(tile.texel_ids[tex], k)
+            # One batch per replicate; a call's time is shared among them by their rays.
+            for r in ([tile.replicate] if replicates is None else np.unique(replicates)):
+                rows = slice(None) if replicates is None else np.repeat(replicates == r, k)
+                share = 1.0 if replicates is None else np.count_nonzero(replicates == r) / g
+                self.on_rays(RayBatch(origins=origins[rows], directions=directions[rows], tfar=traced_tfar[rows],
+                                      occluded=hit[rows], texels=texels[rows], samples=samples[rows],
+                                      seconds=clock.wall * share, cpu_seconds=clock.cpu * share,
+                                      replicate=int(r)))
         if value.dtype == bool and weight is None:
             s1 = value.view(np.uint8).reshape(g, k).sum(axis=1, dtype=np.int64).astype(np.float64)
             return s1, s1, n, clock.wall, clock.cpu
