@@ -256,7 +256,7 @@ class _TileBaker:
         # One integer per piece: (size, curved, located, candidates) says its call, the last bit
         # puts squares before pieces of triangles; a stable sort keeps each texel's pieces in order.
         span = int(cands.max()) + 1 if len(cands) else 1
-        key = (((np.log2(size).astype(np.int64) * 2 + curved) * 2 + located) * span + cands) * 2 + (kind == TRIANGLE)
+        key = (((size * 2 + curved) * 2 + located) * span + cands) * 2 + (kind == TRIANGLE)
         if len(key) and key.max() < 1 << 16:
             order = np.argsort(key.astype(np.uint16), kind="stable")  # a radix sort
         else:

@@ -1,7 +1,7 @@
 """The sampling kernel: pieces of sample units -> rays -> per-piece sums, one matrix product per chunk.
 
-A piece is ``K`` consecutive samples (an aligned block, see :mod:`core.surface`) of one unit, a
-piece of one triangle. Each sample's pattern point (:mod:`core.patterns`) comes as a feature row
+A piece is ``K`` consecutive samples (see :func:`core.surface.allocate`) of one unit, a piece of one
+triangle. Each sample's pattern point (:mod:`core.patterns`) comes as a feature row
 
     x = [a, b, 1, f0, f1, f2]
 
@@ -217,7 +217,7 @@ class Kernel:
         return ws
 
     def run(self, tile, curved, unit, start, size, squares, located=False, vectors=None, replicates=None):
-        """Trace the aligned blocks of ``size`` samples from ``start`` (per piece) of each piece's ``unit``;
+        """Trace the ``size`` samples from ``start`` (per piece) of each piece's ``unit``;
         the first ``squares`` pieces are texel squares, the rest pieces of triangles; all pieces'
         triangles flat-shaded (``curved`` False) or all smooth-shaded. With ``located``, every piece
         is a located texel's square, each sample on its own triangle (``curved``: the tile's
@@ -242,18 +242,33 @@ class Kernel:
         tex = units.texel[unit]
         kt = tex if replicates is None else tex + replicates * tile.texels  # the pieces' rows of keys
         e, o = keys.pattern[kt], keys.order[kt]
-        first = self.pattern.block_rows(e, o, start, k)
-        # Feature rows of the pieces' blocks: consecutive pool rows from each block's first. Blocks
-        # of xor-ordered patterns are aligned, so they are whole rows of a (rows / k, k, 6) view.
+        # Feature rows of the pieces' samples. Xor-ordered patterns map an aligned power-of-two block
+        # of samples onto consecutive pool rows (in another order), whole rows of a (rows / size,
+        # size, 6) view: a call whose pieces all start at the same sample takes its samples as such
+        # blocks (a piece of 56 from sample 8: blocks of 8, 16 and 32), others go row by row.
         feats = self.pattern.features(self.kinds[curved])
         xf = ws.x[:n]
         x = xf.reshape(g, k, 6)
-        aligned = not np.any(start & (k - 1))
-        if self.pattern.xor and aligned:
-            np.take(feats.reshape(-1, k, 6), first // k, axis=0, out=x)
+        blocks = None
+        if self.pattern.xor:
+            if (k & (k - 1)) == 0 and not np.any(start & (k - 1)):
+                blocks = [(0, k, start)]
+            elif g and np.all(start == start[0]):
+                blocks = _aligned_blocks(int(start[0]), k)
+        if blocks is not None:
+            firsts = []
+            for at, size_b, start_b in blocks:
+                first_b = self.pattern.block_rows(e, o, start_b, size_b)
+                firsts.append(first_b)
+                dst = x if size_b == k else x[:, at:at + size_b]
+                if size_b == k:
+                    np.take(feats.reshape(-1, size_b, 6), first_b // size_b, axis=0, out=dst)
+                else:
+                    dst[...] = np.take(feats.reshape(-1, size_b, 6), first_b // size_b, axis=0)
         else:
+            first = self.pattern.block_rows(e, o, start, k)
             idx = ws.idx[:n].reshape(g, k)
-            if self.pattern.xor:  # a piece of a split texel's share: rows in index order
+            if self.pattern.xor:  # rows in index order
                 np.add(start[:, None], ws.ramp[None, :k], out=idx)
                 idx ^= o[:, None]
                 idx += (e * self.pattern.span)[:, None]
@@ -414,8 +429,12 @@ class Kernel:
         if vectors is not None:
             _direction_sums(directions, value, weight, g, k, vectors)
         if self.on_rays is not None:
-            samples = (self.pattern.block_samples(e, o, first, k) if aligned or not self.pattern.xor
-                       else start[:, None] + ws.ramp[None, :k]).ravel()
+            if blocks is not None:
+                samples = np.concatenate([self.pattern.block_samples(e, o, f, b) for f, (_, b, _) in zip(firsts, blocks)],
+                                         axis=1).ravel()
+            else:
+                samples = (self.pattern.block_samples(e, o, first, k) if not self.pattern.xor
+                           else start[:, None] + ws.ramp[None, :k]).ravel()
             texels = np.repeat(tile.texel_ids[tex], k)
             # One batch per replicate; a call's time is shared among them by their rays.
             for r in ([tile.replicate] if replicates is None else np.unique(replicates)):
@@ -508,6 +527,18 @@ class Kernel:
             best[better] = c
             np.maximum(best_d, d[:, c], out=best_d)
         return best
+
+
+def _aligned_blocks(start, count):
+    """[start, start + count) as aligned power-of-two blocks: (offset in the piece, size, start)."""
+    out, at = [], 0
+    while at < count:
+        pos = start + at
+        low = pos & -pos if pos else 1 << 62
+        size = min(low, 1 << int(count - at).bit_length() - 1)
+        out.append((at, size, pos))
+        at += size
+    return out
 
 
 def _direction_sums(directions, value, weight, g, k, out):

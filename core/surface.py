@@ -25,7 +25,8 @@ A split texel's samples are shared among its units by systematic sampling: sampl
 ``count`` goes to the unit whose cumulative area fraction first exceeds (r + phi) / count, phi a
 per-texel random number. Every sample lands in a unit with probability proportional to its area
 (the estimate stays unbiased), each unit gets its area's share of samples to within one, and the
-samples of a unit are consecutive indices, traced together in power-of-two pieces.
+samples of a unit are consecutive indices, traced together in power-of-two pieces (a texel of one
+unit traces a block of samples as one piece).
 """
 
 from dataclasses import dataclass
@@ -198,9 +199,9 @@ def allocate(units, texels, start, count, seed, texel_ids):
     ``start`` and ``count`` are one number for all the texels or one per texel (an adaptive round,
     where each texel goes from its own count to its own next count).
 
-    Returns (unit, piece start, piece size) arrays: every unit's share of the block, cut into pieces
-    whose sizes are powers of two (the kernel traces equal pieces together). A texel of one unit
-    (inside one triangle, or located) takes the whole block; the units of a split texel share it.
+    Returns (unit, piece start, piece size) arrays (the kernel traces equal pieces together). A texel
+    of one unit (inside one triangle, or located) takes the whole block as one piece; the units of a
+    split texel share it, each share cut into pieces whose sizes are powers of two.
     """
     texels = np.asarray(texels, dtype=np.int64)
     start = np.broadcast_to(np.asarray(start, dtype=np.int64), texels.shape)
@@ -232,19 +233,11 @@ def allocate(units, texels, start, count, seed, texel_ids):
         unit, size, offset = unit[keep], size[keep], before[keep] + first[keep]
     else:
         unit = size = offset = np.zeros(0, np.int64)
-    # A block of a power of two samples aligned to its size: a single unit's block is one piece
-    # (what the loop below would cut it into), without the loop. Other blocks join the loop.
-    whole = ((s_count & (s_count - 1)) == 0) & (s_start % s_count == 0)
-    pu, ps, pz = [single[whole]], [s_start[whole]], [s_count[whole]]
-    rest = ~whole
-    unit = np.concatenate([single[rest], unit])
-    size = np.concatenate([s_count[rest], size])
-    offset = np.concatenate([s_start[rest], offset])
-    # Power-of-two pieces, each aligned to its own size (the kernel gathers an aligned block of a
-    # xor-ordered pattern as whole rows; an unaligned one row by row): from each piece's start, the
-    # largest power of two that divides it and still fits. From 0 that is largest first (120 samples
-    # from 0: 64, 32, 16, 8); from an adaptive round's start it climbs (samples 8 to 128: 8, 16, 32,
-    # 64).
+    # A texel of a single unit takes its whole block as one piece, whatever its size and start: an
+    # adaptive round from 8 to 64 samples is one piece of 56, not pieces of 8, 16 and 32 (short
+    # pieces cost the kernel more per ray). The units of split texels get shares of any size, cut
+    # below into pieces whose sizes are powers of two, so that they fall into few kernel calls.
+    pu, ps, pz = [single], [s_start], [s_count]
     pos, left = offset.copy(), size.copy()
     while len(left):
         low = np.where(pos > 0, pos & -pos, 1 << 62)  # the largest power of two dividing pos
