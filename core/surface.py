@@ -37,6 +37,10 @@ from .mesh import corner_positions
 from .patterns import hash_uniform
 
 SQUARE, TRIANGLE, LOCATED = 0, 1, 2
+#: Located texels with more candidates than this have their runs padded to a power of two.
+CANDIDATE_PAD = 4
+#: A padding candidate's edge functions: below any real one's at any point of the texel.
+NEVER = np.float32(3e38)
 _TAG_ALLOCATE = 21
 
 
@@ -116,7 +120,8 @@ class Units:
     to and including the unit; coef : (U, 6) float64, (A0, A1, A2, B0, B1, B2) of the map above.
     Candidates of located units: cand_first (U + 1,) offsets (empty runs for other units), cand_tri
     (c,) triangles, cand_edges (c, 3, 3) float32 edge functions (a, b, c) in texel-local
-    coordinates, cand_coef (c, 2) float32 the translation (A0, B0) to each candidate's texel space.
+    coordinates, cand_coef (c, 2) float32 the translation (A0, B0) to each candidate's texel space;
+    runs of more than :data:`CANDIDATE_PAD` end in padding candidates that never contain a point.
     """
 
     kind: np.ndarray
@@ -165,6 +170,16 @@ def build_units(frag, table, width):
     loc_start = frag.loc_start if frag.loc_start is not None else np.zeros(n + 1, np.int64)
     cand_tri = frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64)
     per_c = loc_start[loc + 1] - loc_start[loc]
+    # Runs of more than CANDIDATE_PAD candidates are padded to a power of two with candidates that
+    # never contain a point (edge functions -BIG everywhere, the first candidate's triangle): the
+    # kernel traces located texels with equal candidate counts together, and a few counts make few
+    # calls (an adaptive bake's rounds each made a call per count, most of a few rays).
+    padded = np.where(per_c <= CANDIDATE_PAD, per_c, 1 << np.ceil(np.log2(np.maximum(per_c, 1))).astype(np.int64))
+    j = np.arange(int(padded.sum())) - np.repeat(np.cumsum(padded) - padded, padded)
+    real = j < np.repeat(per_c, padded)
+    src = np.repeat(loc_start[loc], padded) + np.where(real, j, 0)
+    cand_tri = cand_tri[src]
+    per_c = padded
     cand_tex = np.repeat(frag.texels[loc], per_c)
     cand_coef = np.stack([(cand_tex % width) - table.origin[cand_tri, 0],
                           (cand_tex // width) - table.origin[cand_tri, 1]], axis=1).astype(np.float32)
@@ -188,9 +203,10 @@ def build_units(frag, table, width):
     cand_count[first[loc]] = per_c
     cand_first = np.zeros(U + 1, np.int64)
     np.cumsum(cand_count, out=cand_first[1:])
-    edges = frag.loc_edges if frag.loc_edges is not None else np.zeros((0, 3, 3))
+    edges = (frag.loc_edges if frag.loc_edges is not None else np.zeros((0, 3, 3)))[src].astype(np.float32)
+    edges[~real] = (0.0, 0.0, -NEVER)
     return Units(kind=kind, texel=texel, tri=tri, first=first, cdf=cdf, coef=coef, cand_first=cand_first,
-                 cand_tri=cand_tri, cand_edges=edges.astype(np.float32), cand_coef=cand_coef)
+                 cand_tri=cand_tri, cand_edges=edges, cand_coef=cand_coef)
 
 
 def allocate(units, texels, start, count, seed, texel_ids):
