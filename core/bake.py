@@ -40,7 +40,7 @@ from .mesh import Mesh
 from .patterns import TexelPattern, hash64
 from . import raster as R
 from .raster import bin_triangles, prepare, rasterize_tile
-from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE, BakeSettings, auto_tile_size,
+from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE, BakeSettings, auto_tile_shape,
                        available_memory, estimate_memory)
 from .surface import LOCATED, SQUARE, TRIANGLE, SurfaceTable, allocate, build_units, contact_texels
 from .tracing import Tracer
@@ -200,8 +200,9 @@ class _TileBaker:
         """(fragments, estimates, direction sums or None) of the tile ``key``'s texels."""
         s = self.s
         ty, tx = key
-        x0, y0 = tx * s.tile_size, ty * s.tile_size
-        x1, y1 = min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height)
+        tw, th = s.tile_shape
+        x0, y0 = tx * tw, ty * th
+        x1, y1 = min(x0 + tw, s.width), min(y0 + th, s.height)
         frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1)
         if len(frag.texels) == 0:
             return frag, TexelEstimates(0, s.replicates), None
@@ -391,9 +392,10 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         rays. A cancelled bake raises BakeCancelled and returns nothing.
     on_tile : called as on_tile(rows, cols, ao_block) from worker threads when a tile of texels is
         final (before margin dilation); ``rows``, ``cols`` are slices of the (H, W) result.
-    tile_size, chunk_rays : texels per side of the unit of work a thread takes (None: chosen from
-        samples and resolution), and rays traced per call into Embree (bounds memory). Neither
-        changes the result: texels draw their samples by (texel, index) alone.
+    tile_size, chunk_rays : the unit of work a thread takes, in texels: a side (square tiles) or
+        (columns, rows), rounded up to multiples of 16 (None: :func:`core.settings.auto_tile_shape`
+        of the resolution and threads), and rays traced per call into Embree (bounds memory).
+        Neither changes the result: texels draw their samples by (texel, index) alone.
     on_rays : called as on_rays(batch) from worker threads after every call into Embree, with a
         :class:`core.tracing.RayBatch` (origins, directions, lengths, Embree's answer, the texel and
         sample index of every ray, the call's time). Its arrays are valid during the call only.
@@ -457,17 +459,17 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
 
     uvtris = prepare(target, w, h)
     table = SurfaceTable.build(target, uvtris)
-    bins = bin_triangles(uvtris, w, h, s.tile_size)
+    bins = bin_triangles(uvtris, w, h, s.tile_shape)
     stage = None if s2a is None else _highpoly.HighPolyStage(s2a, target, occluders, uvtris, table, bins, s, unit,
                                                               lambda: _cancelled(cancel))
     tracer = (Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / unit) if stage is None
               else stage.scene.tracer)
     pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
     kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
-    tile = s.tile_size
+    tw, th = s.tile_shape
     # Planned work: texel-samples of every tile's bounding rectangle is unknown before rasterising,
     # so count each tile's texels times samples as it is rasterised, against an upper bound.
-    planned = sum(min(tile, w - kx * tile) * min(tile, h - ky * tile) for ky, kx in bins) * s.samples
+    planned = sum(min(tw, w - kx * tw) * min(th, h - ky * th) for ky, kx in bins) * s.samples
     shared = _Shared(planned, progress, cancel)
     baker = (_TileBaker(uvtris, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals)) if stage is None
              else stage.baker(pattern, shared, on_rays, allocation_seeds(s)))
@@ -485,7 +487,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         nonlocal coverage_over
         frag, est, sums = baker.bake(key, bins[key])
         ty, tx = key
-        rect = min(tile, w - tx * tile) * min(tile, h - ty * tile)
+        rect = min(tw, w - tx * tw) * min(th, h - ty * th)
         shared.advance(rect * s.samples - len(frag.texels) * s.samples)
         if len(frag.texels):
             t = frag.texels
@@ -503,8 +505,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             with shared.lock:
                 coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
             if on_tile is not None:
-                r = slice(ty * tile, min((ty + 1) * tile, h))
-                c = slice(tx * tile, min((tx + 1) * tile, w))
+                r = slice(ty * th, min((ty + 1) * th, h))
+                c = slice(tx * tw, min((tx + 1) * tw, w))
                 with shared.lock:
                     on_tile(r, c, ao[r, c].copy())
 
@@ -529,4 +531,4 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
 
 
 __all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "MAX_RESOLUTION", "SAMPLE_PIECE",
-           "estimate_memory", "available_memory", "interval_half_width", "auto_tile_size"]
+           "estimate_memory", "available_memory", "interval_half_width", "auto_tile_shape"]

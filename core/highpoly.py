@@ -431,8 +431,9 @@ class HighPolyBaker:
     def bake(self, key, tri_ids):
         s, shared, g = self.s, self.shared, self.g
         ty, tx = key
-        x0, y0 = tx * s.tile_size, ty * s.tile_size
-        x1, y1 = min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height)
+        tw, th = s.tile_shape
+        x0, y0 = tx * tw, ty * th
+        x1, y1 = min(x0 + tw, s.width), min(y0 + th, s.height)
         frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1, locate=False)
         n_tex = len(frag.texels)
         est = TexelEstimates(n_tex, s.replicates)
@@ -701,9 +702,10 @@ class HighPolyStage:
                 from .errors import BakeCancelled
 
                 raise BakeCancelled("the bake was cancelled before it started")
-            x0, y0 = tx * s.tile_size, ty * s.tile_size
+            tw, th = s.tile_shape
+            x0, y0 = tx * tw, ty * th
             frag = rasterize_tile(self.uvtris, bins[(ty, tx)], s.width, s.height, x0, y0,
-                                  min(x0 + s.tile_size, s.width), min(y0 + s.tile_size, s.height), locate=False)
+                                  min(x0 + tw, s.width), min(y0 + th, s.height), locate=False)
             full = frag.full_tri >= 0
             t_full = frag.full_tri[full]
             xy_full = np.stack([frag.texels[full] % s.width, frag.texels[full] // s.width], axis=1) + 0.5

@@ -99,7 +99,9 @@ def prepare(mesh, width, height):
 
 
 def bin_triangles(tris, width, height, tile):
-    """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array (ascending), for tiles touched."""
+    """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array (ascending), for tiles
+    touched; ``tile`` the side of square tiles or (columns, rows)."""
+    tile = np.broadcast_to(np.asarray(tile, dtype=np.int64), (2,))
     idx = np.flatnonzero(tris.valid)
     xy = np.take(tris.xy, idx, axis=0)
     lo = np.floor(np.minimum(np.minimum(xy[:, 0], xy[:, 1]), xy[:, 2])).astype(np.int64)
@@ -116,7 +118,7 @@ def bin_triangles(tris, width, height, tile):
     k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
     tx = t_lo[rep, 0] + k % nx[rep]
     ty = t_lo[rep, 1] + k // nx[rep]
-    tiles_x = -(-width // tile)
+    tiles_x = -(-width // int(tile[0]))
     key = ty * tiles_x + tx
     order = np.argsort(key, kind="stable")
     key, tri = key[order], idx[rep[order]]

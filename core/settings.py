@@ -79,6 +79,12 @@ class BakeSettings:
     tile_size: int
     chunk_rays: int
     replicates: int = 2
+    tile_height: int = None  # rows of a tile; None: tile_size (square tiles)
+
+    @property
+    def tile_shape(self):
+        """(columns, rows) of a tile."""
+        return self.tile_size, self.tile_height or self.tile_size
 
     @classmethod
     def from_arguments(cls, resolution, samples, min_samples, target_error, max_distance, distribution, source,
@@ -112,9 +118,13 @@ class BakeSettings:
         threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
         chunk_rays = _positive_int(chunk_rays, "chunk_rays")
         if tile_size is None:
-            tile_size = auto_tile_size(w, h, threads)
-        tile_size = _positive_int(tile_size, "tile_size")
+            tile_size = auto_tile_shape(w, h, threads)
+        if isinstance(tile_size, (tuple, list)) and len(tile_size) == 2:
+            tile_size, tile_height = (_positive_int(t, "tile_size") for t in tile_size)
+        else:
+            tile_size = tile_height = _positive_int(tile_size, "tile_size")
         tile_size = -(-tile_size // TILE_MULTIPLE) * TILE_MULTIPLE
+        tile_height = -(-tile_height // TILE_MULTIPLE) * TILE_MULTIPLE
         replicates = _positive_int(replicates, "replicates")
         if replicates > MAX_REPLICATES:
             raise SettingsError(f"replicates must be at most {MAX_REPLICATES}, got {replicates}")
@@ -122,7 +132,8 @@ class BakeSettings:
         return cls(width=w, height=h, samples=samples, min_samples=min(min_samples, samples),
                    target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
                    margin=margin, seed=seed, threads=threads, ignore_backfaces=bool(ignore_backfaces),
-                   falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays, replicates=replicates)
+                   falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays, replicates=replicates,
+                   tile_height=tile_height)
 
     @property
     def adaptive(self):
@@ -204,21 +215,32 @@ def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, so
     return planes + margin_work + chunks + pool + min(units, texels * 4 * 600 * threads) + tris
 
 
-def auto_tile_size(width, height, threads):
-    """Texels per tile side: about two tiles per thread, a multiple of TILE_MULTIPLE, at most 256.
+def auto_tile_shape(width, height, threads):
+    """(columns, rows) of a tile: at least one tile per thread, sides multiples of TILE_MULTIPLE and
+    at most 256, as large as that allows.
 
     Every tile costs its own rasterising and, per group of equal pieces, its own kernel calls (about
-    0.7 ms of fixed numpy work each, measured): smaller tiles only pay for themselves where they even
-    out the threads' shares. Measured on the bench's Suzanne scene, 2 threads (wall seconds, tile
-    side): 128^2 x 128 spp 0.84 (32) / 0.52 (64) / 0.67 (128); 256^2 x 128 2.74 / 1.42 / 1.05 (128) /
-    1.87 (256); 512^2 x 128 6.41 / 3.57 / 2.92 (128) / 2.95 (256); 1024^2 x 16 13.7 / 5.1 / 2.6 /
-    1.97 (256). The sample count does not enter: tiles are traced in chunks of ``chunk_rays``, so a
-    tile's samples bound neither memory nor the granularity of progress and cancel.
+    half a millisecond of fixed numpy work each): tiles smaller than the threads need cost time and
+    even out nothing. From 256 x 256 (or the image), the longer side is halved until every thread
+    has a tile. Measured on the bench's Suzanne scene (wall seconds; 2 threads unless said):
+    128^2 x 128 spp, square tiles of 64 (the rule before, about two tiles per thread) 0.36-0.42,
+    128 x 64 0.29-0.38; 1 thread, one 128^2 tile 0.50-0.54 against four of 64^2 0.64; 256^2 x 128,
+    128^2 tiles 0.98-1.04, 256 x 128 0.94-0.98; at 512^2 and above both rules give 256^2 tiles.
+    Before the rule of two tiles per thread, 2^20 rays a tile cut a 128^2 image into 16 tiles (0.84 s).
+    The sample count does not enter: tiles are traced in chunks of ``chunk_rays``, so a tile's samples
+    bound neither memory nor the granularity of progress and cancel.
     """
-    side = math.sqrt(width * height / (2 * max(1, threads)))
-    side = -(-int(math.ceil(side)) // TILE_MULTIPLE) * TILE_MULTIPLE
-    return int(min(max(side, TILE_MULTIPLE), 256))
+    def up(v):
+        return max(TILE_MULTIPLE, -(-int(v) // TILE_MULTIPLE) * TILE_MULTIPLE)
+
+    tw, th = min(256, up(width)), min(256, up(height))
+    while -(-width // tw) * -(-height // th) < max(1, threads) and max(tw, th) > TILE_MULTIPLE:
+        if th >= tw:
+            th = up(th / 2)
+        else:
+            tw = up(tw / 2)
+    return int(tw), int(th)
 
 
 __all__ = ["BakeSettings", "DISTRIBUTIONS", "MAX_RESOLUTION", "MAX_SAMPLES", "MAX_REPLICATES", "SAMPLE_PIECE", "available_memory",
-           "estimate_memory", "auto_tile_size", "pattern_span"]
+           "estimate_memory", "auto_tile_shape", "pattern_span"]

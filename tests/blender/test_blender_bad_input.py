@@ -394,9 +394,9 @@ def test_esc_during_a_bake_puts_the_images_back(bpy, scene, hold_bake):
 def test_a_live_bake_draws_its_tiles_over_the_previous_pixels(bpy, scene, hold_bake):
     """A rebake into an image of the same size: the texels not baked yet still show the previous bake."""
     ground = add_plane(bpy, "Ground", size=4)
-    scene.mc_ao.resolution = 64
+    scene.mc_ao.resolution = 512  # one thread: four tiles of 256^2 (core.settings.auto_tile_shape)
     scene.mc_ao.threads = 1
-    old = pattern_image(bpy, "Ground_AO", 64, 64, float_buffer=True, is_data=True)
+    old = pattern_image(bpy, "Ground_AO", 512, 512, float_buffer=True, is_data=True)
     held = hold_bake("Ground")
     select_only(bpy, ground)
     session, _ = new_session()
@@ -407,12 +407,12 @@ def test_a_live_bake_draws_its_tiles_over_the_previous_pixels(bpy, scene, hold_b
 
     live = images.pixels_of(bpy.data.images["Ground_AO"])
     changed = np.any(live != old, axis=2)
-    from core.settings import auto_tile_size
+    from core.settings import auto_tile_shape
 
-    side = auto_tile_size(64, 64, 1)
-    assert side < 64  # more than one tile
+    tw, th = auto_tile_shape(512, 512, 1)
+    assert tw * th < 512 * 512  # more than one tile
     assert changed.any()  # the first tile is in ...
-    assert 0 < changed.sum() <= side * side  # ... and only the first tile
+    assert 0 < changed.sum() <= tw * th  # ... and only the first tile
     assert session.on_event(bpy.context, "ESC") == {"CANCELLED"}
     assert_unchanged(bpy, "Ground_AO", old)
 
