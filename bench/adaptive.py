@@ -4,8 +4,16 @@ For each scene: a reference (exact where known, else a long bake with its own se
 fixed-sample bakes (16 .. 1024 spp) and a series of adaptive bakes (target_error 0.04 .. 0.005, cap
 4096), all with the defaults otherwise. Each adaptive point's RMSE is looked up on the fixed series
 (log-log interpolation of RMSE against time): the fixed bake that reaches the same RMSE, and the
-ratio of the two times (adaptive / fixed: below 1 means adaptive pays). Times are process CPU seconds
-(steadier than wall time on this shared machine), fastest of the repeats.
+ratio of the two times (adaptive / fixed: below 1 means adaptive pays). Times are CPU seconds of
+bakes on one thread (``TIMING_THREADS``), fastest of the repeats: the work each bake does. With two
+threads on this 2-core machine the process CPU time of a 96^2 to 128^2 bake was 1.5 to 2 times its
+one-thread time and moved by +-30% from run to run (GIL hand-offs, two threads on two cores beside
+other work), which drowned the comparison (the box at t=0.04: 1.05, then 1.33 for the same bakes).
+References are baked with all the threads asked for.
+
+The fixed series uses core.bake_ao's defaults, replicates=2 (an error map, as every adaptive bake has);
+the add-on's fixed bakes without an error map use replicates=1, which gives 1.16-1.20 times less RMSE
+at equal rays with Sobol' (the section's last line), a gain adaptive sampling does not have.
 
 Scenes (issue 16's list):
 
@@ -114,11 +122,16 @@ def _fixed_cpu_at(fixed, rmse):
     return float(math.exp(np.interp(x, r, t)))
 
 
+#: Threads of the timed bakes (see the module docstring).
+TIMING_THREADS = 1
+
+
 def adaptive_scene(name, target, occluders, distance, truth, cfg, threads, clock=None):
     res = cfg["res"]
-    kw = dict(resolution=res, threads=threads)
+    kw = dict(resolution=res, threads=TIMING_THREADS)
     if truth is None:
-        ref = _bake(target, occluders, distance, samples=cfg["ref_spp"], seed=987654321, **kw)
+        ref = _bake(target, occluders, distance, samples=cfg["ref_spp"], seed=987654321, resolution=res,
+                    threads=threads)
         truth, mask, ref_noise = ref.ao.astype(np.float64), ref.mask, float(np.sqrt(np.mean(ref.stderr[ref.mask] ** 2)))
     else:
         mask, ref_noise = np.ones_like(truth, bool), 0.0
@@ -177,7 +190,8 @@ def adaptive(ctx):
     scenes = numpy_scenes(cfg["res"]) + blender_scenes(ctx)
     rows = [adaptive_scene(*s, cfg, ctx.threads, ctx.clock) for s in scenes]
     return {"scenes": rows, "replicate_cost": replicate_cost(cfg, ctx.threads, cfg["res"]),
-            "measure": "process CPU seconds, fastest of repeats; RMSE over covered texels against the exact "
+            "measure": f"CPU seconds of {TIMING_THREADS}-thread bakes, fastest of repeats; RMSE over covered texels "
+                       "against the exact "
                        "values (disk) or a reference bake with its own seed"}
 
 

@@ -213,8 +213,8 @@ def table(data):
 
     ad = r.get("adaptive")
     if ad:
-        L.append("5c. Adaptive sampling against fixed sample counts (issue 16; process CPU seconds at equal RMSE, "
-                 "adaptive / fixed: below 1 pays)")
+        L.append("5c. Adaptive sampling against fixed sample counts (issue 16; CPU seconds of one-thread bakes at "
+                 "equal RMSE, adaptive / fixed: below 1 pays)")
         rows = []
         for sc in ad["scenes"]:
             for a in sc["adaptive"]:
