@@ -105,9 +105,10 @@ class SurfaceTable:
 
     def _affine(self, tri, x, y, v0, vx, vy):
         # np.take: numpy's fancy indexing of these (T, 3) arrays is 2-3 times slower.
-        origin = np.take(self.origin, tri, axis=0)
+        origin = np.take(self.origin, tri, axis=0, mode="clip")  # triangle ids of the table: in range
         dx, dy = x - origin[:, 0], y - origin[:, 1]
-        return np.take(v0, tri, axis=0) + dx[:, None] * np.take(vx, tri, axis=0) + dy[:, None] * np.take(vy, tri, axis=0)
+        return (np.take(v0, tri, axis=0, mode="clip") + dx[:, None] * np.take(vx, tri, axis=0, mode="clip")
+                + dy[:, None] * np.take(vy, tri, axis=0, mode="clip"))
 
 
 @dataclass
