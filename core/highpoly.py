@@ -335,7 +335,7 @@ class _Contact:
             if not len(idx):
                 continue
             p = points[idx]
-            e = self.tracer.offset(np.abs(p).max(axis=1))
+            e = self.tracer.point_offset(p)
             below = (p - gn[idx] * e[:, None]).astype(np.float32)
             hit = scene.run(below, np.ascontiguousarray(gn[idx], dtype=np.float32), query="OCCLUDED",
                             dists=(2.0 * e).astype(np.float32))
@@ -542,7 +542,7 @@ class HighPolyBaker:
             zero = np.zeros(npieces)
             return hits, zero, zero, len(cast), inside.wall, inside.cpu
         # AO at the hits: g directions each, from samples (start + j) g .. + g - 1 of the texel.
-        eps = scene.tracer.offset(np.abs(hq).max(axis=1))
+        eps = scene.tracer.point_offset(hq)
         org = (hq + hgn * eps[:, None]).astype(np.float32)
         first_sample = (start[piece] + point % k) * g
         samples = first_sample[:, None] + np.arange(g, dtype=np.int64)[None, :]       # (nh, g)

@@ -126,6 +126,12 @@ class Tracer:
         """Distance to push ray origins off the surface, given each point's largest |coordinate|."""
         return EPS_SCENE * self.extent + EPS_POSITION * max_abs
 
+    def point_offset(self, points):
+        """:meth:`offset` of points (n, 3): their largest |coordinate| as elementwise maxima of the
+        columns (numpy's max over an axis of 3 is several times slower)."""
+        a = np.abs(points)
+        return self.offset(np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2]))
+
     def occluded(self, origins, directions, tfar):
         """Embree's occlusion answer per ray (n,) bool; ``tfar`` (n,) float32 is overwritten."""
         return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
@@ -150,7 +156,7 @@ class Tracer:
         """Per point (n, 3), whether another object's surface crosses the segment of length 2 * offset
         through it along its unit geometric normal (n, 3): whether something touches it."""
         points = np.asarray(points, dtype=np.float64)
-        e = self.offset(np.abs(points).max(axis=1)) if lengths is None else np.asarray(lengths, np.float64)
+        e = self.point_offset(points) if lengths is None else np.asarray(lengths, np.float64)
         below = (points - normals * e[:, None]).astype(np.float32)
         hit = self.contact_scene.run(below, np.ascontiguousarray(normals, dtype=np.float32), query="OCCLUDED",
                                      dists=(2.0 * e).astype(np.float32))
@@ -193,7 +199,7 @@ class Tracer:
             cont = todo[back]
             if len(cont):
                 hit_at = org[cont] + dirs[cont] * (travelled[cont] + t[back])[:, None]
-                step = t[back] + self.offset(np.abs(hit_at).max(axis=1))
+                step = t[back] + self.point_offset(hit_at)
                 travelled[cont] += step
                 o32[cont] = (org[cont] + dirs[cont] * travelled[cont, None]).astype(np.float32)
                 remaining[cont] = np.maximum(reach[cont] - travelled[cont], 0).astype(np.float32)
