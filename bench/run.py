@@ -44,7 +44,7 @@ FULL = dict(
     mem_res=4096, mem_spp=4,
     stat_res=32, stat_spp=(16, 32, 64, 128, 256, 512, 1024),
     adaptive=dict(res=128, fixed=(16, 32, 64, 128, 256, 512, 1024), targets=(0.04, 0.02, 0.01, 0.005), cap=4096,
-                  ref_spp=8192, repeats=2, cost_spp=(64, 256, 1024), cost_seeds=3),
+                  ref_spp=8192, repeats=3, cost_spp=(64, 256, 1024), cost_seeds=3),
 )
 QUICK = dict(
     FULL,
