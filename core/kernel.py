@@ -32,12 +32,12 @@ the same rays. Independent randomisations of a texel for an error estimate are
 ``TexelPattern.keys(texels, replicate=r)``.
 """
 
-import copy
 import threading
 
 import numpy as np
 
 from . import warps
+from .surface import aligned_pieces
 from .tracing import FAR, Clock, RayBatch
 
 FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
@@ -165,7 +165,6 @@ class TileContext:
                 self.loc_rows = _row_table(self.loc_m, CURVED_ENTRIES if self.located_curved else FLAT_ENTRIES)
                 self.loc_pos = np.full(len(table.P0), -1, np.int64)
                 self.loc_pos[ctris] = np.arange(len(ctris))  # triangle id -> row of gn, eps
-        self.replicate = 0
         self.texels = len(texel_ids)
 
     @staticmethod
@@ -178,11 +177,6 @@ class TileContext:
             return keys[0]
         return TexelKeys(*(np.concatenate([getattr(k, f) for k in keys]) for f in TexelKeys.__slots__))
 
-    def for_replicate(self, keys, replicate):
-        """The same tile with the keys of another replicate (everything else is shared)."""
-        other = copy.copy(self)
-        other.keys, other.replicate = keys, replicate
-        return other
 
 
 def _per_piece(values, k):
@@ -235,8 +229,8 @@ class Kernel:
         2 cos(theta) V for uniform ones, times the falloff): the bent-normal estimator, from the same
         rays (:mod:`core.bent`).
 
-        ``replicates``: None (every piece is of ``tile.replicate``, whose keys are ``tile.keys``), or
-        per piece the replicate it belongs to, ``tile.keys`` then holding every replicate's keys
+        ``replicates``: None (every piece is of replicate 0, whose keys are ``tile.keys``), or per
+        piece the replicate it belongs to, ``tile.keys`` then holding every replicate's keys
         (:meth:`TileContext.stacked_keys`): pieces of all replicates in one call.
         """
         units, keys = tile.units, tile.keys
@@ -258,17 +252,18 @@ class Kernel:
             if (k & (k - 1)) == 0 and not np.any(start & (k - 1)):
                 blocks = [(0, k, start)]
             elif g and np.all(start == start[0]):
-                blocks = _aligned_blocks(int(start[0]), k)
+                _, b_start, b_size = aligned_pieces(np.zeros(1, np.int64), start[:1], np.array([k]))
+                blocks = [(int(s0 - start[0]), int(z), int(s0)) for s0, z in zip(b_start, b_size)]
         if blocks is not None:
             firsts = []
             for at, size_b, start_b in blocks:
                 first_b = self.pattern.block_rows(e, o, start_b, size_b)
                 firsts.append(first_b)
-                dst = x if size_b == k else x[:, at:at + size_b]
+                rows = feats.reshape(-1, size_b, 6)
                 if size_b == k:
-                    np.take(feats.reshape(-1, size_b, 6), first_b // size_b, axis=0, out=dst, mode="clip")
+                    np.take(rows, first_b // size_b, axis=0, out=x, mode="clip")
                 else:
-                    dst[...] = np.take(feats.reshape(-1, size_b, 6), first_b // size_b, axis=0, mode="clip")
+                    x[:, at:at + size_b] = np.take(rows, first_b // size_b, axis=0, mode="clip")
         else:
             first = self.pattern.block_rows(e, o, start, k)
             idx = ws.idx[:n].reshape(g, k)
@@ -441,7 +436,7 @@ class Kernel:
                            else start[:, None] + ws.ramp[None, :k]).ravel()
             texels = np.repeat(tile.texel_ids[tex], k)
             # One batch per replicate; a call's time is shared among them by their rays.
-            for r in ([tile.replicate] if replicates is None else np.unique(replicates)):
+            for r in ([0] if replicates is None else np.unique(replicates)):
                 rows = slice(None) if replicates is None else np.repeat(replicates == r, k)
                 share = 1.0 if replicates is None else np.count_nonzero(replicates == r) / g
                 self.on_rays(RayBatch(origins=origins[rows], directions=directions[rows], tfar=traced_tfar[rows],
@@ -531,18 +526,6 @@ class Kernel:
             best[better] = c
             np.maximum(best_d, d[:, c], out=best_d)
         return best
-
-
-def _aligned_blocks(start, count):
-    """[start, start + count) as aligned power-of-two blocks: (offset in the piece, size, start)."""
-    out, at = [], 0
-    while at < count:
-        pos = start + at
-        low = pos & -pos if pos else 1 << 62
-        size = min(low, 1 << int(count - at).bit_length() - 1)
-        out.append((at, size, pos))
-        at += size
-    return out
 
 
 def _direction_sums(directions, value, weight, g, k, out):

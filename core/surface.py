@@ -254,19 +254,30 @@ def allocate(units, texels, start, count, seed, texel_ids):
     # adaptive round from 8 to 64 samples is one piece of 56, not pieces of 8, 16 and 32 (short
     # pieces cost the kernel more per ray). The units of split texels get shares of any size, cut
     # below into pieces whose sizes are powers of two, so that they fall into few kernel calls.
-    pu, ps, pz = [single], [s_start], [s_count]
-    pos, left = offset.copy(), size.copy()
+    pu, ps, pz = aligned_pieces(unit, offset, size)
+    return np.concatenate([single, pu]), np.concatenate([s_start, ps]), np.concatenate([s_count, pz])
+
+
+def aligned_pieces(owner, start, count):
+    """Samples [start, start + count) of each entry cut into power-of-two pieces, each aligned to its
+    own size (the kernel gathers an aligned block of a xor-ordered pattern as whole rows): from each
+    piece's start, the largest power of two that divides it and still fits. From 0 that is largest
+    first (120 samples from 0: 64, 32, 16, 8); from an adaptive round's start it climbs (samples 8 to
+    128: 8, 16, 32, 64). Returns (owner, piece start, piece size), the entries' first pieces, then
+    their second pieces, and so on."""
+    pu, ps, pz = [], [], []
+    pos, left = np.asarray(start, np.int64).copy(), np.asarray(count, np.int64).copy()
     while len(left):
         low = np.where(pos > 0, pos & -pos, 1 << 62)  # the largest power of two dividing pos
         high = np.left_shift(1, np.floor(np.log2(np.maximum(left, 1))).astype(np.int64))  # the largest that fits
         piece = np.minimum(low, high)
-        pu.append(unit)
+        pu.append(owner)
         ps.append(pos.copy())
         pz.append(piece)
         pos = pos + piece
         left = left - piece
         more = left > 0
-        unit, pos, left = unit[more], pos[more], left[more]
+        owner, pos, left = owner[more], pos[more], left[more]
     if not pu:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
     return np.concatenate(pu), np.concatenate(ps), np.concatenate(pz)
@@ -324,4 +335,5 @@ def contact_texels(frag, table, width, tracer, samples):
     return (np.bincount(own[hit], minlength=n_tex) > 0) | located
 
 
-__all__ = ["SQUARE", "TRIANGLE", "LOCATED", "SurfaceTable", "Units", "build_units", "allocate", "contact_texels"]
+__all__ = ["SQUARE", "TRIANGLE", "LOCATED", "SurfaceTable", "Units", "build_units", "allocate", "aligned_pieces",
+           "contact_texels"]
