@@ -199,11 +199,7 @@ class _TileBaker:
     def bake(self, key, tri_ids):
         """(fragments, estimates, direction sums or None) of the tile ``key``'s texels."""
         s = self.s
-        ty, tx = key
-        tw, th = s.tile_shape
-        x0, y0 = tx * tw, ty * th
-        x1, y1 = min(x0 + tw, s.width), min(y0 + th, s.height)
-        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1)
+        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, *s.tile_bounds(key))
         if len(frag.texels) == 0:
             return frag, TexelEstimates(0, s.replicates), None
         units = build_units(frag, self.table, s.width)
@@ -466,10 +462,15 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
               else stage.scene.tracer)
     pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
     kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
-    tw, th = s.tile_shape
+
+    def rect(key):
+        """Rows, columns and texel count of tile ``key``."""
+        x0, y0, x1, y1 = s.tile_bounds(key)
+        return slice(y0, y1), slice(x0, x1), (x1 - x0) * (y1 - y0)
+
     # Planned work: texel-samples of every tile's bounding rectangle is unknown before rasterising,
     # so count each tile's texels times samples as it is rasterised, against an upper bound.
-    planned = sum(min(tw, w - kx * tw) * min(th, h - ky * th) for ky, kx in bins) * s.samples
+    planned = sum(rect(key)[2] for key in bins) * s.samples
     shared = _Shared(planned, progress, cancel)
     baker = (_TileBaker(uvtris, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals)) if stage is None
              else stage.baker(pattern, shared, on_rays, allocation_seeds(s)))
@@ -486,9 +487,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     def work(key):
         nonlocal coverage_over
         frag, est, sums = baker.bake(key, bins[key])
-        ty, tx = key
-        rect = min(tw, w - tx * tw) * min(th, h - ty * th)
-        shared.advance(rect * s.samples - len(frag.texels) * s.samples)
+        r, c, area = rect(key)
+        shared.advance(area * s.samples - len(frag.texels) * s.samples)
         if len(frag.texels):
             t = frag.texels
             rows, cols = t // w, t % w
@@ -505,8 +505,6 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             with shared.lock:
                 coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
             if on_tile is not None:
-                r = slice(ty * th, min((ty + 1) * th, h))
-                c = slice(tx * tw, min((tx + 1) * tw, w))
                 with shared.lock:
                     on_tile(r, c, ao[r, c].copy())
 

@@ -429,12 +429,8 @@ class HighPolyBaker:
     # -- one tile ------------------------------------------------------------------------------------
 
     def bake(self, key, tri_ids):
-        s, shared, g = self.s, self.shared, self.g
-        ty, tx = key
-        tw, th = s.tile_shape
-        x0, y0 = tx * tw, ty * th
-        x1, y1 = min(x0 + tw, s.width), min(y0 + th, s.height)
-        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, x0, y0, x1, y1, locate=False)
+        s, shared = self.s, self.shared
+        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, *s.tile_bounds(key), locate=False)
         n_tex = len(frag.texels)
         est = TexelEstimates(n_tex, s.replicates)
         est.points = np.zeros(n_tex, np.int64)   # sample points cast per texel (all replicates)
@@ -702,10 +698,8 @@ class HighPolyStage:
                 from .errors import BakeCancelled
 
                 raise BakeCancelled("the bake was cancelled before it started")
-            tw, th = s.tile_shape
-            x0, y0 = tx * tw, ty * th
-            frag = rasterize_tile(self.uvtris, bins[(ty, tx)], s.width, s.height, x0, y0,
-                                  min(x0 + tw, s.width), min(y0 + th, s.height), locate=False)
+            frag = rasterize_tile(self.uvtris, bins[(ty, tx)], s.width, s.height, *s.tile_bounds((ty, tx)),
+                                  locate=False)
             full = frag.full_tri >= 0
             t_full = frag.full_tri[full]
             xy_full = np.stack([frag.texels[full] % s.width, frag.texels[full] // s.width], axis=1) + 0.5

@@ -86,6 +86,13 @@ class BakeSettings:
         """(columns, rows) of a tile."""
         return self.tile_size, self.tile_height or self.tile_size
 
+    def tile_bounds(self, key):
+        """(x0, y0, x1, y1): the texels [x0, x1) x [y0, y1) of tile ``key`` = (row, column), within
+        the image."""
+        (ty, tx), (tw, th) = key, self.tile_shape
+        x0, y0 = tx * tw, ty * th
+        return x0, y0, min(x0 + tw, self.width), min(y0 + th, self.height)
+
     @classmethod
     def from_arguments(cls, resolution, samples, min_samples, target_error, max_distance, distribution, source,
                        margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays, replicates=2):
@@ -123,8 +130,7 @@ class BakeSettings:
             tile_size, tile_height = (_positive_int(t, "tile_size") for t in tile_size)
         else:
             tile_size = tile_height = _positive_int(tile_size, "tile_size")
-        tile_size = -(-tile_size // TILE_MULTIPLE) * TILE_MULTIPLE
-        tile_height = -(-tile_height // TILE_MULTIPLE) * TILE_MULTIPLE
+        tile_size, tile_height = _tile_side(tile_size), _tile_side(tile_height)
         replicates = _positive_int(replicates, "replicates")
         if replicates > MAX_REPLICATES:
             raise SettingsError(f"replicates must be at most {MAX_REPLICATES}, got {replicates}")
@@ -230,16 +236,18 @@ def auto_tile_shape(width, height, threads):
     The sample count does not enter: tiles are traced in chunks of ``chunk_rays``, so a tile's samples
     bound neither memory nor the granularity of progress and cancel.
     """
-    def up(v):
-        return max(TILE_MULTIPLE, -(-int(v) // TILE_MULTIPLE) * TILE_MULTIPLE)
-
-    tw, th = min(256, up(width)), min(256, up(height))
+    tw, th = min(256, _tile_side(width)), min(256, _tile_side(height))
     while -(-width // tw) * -(-height // th) < max(1, threads) and max(tw, th) > TILE_MULTIPLE:
         if th >= tw:
-            th = up(th / 2)
+            th = _tile_side(th / 2)
         else:
-            tw = up(tw / 2)
+            tw = _tile_side(tw / 2)
     return int(tw), int(th)
+
+
+def _tile_side(v):
+    """``v`` texels rounded up to a multiple of TILE_MULTIPLE (at least one)."""
+    return max(TILE_MULTIPLE, -(-int(math.ceil(v)) // TILE_MULTIPLE) * TILE_MULTIPLE)
 
 
 __all__ = ["BakeSettings", "DISTRIBUTIONS", "MAX_RESOLUTION", "MAX_SAMPLES", "MAX_REPLICATES", "SAMPLE_PIECE", "available_memory",
