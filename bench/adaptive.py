@@ -34,7 +34,6 @@ Run alone: ``.venv/bin/python -m bench.adaptive [--quick]`` (bpy needed for suza
 
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +46,7 @@ from core import Mesh, bake_ao  # noqa: E402
 from core.analytic import polygon_form_factor, regular_polygon, texel_mean  # noqa: E402
 
 from .common import log  # noqa: E402
+from .mcao import core_bake  # noqa: E402
 
 QUAD = np.array([[0, 1, 2], [0, 2, 3]])
 FULL = dict(res=96, fixed=(16, 32, 64, 128, 256, 512, 1024), targets=(0.04, 0.02, 0.01, 0.005), cap=4096,
@@ -92,20 +92,6 @@ def blender_scenes(ctx):
     return out
 
 
-def _bake(target, occluders, distance, repeats=1, **kw):
-    best = None
-    for _ in range(repeats):
-        c0 = time.process_time()
-        r = bake_ao(target, occluders, max_distance=distance, margin=0, **kw)
-        r.cpu_seconds = time.process_time() - c0
-        if best is None:
-            best = r
-        else:
-            best.cpu_seconds = min(best.cpu_seconds, r.cpu_seconds)
-            best.seconds = min(best.seconds, r.seconds)
-    return best
-
-
 def _rmse(a, b, sel):
     d = a[sel].astype(np.float64) - b[sel]
     return float(np.sqrt(np.mean(d * d)))
@@ -131,8 +117,8 @@ def adaptive_scene(name, target, occluders, distance, truth, cfg, threads, clock
     res = cfg["res"]
     kw = dict(resolution=res, threads=TIMING_THREADS)
     if truth is None:
-        ref = _bake(target, occluders, distance, samples=cfg["ref_spp"], seed=987654321, resolution=res,
-                    threads=threads)
+        ref = core_bake(target, occluders, max_distance=distance, samples=cfg["ref_spp"], seed=987654321,
+                        resolution=res, threads=threads)
         truth, mask, ref_noise = ref.ao.astype(np.float64), ref.mask, float(np.sqrt(np.mean(ref.stderr[ref.mask] ** 2)))
     else:
         mask, ref_noise = np.ones_like(truth, bool), 0.0
@@ -143,7 +129,7 @@ def adaptive_scene(name, target, occluders, distance, truth, cfg, threads, clock
     best = [None] * len(runs)
     for _ in range(cfg["repeats"]):
         for i, args in enumerate(runs):
-            r = _bake(target, occluders, distance, seed=5, **args, **kw)
+            r = core_bake(target, occluders, max_distance=distance, seed=5, **args, **kw)
             if best[i] is None:
                 best[i] = r
             else:
