@@ -37,6 +37,7 @@ import threading
 import numpy as np
 
 from . import warps
+from .patterns import TexelKeys
 from .surface import aligned_pieces
 from .tracing import FAR, Clock, RayBatch
 
@@ -171,8 +172,6 @@ class TileContext:
     def stacked_keys(keys):
         """The keys of several replicates of the same texels as one TexelKeys: replicate r's texel t
         at row r * len(texels) + t (what :meth:`Kernel.run` reads with ``replicates``)."""
-        from .patterns import TexelKeys
-
         if len(keys) == 1:
             return keys[0]
         return TexelKeys(*(np.concatenate([getattr(k, f) for k in keys]) for f in TexelKeys.__slots__))
