@@ -36,10 +36,11 @@ def _record_rays(target, occluders, **kw):
 
 
 def embree_scene(meshes):
-    """The committed Embree scene the bake itself builds of ``meshes`` (core.tracing)."""
-    from core.tracing import embree_scene as build
+    """The committed Embree scene the bake itself traces its occlusion rays in (core.tracing.Tracer:
+    the same robust mode)."""
+    from core.tracing import OCCLUSION_ROBUST, embree_scene as build
 
-    return build(meshes)[0]
+    return build(meshes, robust=OCCLUSION_ROBUST)[0]
 
 
 def _replay(scene, chunks, threads):

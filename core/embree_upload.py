@@ -41,6 +41,7 @@ RTC_BUFFER_TYPE_VERTEX = 1
 RTC_FORMAT_UINT3 = 0x5003
 RTC_FORMAT_FLOAT3 = 0x9003
 RTC_ERROR_NONE = 0
+RTC_SCENE_FLAG_ROBUST = 1 << 2  # rtcore_scene.h
 
 _lock = threading.Lock()
 _state = {"lib": None, "ok": None, "reason": ""}
@@ -111,6 +112,7 @@ def _load():
         "rtcCommitGeometry": (None, [vp]),
         "rtcAttachGeometry": (u, [vp, vp]),
         "rtcReleaseGeometry": (None, [vp]),
+        "rtcGetSceneFlags": (i, [vp]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -180,6 +182,13 @@ def _attach(lib, scene, positions, triangles):
         lib.rtcReleaseDevice(device)
 
 
+def scene_flags(scene):
+    """Embree's scene flags of an embreex scene (committed or not); only after :func:`available`."""
+    if not available():
+        raise RuntimeError(f"the C-API upload is off: {reason()}")
+    return int(_state["lib"].rtcGetSceneFlags(_scene_handle(scene)))
+
+
 def _self_test(lib):
     """Embree's answers for a small mesh uploaded here and by embreex's TriangleMesh must agree."""
     from embreex import rtcore_scene
@@ -234,4 +243,4 @@ def attach_triangles(scene, positions, triangles):
     _attach(_state["lib"], scene, positions, triangles)
 
 
-__all__ = ["available", "reason", "attach_triangles"]
+__all__ = ["available", "reason", "attach_triangles", "scene_flags", "RTC_SCENE_FLAG_ROBUST"]

@@ -248,8 +248,9 @@ class HighPolyScene:
         # single target; contact here is per high-poly mesh, below).
         everything = _concatenate(highs + list(occluders), "high-poly and occluders")
         self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance)
-        # Matching: the high-poly meshes alone (the tracer's scene when there is nothing else).
-        self.match_scene = self.tracer.scene if not occluders else embree_scene([high])[0]
+        # Matching: the high-poly meshes alone, in Embree's robust mode (a low-poly lying on the
+        # high-poly surface starts its rays on it, see core.tracing.OCCLUSION_ROBUST).
+        self.match_scene = embree_scene([high])[0]
         self.limit = np.float32(min(s2a.max_ray_distance, FAR) if s2a.max_ray_distance > 0 else FAR)
         self.contact = _Contact(highs, list(occluders), self.tracer)
 

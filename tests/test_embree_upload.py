@@ -10,16 +10,17 @@ import numpy as np
 import pytest
 
 from core import Mesh, bake_ao, embree_upload
-from core.tracing import embree_scene
+from core.tracing import OCCLUSION_ROBUST, embree_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _binding_scene(positions, triangles):
+def _binding_scene(positions, triangles, robust=True):
+    """embreex's own TriangleMesh scene."""
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
-    scene = rtcore_scene.EmbreeScene()
+    scene = rtcore_scene.EmbreeScene(robust=robust)
     TriangleMesh(scene, np.asarray(positions, np.float32), np.asarray(triangles, np.int32))
     return scene
 
@@ -42,24 +43,97 @@ def test_available_here():
     assert embree_upload.available(), embree_upload.reason()
 
 
+def _rays(n=50_000, seed=3):
+    rng = np.random.default_rng(seed)
+    org = np.column_stack([rng.uniform(-0.2, 1.2, (n, 2)), rng.uniform(-0.5, 0.5, n)]).astype(np.float32)
+    return org, rng.normal(size=(n, 3)).astype(np.float32)
+
+
 def test_same_answers_as_the_binding():
-    """Intersections (primitive, distance, barycentrics) and occlusion agree ray for ray."""
+    """Intersections (primitive, distance, barycentrics) and occlusion agree ray for ray with
+    embreex's own scene, robust or not."""
     positions, tris, _ = _grid(60)
     mesh = Mesh(positions, tris, None, name="grid")
-    mine = embree_scene([mesh])[0]
-    theirs = _binding_scene(positions, tris)
-    rng = np.random.default_rng(3)
-    n = 50_000
-    org = np.column_stack([rng.uniform(-0.2, 1.2, (n, 2)), rng.uniform(-0.5, 0.5, n)]).astype(np.float32)
-    dirs = rng.normal(size=(n, 3)).astype(np.float32)
-    a = mine.run(org, dirs, output=True)
-    b = theirs.run(org, dirs, output=True)
-    for key in ("primID", "geomID", "tfar", "u", "v", "Ng"):
-        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
-    assert 0.1 < (a["primID"] >= 0).mean() < 0.9  # both hits and misses were asked
-    occ_a = mine.run(org, dirs, query="OCCLUDED", dists=np.full(n, 0.3, np.float32))
-    occ_b = theirs.run(org, dirs, query="OCCLUDED", dists=np.full(n, 0.3, np.float32))
-    np.testing.assert_array_equal(occ_a >= 0, occ_b >= 0)
+    org, dirs = _rays()
+    n = len(org)
+    for robust in (True, False):
+        mine = embree_scene([mesh], robust=robust)[0]
+        theirs = _binding_scene(positions, tris, robust=robust)
+        a = mine.run(org, dirs, output=True)
+        b = theirs.run(org, dirs, output=True)
+        for key in ("primID", "geomID", "tfar", "u", "v", "Ng"):
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+        assert 0.1 < (a["primID"] >= 0).mean() < 0.9  # both hits and misses were asked
+        occ_a = mine.run(org, dirs, query="OCCLUDED", dists=np.full(n, 0.3, np.float32))
+        occ_b = theirs.run(org, dirs, query="OCCLUDED", dists=np.full(n, 0.3, np.float32))
+        np.testing.assert_array_equal(occ_a >= 0, occ_b >= 0)
+
+
+def _sphere(n, seed=0):
+    """A closed, slightly bumpy UV sphere of 2n(2n - 2) triangles about the origin."""
+    th, ph = np.linspace(0, np.pi, n + 1)[1:-1], np.linspace(0, 2 * np.pi, 2 * n, endpoint=False)
+    t, p = np.meshgrid(th, ph, indexing="ij")
+    pos = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
+    pos = np.vstack([pos, [[0, 0, 1], [0, 0, -1]]])
+    m = 2 * n
+    i, j = np.meshgrid(np.arange(n - 2), np.arange(m), indexing="ij")
+    a, b = (i * m + j).ravel(), (i * m + (j + 1) % m).ravel()
+    top, bottom, last = len(pos) - 2, len(pos) - 1, (n - 2) * m
+    ring = np.arange(m)
+    tris = np.concatenate([np.stack([a, a + m, b], 1), np.stack([b, a + m, b + m], 1),
+                           np.stack([np.full(m, top), ring, (ring + 1) % m], 1),
+                           np.stack([np.full(m, bottom), last + (ring + 1) % m, last + ring], 1)])
+    pos *= 1 + 0.01 * np.random.default_rng(seed).standard_normal((len(pos), 1))
+    return pos, tris
+
+
+def test_occlusion_scene_without_robust_mode():
+    """The bake traces its occlusion rays in a scene without Embree's robust mode (OCCLUSION_ROBUST,
+    chosen for speed), everything else in robust scenes. What that gives up, measured: rays from
+    inside a closed sphere in random directions all stay inside, as many as with robust mode; rays
+    aimed exactly at its shared edges and vertices leak through at most a few times more often."""
+    assert OCCLUSION_ROBUST is False
+    positions, tris = _sphere(120)
+    fast, robust = embree_scene([Mesh(positions, tris, None, name="sphere")], robust=False)[0], \
+        embree_scene([Mesh(positions, tris, None, name="sphere")])[0]
+    assert embree_upload.scene_flags(fast) == 0
+    assert embree_upload.scene_flags(robust) == embree_upload.RTC_SCENE_FLAG_ROBUST
+    rng = np.random.default_rng(5)
+    n = 1_000_000
+    org = rng.uniform(-0.5, 0.5, (n, 3)).astype(np.float32)  # well inside (radius 1 +- 3%)
+    dirs = rng.normal(size=(n, 3))
+    dirs = (dirs / np.linalg.norm(dirs, axis=1, keepdims=True)).astype(np.float32)
+    far = np.full(n, 10, np.float32)
+    leaks = [int((scene.run(org, dirs, query="OCCLUDED", dists=far.copy()) < 0).sum()) for scene in (fast, robust)]
+    # Random rays pass within a rounding error of an edge about once in a million (the grid below).
+    assert leaks[1] == 0 and leaks[0] <= 10, leaks
+    edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    aim = np.concatenate([positions, 0.5 * (positions[edges[:, 0]] + positions[edges[:, 1]])])
+    org = rng.normal(scale=0.1, size=aim.shape).astype(np.float32)
+    d = (aim - org).astype(np.float32)
+    far = np.full(len(d), 10, np.float32)
+    aimed = [(scene.run(org, d, query="OCCLUDED", dists=far.copy()) < 0).mean() for scene in (fast, robust)]
+    assert aimed[1] < 0.01 and aimed[0] > 5 * aimed[1], aimed  # robust mode does what it is for
+
+
+def test_which_scenes_are_robust():
+    """The bake's occlusion rays go to a scene without robust mode; its contact probes and the
+    high-poly matching rays, which start on surfaces, to robust scenes (without robust mode a
+    low-poly plane lying on the high-poly one finds nothing: tests/test_highpoly.py)."""
+    from core.highpoly import HighPolyScene, SelectedToActive
+    from core.tracing import Tracer
+
+    positions, tris, uvs = _grid(4)
+    low, occ = Mesh(positions, tris, uvs, name="low"), Mesh(positions + [0, 0, 0.5], tris, None, name="occ")
+    tracer = Tracer([low, occ])
+    robust = embree_upload.RTC_SCENE_FLAG_ROBUST
+    assert embree_upload.scene_flags(tracer.scene) == 0
+    assert embree_upload.scene_flags(tracer.contact_scene) == robust
+    for occluders in ([], [occ]):
+        s2a = SelectedToActive.check(low, [Mesh(positions + [0, 0, 0.01], tris, None, name="high")], 0.1, 0.0, None)
+        hp = HighPolyScene(s2a, occluders, False, 0.0, float("inf"))
+        assert embree_upload.scene_flags(hp.tracer.scene) == 0
+        assert embree_upload.scene_flags(hp.match_scene) == robust
 
 
 def test_several_meshes_and_vertex_offsets():
