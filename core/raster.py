@@ -131,31 +131,49 @@ def bin_triangles(tris, width, height, tile):
 
 
 def _clip(poly, count, a, b, c):
-    """Clip convex polygons (P, K, 2) with ``count`` vertices by a*x + b*y + c >= 0 (vectorised)."""
+    """Clip convex polygons (P, K, 2) with ``count`` vertices by a*x + b*y + c >= 0 (vectorised).
+
+    Returns the clipped polygons (P, K + 1, 2), slots past their count zero, and their counts. Each
+    vertex is kept if inside, and each edge that crosses the line adds its crossing point, in
+    order; the kept and added points are packed to the front of each row through one flat index.
+    """
     P, K, _ = poly.shape
-    slot = np.arange(K)
-    alive = slot[None, :] < count[:, None]
-    nxt = (slot[None, :] + 1) % np.maximum(count[:, None], 1)
-    v = poly
-    w = np.take_along_axis(poly, nxt[..., None], axis=1)
-    dv = a[:, None] * v[..., 0] + b[:, None] * v[..., 1] + c[:, None]
-    dw = a[:, None] * w[..., 0] + b[:, None] * w[..., 1] + c[:, None]
+    x, y = poly[..., 0], poly[..., 1]
+    rows = np.arange(P)
+    last = np.maximum(count, 1) - 1
+
+    def following(v):
+        """Each slot's next vertex: the slot after it, the first for the last vertex."""
+        w = np.empty_like(v)
+        w[:, :-1] = v[:, 1:]
+        w[:, -1] = v[:, 0]
+        w[rows, last] = v[:, 0]
+        return w
+
+    dv = a[:, None] * x + b[:, None] * y + c[:, None]
+    dw = following(dv)
+    alive = np.arange(K)[None, :] < count[:, None]
     inside_v = dv >= 0
-    inside_w = dw >= 0
     keep = alive & inside_v
-    cross = alive & (inside_v != inside_w)
+    cross = alive & (inside_v != (dw >= 0))
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(cross, dv / (dv - dw), 0.0)
-    x = v + t[..., None] * (w - v)
     # Emit per slot: the vertex if kept, then the crossing point if the edge crosses.
-    emit = np.stack([keep, cross], axis=2).reshape(P, 2 * K)
-    pts = np.stack([v, x], axis=2).reshape(P, 2 * K, 2)
-    pos = np.cumsum(emit, axis=1) - 1
-    new_count = emit.sum(axis=1)
-    out = np.zeros((P, K + 1, 2))
-    r, s = np.nonzero(emit)
-    out[r, pos[r, s]] = pts[r, s]
-    return out, new_count
+    emit = np.empty((P, 2 * K), bool)
+    emit[:, 0::2] = keep
+    emit[:, 1::2] = cross
+    flat = np.flatnonzero(emit)
+    new_count = np.count_nonzero(emit, axis=1)
+    start = np.cumsum(new_count) - new_count
+    r = flat // (2 * K)
+    dst = r * (K + 1) + (np.arange(len(flat)) - start[r])
+    out = np.zeros((P * (K + 1), 2))
+    pts = np.empty((P, 2 * K))
+    for j, v in enumerate((x, y)):
+        pts[:, 0::2] = v
+        pts[:, 1::2] = v + t * (following(v) - v)
+        out[dst, j] = pts.reshape(-1)[flat]
+    return out.reshape(P, K + 1, 2), new_count
 
 
 @dataclass
@@ -483,15 +501,23 @@ def _clip_pairs(xy, E, tri, px, py):
     poly[:, :4, 0], poly[:, :4, 1] = cx, cy
     cnt = np.full(n, 4)
     # A triangle inside the texel is its own fragment (meshes with triangles smaller than texels).
-    txy = xy[tri]
-    corner = np.stack([px, py], 1)
-    within = np.all((txy.min(axis=1) >= corner) & (txy.max(axis=1) <= corner + 1), axis=1)
+    txy = np.take(xy, tri, axis=0)
+    tx, ty = txy[:, :, 0], txy[:, :, 1]
+    # Minima and maxima of the three corners elementwise (numpy's reductions over an axis of 3 are slow).
+    within = ((np.minimum(np.minimum(tx[:, 0], tx[:, 1]), tx[:, 2]) >= px)
+              & (np.maximum(np.maximum(tx[:, 0], tx[:, 1]), tx[:, 2]) <= px + 1)
+              & (np.minimum(np.minimum(ty[:, 0], ty[:, 1]), ty[:, 2]) >= py)
+              & (np.maximum(np.maximum(ty[:, 0], ty[:, 1]), ty[:, 2]) <= py + 1))
     poly[within, :3] = txy[within]
     cnt[within] = 3
+    et = np.take(E, tri, axis=0)
     for e in range(3):
-        a_e, b_e, c_e = E[tri, e, 0], E[tri, e, 1], E[tri, e, 2]
+        a_e, b_e, c_e = et[:, e, 0], et[:, e, 1], et[:, e, 2]
         # Only the edges that cut a texel clip it (usually one): each pass takes the pairs it cuts.
-        cuts = np.flatnonzero(~within & np.any(a_e[:, None] * cx + b_e[:, None] * cy + c_e[:, None] < 0, axis=1))
+        cut = a_e * cx[:, 0] + b_e * cy[:, 0] + c_e < 0
+        for j in range(1, 4):
+            cut |= a_e * cx[:, j] + b_e * cy[:, j] + c_e < 0
+        cuts = np.flatnonzero(cut & ~within)
         if not len(cuts):
             continue
         slots = int(cnt[cuts].max())
