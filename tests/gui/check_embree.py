@@ -7,7 +7,8 @@ From the repository root, after ``python scripts/build_extension.py --platform l
 
 It installs the zip into a temporary user repository, then prints whether core.embree_upload's C-API
 upload is on, the library it calls, every Embree mapped into Blender, and a small bake's mean AO
-against the exact value. Seen in Debian's Blender 4.3 (2026-12-02): Blender links the system
+against the exact value, and the Embree scene flags of the occlusion and contact scenes (robust mode
+off and on, core.tracing.OCCLUSION_ROBUST). Seen in Debian's Blender 4.3 (2026-12-02): Blender links the system
 libembree4 and its symbols are global, so embreex's extension calls it too, although its own copy
 (embreex.libs) is mapped as well; the upload finds the system library from the scene's vtable and
 uses the same one. With the bpy module it is embreex's own copy (tests/test_embree_upload.py).
@@ -47,4 +48,9 @@ exact = analytic.texel_mean(lambda p: 1.0 - analytic.polygon_form_factor(p, lid_
 err = float(np.abs(r.ao - exact).max())
 z = float(np.max(np.abs(r.ao - exact) / np.maximum(r.stderr, 1e-9)))
 print(f"bake: largest |AO - exact| {err:.4f}, largest |z| {z:.2f}")
-sys.exit(0 if on and z < 5 else 1)
+# The occlusion scene without Embree's robust mode, the contact scene with it (core.tracing).
+tracing = importlib.import_module(package + ".core.tracing")
+tracer = tracing.Tracer([plane, lid])
+flags = (upload.scene_flags(tracer.scene), upload.scene_flags(tracer.contact_scene))
+print("scene flags (occlusion, contact):", flags)
+sys.exit(0 if on and z < 5 and flags == (0, upload.RTC_SCENE_FLAG_ROBUST) else 1)
