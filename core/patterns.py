@@ -71,14 +71,21 @@ def _mix(x):
 
 def hash64(*keys):
     """Hash integer keys (arrays broadcast together) into uint64, one mixing round per key."""
+    return hash_more(np.array(0x2545F4914F6CDD1D, dtype=np.uint64), *keys)
+
+
+def hash_more(state, *keys):
+    """Continue :func:`hash64` from ``state`` (what it returned for the keys before these):
+    ``hash_more(hash64(a, b), c, d) == hash64(a, b, c, d)``, so hashes that share their first keys
+    mix those once."""
     # 0-d arrays, not numpy scalars: array arithmetic wraps silently, scalar arithmetic warns.
-    h = np.array(0x2545F4914F6CDD1D, dtype=np.uint64)
+    h = np.asarray(state, dtype=np.uint64)
     tmp = None
     with np.errstate(over="ignore"):
         for k in keys:
             k = np.asarray(k)
             k = k.astype(np.uint64) if k.dtype != np.uint64 else k
-            h = np.bitwise_xor(h, k)  # a new array: the keys are never written
+            h = np.bitwise_xor(h, k)  # a new array: the keys and the state are never written
             h += _GOLDEN
             if h.ndim == 0:
                 h = _mix(h)
@@ -175,17 +182,20 @@ class TexelPattern:
         """The random choices of ``texels`` (array of non-negative ints) for ``replicate``."""
         t = np.asarray(texels, dtype=np.uint64)
         r = np.uint64(replicate)
-        s = self.seed
+        # hash64(seed, t, r, tag) for every tag, the shared keys mixed once (hash_more).
+        st = hash64(self.seed, t)
+        str_ = hash_more(st, r)
         # A texel's replicates take distinct patterns (consecutive ones from its first: each pattern
         # is an independent randomisation), so that replicates are independent of each other.
-        pattern = (_below(hash64(s, t, np.uint64(0), _TAG_PATTERN), self.patterns).astype(np.int64)
+        first = str_ if replicate == 0 else hash_more(st, np.uint64(0))
+        pattern = (_below(hash_more(first, _TAG_PATTERN), self.patterns).astype(np.int64)
                    + int(replicate)) % self.patterns
-        h = hash64(s, t, r, _TAG_ORDER)
+        h = hash_more(str_, _TAG_ORDER)
         order = (h >> np.uint64(40)) & np.uint64(self.length - 1) if self.xor else _below(h, self.length)
-        shift = np.stack([(hash64(s, t, r, _TAG_SHIFT2) >> np.uint64(32)).astype(np.uint32),
-                          (hash64(s, t, r, _TAG_SHIFT3) >> np.uint64(32)).astype(np.uint32)], axis=-1)
+        shift = np.stack([(hash_more(str_, _TAG_SHIFT2) >> np.uint64(32)).astype(np.uint32),
+                          (hash_more(str_, _TAG_SHIFT3) >> np.uint64(32)).astype(np.uint32)], axis=-1)
         shift &= self.shift_mask
-        turn = warps.TWO_PI * hash_uniform(s, t, r, _TAG_TURN)
+        turn = warps.TWO_PI * ((hash_more(str_, _TAG_TURN) >> np.uint64(11)).astype(np.float64) * (2.0 ** -53))
         return TexelKeys(pattern, order.astype(np.int64), shift, np.cos(turn), np.sin(turn))
 
     def rows(self, keys, index):
@@ -379,4 +389,4 @@ def _halton_pool(seed, patterns, span):
     return q
 
 
-__all__ = ["SOURCE_NAMES", "DIMS", "POOL_POINTS", "TexelPattern", "TexelKeys", "hash64", "hash_uniform"]
+__all__ = ["SOURCE_NAMES", "DIMS", "POOL_POINTS", "TexelPattern", "TexelKeys", "hash64", "hash_more", "hash_uniform"]

@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from core.patterns import DIMS, SOURCE_NAMES, TexelPattern
+from core import patterns as P
+from core.patterns import DIMS, SOURCE_NAMES, TexelPattern, hash64, hash_more
 from core.sources import Stratified, sobol_uint32
 
 ALPHA = 1e-3
@@ -210,6 +211,33 @@ class PatternContract:
 @pytest.mark.parametrize("source", SOURCE_NAMES)
 def test_every_source_has_a_contract_class(source):
     assert any(getattr(cls, "source", None) == source for cls in PatternContract.__subclasses__())
+
+
+def test_hash_more_continues_hash64():
+    a, b = np.uint64(7), np.arange(1000, dtype=np.uint64)
+    for tail in ((), (np.uint64(3),), (np.uint64(0), np.arange(1000, dtype=np.uint64))):
+        np.testing.assert_array_equal(hash_more(hash64(a, b), *tail), hash64(a, b, *tail))
+    assert hash_more(hash64(a), np.uint64(1)) == hash64(a, np.uint64(1))
+
+
+@pytest.mark.parametrize("replicate", [0, 1, 3])
+def test_texel_keys_are_hashes_of_seed_texel_replicate_and_tag(replicate):
+    """Each texel's draws are hash64(seed, texel, replicate, tag) (the pattern: replicate 0's, then
+    the next patterns), however keys() shares the mixing of the common keys."""
+    p = TexelPattern("sobol", 99, 64)
+    t = np.arange(0, 40000, 3, dtype=np.uint64)
+    k = p.keys(t, replicate)
+    r = np.uint64(replicate)
+    pattern = (P._below(hash64(p.seed, t, np.uint64(0), P._TAG_PATTERN), p.patterns).astype(np.int64) + replicate)
+    np.testing.assert_array_equal(k.pattern, pattern % p.patterns)
+    np.testing.assert_array_equal(k.order, ((hash64(p.seed, t, r, P._TAG_ORDER) >> np.uint64(40))
+                                            & np.uint64(p.length - 1)).astype(np.int64))
+    for j, tag in enumerate((P._TAG_SHIFT2, P._TAG_SHIFT3)):
+        np.testing.assert_array_equal(k.shift[:, j], (hash64(p.seed, t, r, tag) >> np.uint64(32)).astype(np.uint32)
+                                      & p.shift_mask[j])
+    turn = 2 * np.pi * P.hash_uniform(p.seed, t, r, P._TAG_TURN)
+    np.testing.assert_array_equal(k.cos_turn, np.cos(turn))
+    np.testing.assert_array_equal(k.sin_turn, np.sin(turn))
 
 
 class TestSobol(PatternContract):
