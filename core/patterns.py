@@ -111,7 +111,12 @@ def _mix_into(x, tmp):
 
 def hash_uniform(*keys):
     """Uniform float64 in [0, 1) from the top 53 bits of :func:`hash64`."""
-    return (hash64(*keys) >> np.uint64(11)).astype(np.float64) * (2.0 ** -53)
+    return _unit_float(hash64(*keys))
+
+
+def _unit_float(h):
+    """Uniform float64 in [0, 1) from the top 53 bits of the uint64 hashes ``h``."""
+    return (h >> np.uint64(11)).astype(np.float64) * (2.0 ** -53)
 
 
 def _seed_key(seed):
@@ -195,7 +200,7 @@ class TexelPattern:
         shift = np.stack([(hash_more(str_, _TAG_SHIFT2) >> np.uint64(32)).astype(np.uint32),
                           (hash_more(str_, _TAG_SHIFT3) >> np.uint64(32)).astype(np.uint32)], axis=-1)
         shift &= self.shift_mask
-        turn = warps.TWO_PI * ((hash_more(str_, _TAG_TURN) >> np.uint64(11)).astype(np.float64) * (2.0 ** -53))
+        turn = warps.TWO_PI * _unit_float(hash_more(str_, _TAG_TURN))
         return TexelKeys(pattern, order.astype(np.int64), shift, np.cos(turn), np.sin(turn))
 
     def rows(self, keys, index):
