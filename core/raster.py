@@ -98,14 +98,21 @@ def prepare(mesh, width, height):
                        degenerate_space=degenerate_space, outside=outside, edges=edges)
 
 
+def _corner_bounds(xy):
+    """Per triangle of ``xy`` (T, 3, 2), the least and greatest (x, y) of its corners, each (T, 2):
+    elementwise over the three corners (numpy's reductions over an axis of 3 are several times slower)."""
+    return (np.minimum(np.minimum(xy[:, 0], xy[:, 1]), xy[:, 2]),
+            np.maximum(np.maximum(xy[:, 0], xy[:, 1]), xy[:, 2]))
+
+
 def bin_triangles(tris, width, height, tile):
     """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array (ascending), for tiles
     touched; ``tile`` the side of square tiles or (columns, rows)."""
     tile = np.broadcast_to(np.asarray(tile, dtype=np.int64), (2,))
     idx = np.flatnonzero(tris.valid)
-    xy = np.take(tris.xy, idx, axis=0)
-    lo = np.floor(np.minimum(np.minimum(xy[:, 0], xy[:, 1]), xy[:, 2])).astype(np.int64)
-    hi = np.ceil(np.maximum(np.maximum(xy[:, 0], xy[:, 1]), xy[:, 2])).astype(np.int64) - 1  # last texel the bbox reaches
+    lo, hi = _corner_bounds(np.take(tris.xy, idx, axis=0))
+    lo = np.floor(lo).astype(np.int64)
+    hi = np.ceil(hi).astype(np.int64) - 1  # last texel the bbox reaches
     lo = np.maximum(lo, 0)
     hi = np.minimum(hi, [width - 1, height - 1])
     ok = np.all(hi >= lo, axis=1)
@@ -502,12 +509,8 @@ def _clip_pairs(xy, E, tri, px, py):
     cnt = np.full(n, 4)
     # A triangle inside the texel is its own fragment (meshes with triangles smaller than texels).
     txy = np.take(xy, tri, axis=0)
-    tx, ty = txy[:, :, 0], txy[:, :, 1]
-    # Minima and maxima of the three corners elementwise (numpy's reductions over an axis of 3 are slow).
-    within = ((np.minimum(np.minimum(tx[:, 0], tx[:, 1]), tx[:, 2]) >= px)
-              & (np.maximum(np.maximum(tx[:, 0], tx[:, 1]), tx[:, 2]) <= px + 1)
-              & (np.minimum(np.minimum(ty[:, 0], ty[:, 1]), ty[:, 2]) >= py)
-              & (np.maximum(np.maximum(ty[:, 0], ty[:, 1]), ty[:, 2]) <= py + 1))
+    lo, hi = _corner_bounds(txy)
+    within = (lo[:, 0] >= px) & (hi[:, 0] <= px + 1) & (lo[:, 1] >= py) & (hi[:, 1] <= py + 1)
     poly[within, :3] = txy[within]
     cnt[within] = 3
     et = np.take(E, tri, axis=0)
