@@ -33,7 +33,7 @@ import numpy as np
 from . import bent as bent_mod
 from ._version import __version__
 from .errors import BakeCancelled, BakeMemoryError, MeshError, SettingsError
-from .estimators import ErrorModel, SamplingPlan, TexelEstimates, interval_half_width
+from .estimators import ErrorModel, SamplingPlan, TexelEstimates, TexelWindows, interval_half_width
 from .kernel import Kernel, TileContext
 from .margin import dilate
 from .mesh import Mesh
@@ -227,6 +227,8 @@ class _TileBaker:
         # kernel together (each call costs about half a millisecond before its first ray).
         tile = TileContext(self.table, units, TileContext.stacked_keys(keys), texel_ids, contact, self.tracer.offset,
                            located_curved=self.located_curved, tris=tris)
+        if y is not None:  # the texels' windows, set up once for every round's pooling
+            x, y = TexelWindows(x, y), None
         for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
             self._trace(tile, units, est, sums, list(self.plan.shares(start, count, texels)))
         # Credit the work the adaptive stop saved, so progress reaches 1.

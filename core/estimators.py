@@ -51,6 +51,12 @@ POOL_BLOCK = 16
 POOL_RADIUS = 2
 
 
+#: :func:`t_quantile` of more than this many values, all whole numbers up to _T_TABLE_MAX, goes
+#: through a table of every whole number up to the largest.
+_T_TABLE_FROM = 256
+_T_TABLE_MAX = 1 << 12
+
+
 def t_quantile(p, dof):
     """Student's t quantile for probability ``p`` and ``dof`` degrees of freedom (arrays broadcast).
 
@@ -59,6 +65,20 @@ def t_quantile(p, dof):
     8, below 1e-7 from 50 (tests/test_estimators.py compares with scipy). The core needs no scipy.
     """
     dof = np.asarray(dof, dtype=np.float64)
+    if dof.size > _T_TABLE_FROM:
+        # A tile's texels share a few small whole degrees of freedom (pooled over windows): the
+        # quantile of each once, from a table (the same arithmetic, value by value).
+        top = float(dof.max(initial=0.0))
+        if 0.0 <= float(dof.min(initial=0.0)) and top <= _T_TABLE_MAX:
+            whole = np.floor(dof)
+            if np.array_equal(whole, dof):
+                table = _cornish_fisher(p, np.arange(int(top) + 1, dtype=np.float64))
+                return np.take(table, whole.astype(np.intp))
+    return _cornish_fisher(p, dof)
+
+
+def _cornish_fisher(p, dof):
+    """:func:`t_quantile` value by value."""
     z = normal_quantile(p)
     z2 = z * z
     g1 = (z2 + 1) * z / 4
@@ -133,51 +153,83 @@ class TexelEstimates:
         return np.nan_to_num(RunningStats.from_moments(self.n, self.mean, self.m2).stderr, nan=0.0)
 
 
+class TexelWindows:
+    """The windows of a fixed set of texels (see the module docstring): the index arithmetic of
+    :func:`window_sums`, done once and reused for every sum over the same texels (a tile's texels are
+    pooled once per round of adaptive sampling). ``x``, ``y`` (m,) are integer texel coordinates in
+    the image; the texels must lie in whole :data:`POOL_BLOCK` blocks (a tile of a multiple of the
+    block side) and be distinct.
+
+    Per row of values, a summed-area table of each block padded with zeros, (side, side, blocks)
+    with the blocks innermost, so both running sums add whole contiguous planes (numpy's cumsum
+    along an axis is several times slower); then each block's window sums on the (B, B) grid, and
+    the texels' values gathered from it: O(1) per texel whatever the window.
+    """
+
+    def __init__(self, x, y):
+        B, r = POOL_BLOCK, POOL_RADIUS
+        x = np.asarray(x, dtype=np.int64)
+        y = np.asarray(y, dtype=np.int64)
+        self.m = len(x)
+        if self.m == 0:
+            return
+        bx, by = x // B, y // B
+        bx0, by0 = int(bx.min()), int(by.min())
+        nbx, nby = int(bx.max()) - bx0 + 1, int(by.max()) - by0 + 1
+        self.blocks = nby * nbx
+        self.block = (by - by0) * nbx + (bx - bx0)
+        self.cell = y % B * B + x % B  # place in its block
+        self._k = None
+
+    def _plan(self, k):
+        """Scatter and gather indices for ``k`` rows of values (cached for the last k)."""
+        if self._k != k:
+            B, r = POOL_BLOCK, POOL_RADIUS
+            side = B + 2 * r + 1
+            K = k * self.blocks
+            rows = (np.arange(k) * self.blocks)[:, None] + self.block[None, :]
+            y, x = np.divmod(self.cell, B)
+            self._scatter = ((y + r + 1) * side + (x + r + 1)) * K + rows
+            self._gather = self.cell * K + rows
+            self._k = k
+        return self._scatter, self._gather
+
+    def sums(self, values):
+        """(k, m) window sums of ``values`` (k, m)."""
+        values = np.asarray(values, dtype=np.float64)
+        k = values.shape[0]
+        if self.m == 0:
+            return np.zeros((k, 0))
+        B, r = POOL_BLOCK, POOL_RADIUS
+        side = B + 2 * r + 1
+        scatter, gather = self._plan(k)
+        table = np.zeros((side, side, k * self.blocks))
+        table.reshape(-1)[scatter] = values
+        for i in range(1, side):  # running sums down, then across: the same additions as cumsum
+            np.add(table[i], table[i - 1], out=table[i])
+        for i in range(1, side):
+            np.add(table[:, i], table[:, i - 1], out=table[:, i])
+        # Each window's corners (y1, x1) - (y0, x1) - (y1, x0) + (y0, x0), y0 = y - r - 1, y1 = y + r.
+        lo, hi = slice(0, B), slice(2 * r + 1, side)
+        win = table[hi, hi] - table[lo, hi]
+        win -= table[hi, lo]
+        win += table[lo, lo]
+        return win.reshape(-1)[gather]
+
+
 def window_sums(values, x, y):
     """For each texel, the sums of ``values`` (k, m) over the texels in its window (see the module
-    docstring): (k, m). ``x``, ``y`` (m,) are integer texel coordinates in the image; the texels of
-    one call must lie in whole :data:`POOL_BLOCK` blocks (a tile of a multiple of the block side) and
-    be distinct.
+    docstring): (k, m). ``x``, ``y`` (m,) are integer texel coordinates in the image (see
+    :class:`TexelWindows`, which this builds for one call).
 
-    Sample points that are not texels (mesh vertices, :mod:`core.vertices`) have no image window:
-    there ``x`` is an object whose ``sums(values)`` gives the sums over each point's neighbourhood
-    (:class:`core.vertices.Neighbours`, a vertex and the vertices that share an edge with it), and
-    ``y`` is None."""
+    ``y`` None: ``x`` is an object whose ``sums(values)`` gives the sums over each point's
+    neighbourhood: a :class:`TexelWindows` built once for texels summed over many times, or, for
+    sample points that are not texels (mesh vertices, :mod:`core.vertices`), a
+    :class:`core.vertices.Neighbours` (a vertex and the vertices that share an edge with it)."""
     values = np.asarray(values, dtype=np.float64)
     if y is None:
         return x.sums(values)
-    k, m = values.shape
-    if m == 0:
-        return np.zeros((k, 0))
-    B, r = POOL_BLOCK, POOL_RADIUS
-    x = np.asarray(x, dtype=np.int64)
-    y = np.asarray(y, dtype=np.int64)
-    bx, by = x // B, y // B
-    bx0, by0 = int(bx.min()), int(by.min())
-    nbx, nby = int(bx.max()) - bx0 + 1, int(by.max()) - by0 + 1
-    # Dense blocks (nby, nbx, B + 2r + 1, B + 2r + 1) per row of ``values``, with a border of zeros,
-    # then window sums from a summed-area table: O(1) per texel whatever the window. Each texel's
-    # place is one flat index; its window's corners are that index plus constant offsets.
-    side = B + 2 * r + 1
-    size = nby * nbx * side * side
-    at = ((by - by0) * nbx + (bx - bx0)) * (side * side) + (y % B + r + 1) * side + (x % B + r + 1)
-    dense = np.zeros((k, nby * nbx, side, side))
-    flat = dense.reshape(k, size)
-    for j in range(k):
-        flat[j, at] = values[j]
-    np.cumsum(dense, axis=2, out=dense)
-    np.cumsum(dense, axis=3, out=dense)
-    out = np.empty((k, m))
-    hi, lo = r * side + r, (r + 1) * side + r + 1  # offsets of the (y1, x1) and (y0, x0) corners,
-    # added in the order y1x1 - y0x1 - y1x0 + y0x0
-    for j in range(k):
-        f = flat[j]
-        o = out[j]
-        np.take(f, at + hi, out=o, mode="clip")  # indices inside the padded blocks: no checks needed
-        o -= np.take(f, at - ((r + 1) * side - r), mode="clip")  # (y0, x1)
-        o -= np.take(f, at + (r * side - r - 1), mode="clip")    # (y1, x0)
-        o += np.take(f, at - lo, mode="clip")                    # (y0, x0)
-    return out
+    return TexelWindows(x, y).sums(values)
 
 
 def pooled_variance(v, dof, n, x, y, also=()):
@@ -372,4 +424,4 @@ class SamplingPlan:
 
 
 __all__ = ["TexelEstimates", "ErrorModel", "SamplingPlan", "pooled_variance", "window_sums", "t_quantile",
-           "interval_half_width", "replicate_samples", "POOL_BLOCK", "POOL_RADIUS"]
+           "interval_half_width", "replicate_samples", "POOL_BLOCK", "POOL_RADIUS", "TexelWindows"]

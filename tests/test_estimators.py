@@ -15,7 +15,7 @@ from scipy import stats as sps
 
 from core import Mesh, bake_ao
 from core.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
-from core.estimators import POOL_BLOCK, POOL_RADIUS, TexelEstimates, t_quantile, window_sums
+from core.estimators import POOL_BLOCK, POOL_RADIUS, TexelEstimates, TexelWindows, t_quantile, window_sums
 from core.patterns import TexelPattern
 from scenes import box, plane
 
@@ -35,6 +35,32 @@ def test_t_quantile_matches_scipy(p):
     assert np.all(rel[dof >= 10] < 5e-5) and np.all(rel[dof >= 50] < 1e-7)
 
 
+@pytest.mark.parametrize("p", [0.9, 0.975])
+def test_t_quantile_of_a_tile_of_whole_degrees_of_freedom_is_each_value_alone(p):
+    # More than a few hundred whole numbers go through a table of each of them: the same values as
+    # one at a time, and as scipy's.
+    rng = np.random.default_rng(4)
+    for top in (2, 24, 75, 4096):
+        dof = rng.integers(0, top + 1, 5000).astype(np.float64)
+        got = t_quantile(p, dof)
+        alone = np.array([t_quantile(p, np.array([d]))[0] for d in dof[:400]])
+        np.testing.assert_array_equal(got[:400], alone)
+        ok = dof >= 10
+        np.testing.assert_allclose(got[ok], sps.t.ppf(p, dof[ok]), rtol=5e-5)
+    # Not whole, negative, or beyond the table: value by value.
+    for dof in (rng.random(1000) * 30, np.full(1000, 5000.0)):
+        np.testing.assert_array_equal(t_quantile(p, dof), [t_quantile(p, np.array([d]))[0] for d in dof])
+
+
+def _brute_window_sums(v, x, y, W, H):
+    dense = np.zeros((H, W))
+    dense[y, x] = v
+    B, r = POOL_BLOCK, POOL_RADIUS
+    return np.array([dense[max(yy - r, yy // B * B):min(yy + r, yy // B * B + B - 1) + 1,
+                           max(xx - r, xx // B * B):min(xx + r, xx // B * B + B - 1) + 1].sum()
+                     for xx, yy in zip(x, y)])
+
+
 def test_window_sums_equal_a_brute_force_sum_within_blocks():
     rng = np.random.default_rng(1)
     W, H = 48, 40
@@ -42,13 +68,25 @@ def test_window_sums_equal_a_brute_force_sum_within_blocks():
     y, x = np.nonzero(keep)
     v = rng.random(len(x))
     (got,) = window_sums([v], x, y)
-    dense = np.zeros((H, W))
-    dense[y, x] = v
-    B, r = POOL_BLOCK, POOL_RADIUS
-    want = np.array([dense[max(yy - r, yy // B * B):min(yy + r, yy // B * B + B - 1) + 1,
-                           max(xx - r, xx // B * B):min(xx + r, xx // B * B + B - 1) + 1].sum()
-                     for xx, yy in zip(x, y)])
-    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got, _brute_window_sums(v, x, y, W, H), rtol=1e-12, atol=1e-12)
+
+
+def test_texel_windows_set_up_once_sum_any_rows_of_the_same_texels():
+    # A tile's windows are set up once and summed over every round: any number of rows, in any
+    # order of calls, each the brute-force sum (and the same as window_sums built for one call).
+    rng = np.random.default_rng(5)
+    W, H = 64, 48
+    y, x = np.nonzero(rng.random((H, W)) < 0.6)
+    x, y = x + 32, y + 16  # a tile away from the image's corner
+    windows = TexelWindows(x, y)
+    for k in (1, 3, 3, 2, 1):
+        v = rng.random((k, len(x)))
+        got = windows.sums(v)
+        for j in range(k):
+            np.testing.assert_allclose(got[j], _brute_window_sums(v[j], x - 32, y - 16, W, H), rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(got, window_sums(v, x, y))
+        np.testing.assert_array_equal(got, window_sums(v, windows, None))
+    assert TexelWindows(x[:0], y[:0]).sums(np.zeros((2, 0))).shape == (2, 0)
 
 
 def test_replicate_variance_is_unbiased_for_equal_and_unequal_replicates():
