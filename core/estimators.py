@@ -167,7 +167,7 @@ class TexelWindows:
     """
 
     def __init__(self, x, y):
-        B, r = POOL_BLOCK, POOL_RADIUS
+        B = POOL_BLOCK
         x = np.asarray(x, dtype=np.int64)
         y = np.asarray(y, dtype=np.int64)
         self.m = len(x)
