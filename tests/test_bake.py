@@ -295,6 +295,61 @@ def test_a_block_resting_on_the_surface_occludes_it_completely(samples):
     assert np.all(g.ao == 1.0)
 
 
+def _rotated_box(centre, half, height, angle):
+    c, s_ = math.cos(angle), math.sin(angle)
+    b = box((-half, -half, 0.0), (half, half, height))
+    P = b.positions @ np.array([[c, s_, 0], [-s_, c, 0], [0, 0, 1]]) + [centre[0], centre[1], 0.0]
+    return Mesh(P, b.triangles, name="turned box")
+
+
+@pytest.mark.parametrize("resolution", [32, 96])
+def test_contact_probes_boxed_per_texel_find_every_texel_in_contact(resolution, monkeypatch):
+    # Contact is probed only where a texel's (or sub-triangle's) probes, boxed, meet an occluder
+    # triangle's box. That must be conservative. The plane's two triangles are separate UV islands,
+    # so split texels run along their diagonal, under a turned box. Every texel under a resting box
+    # (or one hovering within the probes' reach), split or not, is in contact: AO exactly 0, though
+    # the boxes are taller than the rays reach. Past the budget of (box, occluder) pairs every probe
+    # is traced: the same bake.
+    import core.surface as surface_mod
+
+    halves = plane()
+    uvs = halves.uvs.copy()
+    uvs[1] = uvs[1] * 0.98 + 0.01  # the second triangle's island a little apart
+    halves = Mesh(halves.positions, halves.triangles, uvs, name="halves")
+    turned = ((0.55, 0.45), 0.12, 0.5)
+    occluders = [box((0.2, 0.55, 0.0), (0.45, 0.8, 0.3)), _rotated_box(turned[0], turned[1], 0.3, turned[2]),
+                 box((0.7, 0.1, 1e-6), (0.9, 0.3, 0.3)),  # within the probes' reach: in contact
+                 box((0.1, 0.05, 0.05), (0.3, 0.25, 0.3))]  # hovers: never in contact
+    kw = dict(resolution=resolution, samples=32, max_distance=0.2, margin=0, threads=2, tile_size=32)
+    r = bake_ao(halves, occluders, **kw)
+
+    def under(p):
+        """Whether points (..., 2) of the plane lie under a box in contact (1e-3 inside its edges)."""
+        x, y = p[..., 0], p[..., 1]
+        c, s_ = math.cos(turned[2]), math.sin(turned[2])
+        dx, dy = x - turned[0][0], y - turned[0][1]
+        u, v = c * dx + s_ * dy, -s_ * dx + c * dy  # the turned box's own axes
+        e = 1e-3
+        return (((x > 0.2 + e) & (x < 0.45 - e) & (y > 0.55 + e) & (y < 0.8 - e))
+                | ((np.abs(u) < turned[1] - e) & (np.abs(v) < turned[1] - e))
+                | ((x > 0.7 + e) & (x < 0.9 - e) & (y > 0.1 + e) & (y < 0.3 - e)))
+
+    i, j = np.mgrid[0:resolution, 0:resolution]
+    corners = np.stack([np.stack([(j + a) / resolution, (i + b) / resolution], -1) for a in (0, 1) for b in (0, 1)])
+    # Texel corners as points of either triangle (the second island's map undone).
+    inside = np.all(under(corners) & under((corners - 0.01) / 0.98), axis=0)
+    assert inside.sum() > 0.1 * resolution ** 2
+    np.testing.assert_array_equal(r.ao[inside], 0.0)
+    split = np.zeros(resolution * resolution, bool)
+    uvt = prepare(halves, resolution, resolution)
+    frag = rasterize_tile(uvt, np.arange(2), resolution, resolution, 0, 0, resolution, resolution)
+    split[frag.texels[frag.full_tri == -1]] = True
+    assert (split.reshape(inside.shape) & inside).sum() >= resolution // 16  # split texels among them
+    assert r.ao[(r.mask & ~inside)].mean() > 0.5  # elsewhere the plane is mostly open
+    monkeypatch.setattr(surface_mod, "CONTACT_BOX_BUDGET", 0)
+    np.testing.assert_array_equal(bake_ao(halves, occluders, **kw).ao, r.ao)
+
+
 @pytest.mark.parametrize("margin", [3, 16])
 def test_margin_does_not_depend_on_the_number_of_threads(margin):
     # The margin is computed in bands of rows (each with `margin` rows of its neighbours) when
