@@ -283,11 +283,6 @@ def aligned_pieces(owner, start, count):
     return np.concatenate(pu), np.concatenate(ps), np.concatenate(pz)
 
 
-#: :func:`contact_texels` boxes each texel's probes against the occluders' triangles up to this
-#: many (box, triangle) pairs per tile; past it every probe is traced.
-CONTACT_BOX_BUDGET = 1 << 21
-
-
 def contact_texels(frag, table, width, tracer, samples):
     """Per texel, whether another object's surface touches this one somewhere in the texel.
 
@@ -336,26 +331,7 @@ def contact_texels(frag, table, width, tracer, samples):
     tri = np.concatenate([tri_s, tri_p])
     own = np.concatenate([own_s, own_p])
     pos = table.position(tri, xy[:, 0], xy[:, 1])
-    # The probes of each texel inside a triangle (5) and of each sub-triangle (4), boxed with their
-    # probe segments (grown by twice their reach): only groups whose box meets an occluder
-    # triangle's box can find contact, the rest are not traced (a plane under a resting box: the
-    # footprint's texels, not the whole plane).
-    counts = (len(corners), 4)
-    groups = [len(simple), len(sub)]
-    reach = 2.0 * tracer.point_offset(pos)[:, None]
-    near_group, at = [], 0
-    for size, g in zip(counts, groups):
-        p = pos[at:at + size * g].reshape(g, size, 3)
-        r = reach[at:at + size * g].reshape(g, size, 1)
-        lo, hi = p[:, 0] - r[:, 0], p[:, 0] + r[:, 0]
-        for j in range(1, size):
-            np.minimum(lo, p[:, j] - r[:, j], out=lo)
-            np.maximum(hi, p[:, j] + r[:, j], out=hi)
-        near_group.append(np.repeat(tracer.near_occluders(lo, hi, budget=CONTACT_BOX_BUDGET), size))
-        at += size * g
-    probe = np.flatnonzero(np.concatenate(near_group))
-    hit = np.zeros(len(pos), bool)
-    hit[probe] = tracer.contact(pos[probe], table.FN[tri[probe]])
+    hit = tracer.contact(pos, table.FN[tri])
     return (np.bincount(own[hit], minlength=n_tex) > 0) | located
 
 

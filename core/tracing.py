@@ -152,11 +152,9 @@ class Tracer:
         """Embree's occlusion answer per ray (n,) bool; ``tfar`` (n,) float32 is overwritten."""
         return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
 
-    def near_occluders(self, lo, hi, budget=None):
+    def near_occluders(self, lo, hi):
         """Per box [lo, hi] (n, 3), whether some occluder triangle's bounding box overlaps it: a
-        cheap, conservative test of where contact probes can find anything. ``budget``: when more
-        than this many (box, occluder) pairs would be compared, every box is called near (the
-        test costs more than the probes it could save)."""
+        cheap, conservative test of where contact probes can find anything."""
         lo, hi = np.atleast_2d(lo), np.atleast_2d(hi)
         out = np.zeros(len(lo), bool)
         if self.contact_scene is None or not len(lo):
@@ -164,19 +162,10 @@ class Tracer:
         # Only occluders overlapping the boxes' union can overlap any of them.
         ulo, uhi = lo.min(axis=0), hi.max(axis=0)
         cand = np.flatnonzero(np.all((self._occ_lo <= uhi) & (self._occ_hi >= ulo), axis=1))
-        if budget is not None and len(cand) * len(lo) > budget:
-            out[:] = True
-            return out
-        # Blocks of (box, occluder) pairs, axis by axis (numpy's all/any over an axis of 3 is slow).
-        olo, ohi = self._occ_lo[cand], self._occ_hi[cand]
-        step = max(1, (1 << 20) // len(lo))
-        for c0 in range(0, len(cand), step):
-            c = slice(c0, c0 + step)
-            meet = (olo[None, c, 0] <= hi[:, 0, None]) & (ohi[None, c, 0] >= lo[:, 0, None])
-            for a in (1, 2):
-                meet &= olo[None, c, a] <= hi[:, a, None]
-                meet &= ohi[None, c, a] >= lo[:, a, None]
-            out |= meet.any(axis=1)
+        for c0 in range(0, len(cand), 256):
+            c = cand[c0:c0 + 256]
+            out |= np.any(np.all((self._occ_lo[c][None] <= hi[:, None]) & (self._occ_hi[c][None] >= lo[:, None]),
+                                 axis=2), axis=1)
         return out
 
     def contact(self, points, normals, lengths=None):
