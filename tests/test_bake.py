@@ -315,9 +315,10 @@ def test_every_texel_in_contact_is_found_split_texels_too(resolution):
     uvs[1] = uvs[1] * 0.98 + 0.01  # the second triangle's island a little apart
     halves = Mesh(halves.positions, halves.triangles, uvs, name="halves")
     turned = ((0.55, 0.45), 0.12, 0.5)
-    occluders = [box((0.2, 0.55, 0.0), (0.45, 0.8, 0.3)), _rotated_box(turned[0], turned[1], 0.3, turned[2]),
-                 box((0.7, 0.1, 1e-6), (0.9, 0.3, 0.3)),  # within the probes' reach: in contact
-                 box((0.1, 0.05, 0.05), (0.3, 0.25, 0.3))]  # hovers: never in contact
+    # Boxes in contact: one resting, one 1e-6 above (within the probes' reach); and one hovering.
+    touching = [((0.2, 0.55, 0.0), (0.45, 0.8, 0.3)), ((0.7, 0.1, 1e-6), (0.9, 0.3, 0.3))]
+    occluders = [box(lo, hi) for lo, hi in touching] + [_rotated_box(turned[0], turned[1], 0.3, turned[2]),
+                                                         box((0.1, 0.05, 0.05), (0.3, 0.25, 0.3))]
     kw = dict(resolution=resolution, samples=32, max_distance=0.2, margin=0, threads=2, tile_size=32)
     r = bake_ao(halves, occluders, **kw)
 
@@ -328,9 +329,10 @@ def test_every_texel_in_contact_is_found_split_texels_too(resolution):
         dx, dy = x - turned[0][0], y - turned[0][1]
         u, v = c * dx + s_ * dy, -s_ * dx + c * dy  # the turned box's own axes
         e = 1e-3
-        return (((x > 0.2 + e) & (x < 0.45 - e) & (y > 0.55 + e) & (y < 0.8 - e))
-                | ((np.abs(u) < turned[1] - e) & (np.abs(v) < turned[1] - e))
-                | ((x > 0.7 + e) & (x < 0.9 - e) & (y > 0.1 + e) & (y < 0.3 - e)))
+        out = (np.abs(u) < turned[1] - e) & (np.abs(v) < turned[1] - e)
+        for lo, hi in touching:
+            out |= (x > lo[0] + e) & (x < hi[0] - e) & (y > lo[1] + e) & (y < hi[1] - e)
+        return out
 
     i, j = np.mgrid[0:resolution, 0:resolution]
     corners = np.stack([np.stack([(j + a) / resolution, (i + b) / resolution], -1) for a in (0, 1) for b in (0, 1)])
