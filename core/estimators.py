@@ -68,8 +68,8 @@ def t_quantile(p, dof):
     if dof.size > _T_TABLE_FROM:
         # A tile's texels share a few small whole degrees of freedom (pooled over windows): the
         # quantile of each once, from a table (the same arithmetic, value by value).
-        top = float(dof.max(initial=0.0))
-        if 0.0 <= float(dof.min(initial=0.0)) and top <= _T_TABLE_MAX:
+        top = float(dof.max())
+        if float(dof.min()) >= 0.0 and top <= _T_TABLE_MAX:
             whole = np.floor(dof)
             if np.array_equal(whole, dof):
                 table = _cornish_fisher(p, np.arange(int(top) + 1, dtype=np.float64))
