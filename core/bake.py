@@ -392,7 +392,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         final (before margin dilation); ``rows``, ``cols`` are slices of the (H, W) result.
     tile_size, chunk_rays : the unit of work a thread takes, in texels: a side (square tiles) or
         (columns, rows), rounded up to multiples of 16 (None: :func:`core.settings.auto_tile_shape`
-        of the resolution and threads), and rays traced per call into Embree (bounds memory).
+        of the resolution, threads and samples), and rays traced per call into Embree (bounds memory).
         Neither changes the result: texels draw their samples by (texel, index) alone.
     on_rays : called as on_rays(batch) from worker threads after every call into Embree, with a
         :class:`core.tracing.RayBatch` (origins, directions, lengths, Embree's answer, the texel and
@@ -447,7 +447,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     target, occluders, unit = _normalized_scene(target, occluders)
     w, h = s.width, s.height
     tri_total = target.triangle_count + sum(o.triangle_count for o in occluders) + (s2a.triangle_count if s2a else 0)
-    need = estimate_memory(w, h, tri_total, s.threads, s.chunk_rays, s.samples, s.source, s.replicates)
+    need = estimate_memory(w, h, tri_total, s.threads, s.chunk_rays, s.samples, s.source, s.replicates,
+                           s.tile_shape[0] * s.tile_shape[1])
     avail = available_memory()
     if avail is not None and need > avail:
         raise BakeMemoryError(f"a {w} x {h} bake of {tri_total} triangles needs about {need / 2**30:.2f} GiB, "

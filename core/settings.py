@@ -28,6 +28,11 @@ MAX_REPLICATES = 16
 #: Tiles are multiples of this side, so that the blocks error estimates are pooled in
 #: (core.estimators.POOL_BLOCK) never straddle two tiles.
 TILE_MULTIPLE = 16
+#: The side of the largest tile :func:`auto_tile_shape` makes, and of the larger one it makes for bakes
+#: of at most LARGE_TILE_SAMPLES samples per texel when the image gives every thread at least
+#: LARGE_TILES_PER_THREAD of them.
+TILE_SIDE, LARGE_TILE_SIDE = 256, 512
+LARGE_TILE_SAMPLES, LARGE_TILES_PER_THREAD = 16, 8
 
 
 def _positive_int(value, what, lo=1):
@@ -125,7 +130,7 @@ class BakeSettings:
         threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
         chunk_rays = _positive_int(chunk_rays, "chunk_rays")
         if tile_size is None:
-            tile_size = auto_tile_shape(w, h, threads)
+            tile_size = auto_tile_shape(w, h, threads, samples)
         if isinstance(tile_size, (tuple, list)) and len(tile_size) == 2:
             tile_size, tile_height = (_positive_int(t, "tile_size") for t in tile_size)
         else:
@@ -201,7 +206,8 @@ def available_memory():
         return None
 
 
-def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, source="sobol", replicates=1):
+def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, source="sobol", replicates=1,
+                    tile_texels=TILE_SIDE * TILE_SIDE):
     """Peak bytes a bake needs: output planes, margin work, per-thread chunks, the sample pool, triangles.
 
     A chunk holds at most ``max(chunk_rays, SAMPLE_PIECE)`` rays (a texel with more samples is
@@ -216,28 +222,48 @@ def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, so
     chunks = threads * max(chunk_rays, min(samples, SAMPLE_PIECE)) * per_ray
     span = pattern_span(source, -(-samples // replicates))
     pool = max(span * replicates, min(POOL_POINTS, texels * replicates * span)) * 64
-    units = threads * (256 * 256) * 4 * 600     # a tile's units, at most 256^2 texels of a few units
+    units = threads * tile_texels * 4 * 600     # a tile's units, a few per texel
     tris = triangles * 300                      # texel-space corners, affine maps, Embree buffers
     return planes + margin_work + chunks + pool + min(units, texels * 4 * 600 * threads) + tris
 
 
-def auto_tile_shape(width, height, threads):
+def auto_tile_shape(width, height, threads, samples=None):
     """(columns, rows) of a tile: at least one tile per thread, sides multiples of TILE_MULTIPLE and
-    at most 256, as large as that allows.
+    at most TILE_SIDE (LARGE_TILE_SIDE for bakes of few samples on large images), as large as that
+    allows.
 
-    Every tile costs its own rasterising and, per group of equal pieces, its own kernel calls (about
-    half a millisecond of fixed numpy work each): tiles smaller than the threads need cost time and
-    even out nothing. From 256 x 256 (or the image), the longer side is halved until every thread
-    has a tile. Measured on the bench's Suzanne scene (wall seconds; 2 threads unless said):
-    128^2 x 128 spp, square tiles of 64 (the rule before, about two tiles per thread) 0.36-0.42,
-    128 x 64 0.29-0.38; 1 thread, one 128^2 tile 0.50-0.54 against four of 64^2 0.64; 256^2 x 128,
-    128^2 tiles 0.98-1.04, 256 x 128 0.94-0.98; at 512^2 and above both rules give 256^2 tiles.
-    Before the rule of two tiles per thread, 2^20 rays a tile cut a 128^2 image into 16 tiles (0.84 s).
-    The sample count does not enter: tiles are traced in chunks of ``chunk_rays``, so a tile's samples
-    bound neither memory nor the granularity of progress and cancel.
+    Every tile costs its own rasterising, sample units and, per group of equal pieces, its own kernel
+    calls (about half a millisecond of fixed numpy work each): tiles smaller than the threads need
+    cost time and even out nothing. From 256 x 256 (or the image), the longer side is halved until
+    every thread has a tile. Measured on the bench's Suzanne scene (wall seconds; 2 threads unless
+    said): 128^2 x 128 spp, square tiles of 64 (the rule before, about two tiles per thread)
+    0.36-0.42, 128 x 64 0.29-0.38; 1 thread, one 128^2 tile 0.50-0.54 against four of 64^2 0.64;
+    256^2 x 128, 128^2 tiles 0.98-1.04, 256 x 128 0.94-0.98. Before the rule of two tiles per thread,
+    2^20 rays a tile cut a 128^2 image into 16 tiles (0.84 s).
+
+    Larger tiles: a 256^2 tile's fixed work is a few milliseconds on one thread, and with two
+    threads, whose numpy calls wait for each other's Python between them, 14-18 ms of CPU. Where a
+    texel takes few samples that is most of a tile's time (a 4096^2 x 1 bake spends 5.2 s outside
+    embreex on 254 tiles, 3.6 s on 64 of 512^2). Where it takes many, larger tiles lose: their
+    arrays outgrow the caches (one thread, 512^2 x 64: one 512^2 tile 1.91-2.00 s against four of
+    256^2 1.83-1.87) and the last tiles leave threads idle (1024^2 x 64 on 2 threads, four 512^2 tiles
+    3.61 s against sixteen of 256^2 3.31). So 512^2 tiles are taken for at most LARGE_TILE_SAMPLES
+    samples (``samples`` None: many) when there are LARGE_TILES_PER_THREAD of them per thread. 256^2
+    -> 512^2 on 2 threads: 4096^2 x 1, 4, 16 5.16 -> 3.76, 8.67 -> 7.85, 17.95 -> 17.25 s; 2048^2 x
+    1, 4 1.50 -> 1.18, 2.99 -> 2.61 s; 2048^2 x 64 (not taken) 12.19 -> 12.58 s.
+
+    The tiling never changes a result (texels draw their samples by (texel, index) alone), and tiles
+    are traced in chunks of ``chunk_rays``, so a tile's samples bound neither memory nor the
+    granularity of progress and cancel.
     """
-    tw, th = min(256, _tile_side(width)), min(256, _tile_side(height))
-    while -(-width // tw) * -(-height // th) < max(1, threads) and max(tw, th) > TILE_MULTIPLE:
+    threads = max(1, threads)
+    side = TILE_SIDE
+    if samples is not None and samples <= LARGE_TILE_SAMPLES:
+        large = -(-width // LARGE_TILE_SIDE) * -(-height // LARGE_TILE_SIDE)
+        if large >= LARGE_TILES_PER_THREAD * threads:
+            side = LARGE_TILE_SIDE
+    tw, th = min(side, _tile_side(width)), min(side, _tile_side(height))
+    while -(-width // tw) * -(-height // th) < threads and max(tw, th) > TILE_MULTIPLE:
         if th >= tw:
             th = _tile_side(th / 2)
         else:

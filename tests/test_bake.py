@@ -6,6 +6,8 @@ import threading
 
 import numpy as np
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from core import BakeCancelled, Mesh, bake_ao
 from core.raster import prepare, rasterize_tile
@@ -112,6 +114,37 @@ def test_result_does_not_depend_on_tiling_or_chunking():
     a = bake_ao(plane(), [lid_mesh()], resolution=20, samples=32, tile_size=8, chunk_rays=100, margin=0)
     b = bake_ao(plane(), [lid_mesh()], resolution=20, samples=32, tile_size=32, chunk_rays=1 << 16, margin=0)
     assert np.array_equal(a.ao, b.ao) and np.array_equal(a.stderr, b.stderr)
+
+
+@given(st.integers(1, 8192), st.integers(1, 8192), st.integers(1, 64), st.one_of(st.none(), st.integers(1, 4096)))
+@example(4096, 4096, 2, 4).via("large tiles")
+@example(4096, 4096, 2, 17).via("too many samples")
+@example(4096, 4096, 2, None).via("samples unknown")
+@example(4096, 4096, 16, 1).via("too few large tiles per thread")
+@example(2048, 2048, 2, 16).via("just enough large tiles per thread")
+@example(1024, 1024, 2, 1).via("too few large tiles per thread")
+@example(128, 128, 2, 128).via("a small image, halved for the threads")
+@settings(max_examples=300, deadline=None)
+def test_auto_tiles_cover_the_image_with_a_tile_per_thread(width, height, threads, samples):
+    """The automatic tile shape: sides multiples of TILE_MULTIPLE, at most TILE_SIDE, or
+    LARGE_TILE_SIDE only for few samples on an image with LARGE_TILES_PER_THREAD such tiles per
+    thread; at least one tile per thread whenever the image has room for that many."""
+    from core.settings import (LARGE_TILE_SAMPLES, LARGE_TILE_SIDE, LARGE_TILES_PER_THREAD, TILE_MULTIPLE,
+                               TILE_SIDE, auto_tile_shape)
+
+    tw, th = auto_tile_shape(width, height, threads, samples)
+    assert tw % TILE_MULTIPLE == 0 and th % TILE_MULTIPLE == 0
+    large = -(-width // LARGE_TILE_SIDE) * -(-height // LARGE_TILE_SIDE)
+    few = samples is not None and samples <= LARGE_TILE_SAMPLES and large >= LARGE_TILES_PER_THREAD * threads
+    assert max(tw, th) <= (LARGE_TILE_SIDE if few else TILE_SIDE)
+    assert tw <= max(TILE_MULTIPLE, -(-width // TILE_MULTIPLE) * TILE_MULTIPLE)
+    assert th <= max(TILE_MULTIPLE, -(-height // TILE_MULTIPLE) * TILE_MULTIPLE)
+    tiles = -(-width // tw) * -(-height // th)
+    if max(tw, th) > TILE_MULTIPLE:
+        assert tiles >= threads
+    if few:
+        side = lambda v: max(TILE_MULTIPLE, -(-v // TILE_MULTIPLE) * TILE_MULTIPLE)  # noqa: E731
+        assert (tw, th) == (min(LARGE_TILE_SIDE, side(width)), min(LARGE_TILE_SIDE, side(height)))
 
 
 def test_adaptive_sampling_stops_open_texels_early_and_converges_the_rest():
