@@ -69,13 +69,19 @@ def prepare(mesh, width, height):
     """Texel-space corners of every triangle, which of them can be baked, and counts of the others.
 
     The surface each texel point lies on (position and normal as affine maps of texel space) is
-    :class:`core.surface.SurfaceTable`'s business.
+    :class:`core.surface.SurfaceTable`'s business. Arrays of a few values per triangle are worked
+    column by column (see :func:`core.mesh.face_geometry`), with the same operations and bits.
     """
-    xy = mesh.uvs * np.array([width, height], dtype=np.float64)
-    e1 = xy[:, 1] - xy[:, 0]
-    e2 = xy[:, 2] - xy[:, 0]
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # twice the signed UV area, in texels
-    scale = np.maximum(np.maximum(np.abs(e1[:, 0]), np.abs(e1[:, 1])), np.maximum(np.abs(e2[:, 0]), np.abs(e2[:, 1])))
+    uv = mesh.uvs
+    T = len(uv)
+    xy = np.empty((T, 3, 2))
+    xf, uf = xy.reshape(-1, 2), uv.reshape(-1, 2)
+    np.multiply(uf[:, 0], np.float64(width), out=xf[:, 0])
+    np.multiply(uf[:, 1], np.float64(height), out=xf[:, 1])
+    e1x, e1y = xy[:, 1, 0] - xy[:, 0, 0], xy[:, 1, 1] - xy[:, 0, 1]
+    e2x, e2y = xy[:, 2, 0] - xy[:, 0, 0], xy[:, 2, 1] - xy[:, 0, 1]
+    det = e1x * e2y - e1y * e2x  # twice the signed UV area, in texels
+    scale = np.maximum(np.maximum(np.abs(e1x), np.abs(e1y)), np.maximum(np.abs(e2x), np.abs(e2y)))
     valid = np.abs(det) > 1e-12 * np.maximum(scale * scale, 1e-300)
     valid &= np.abs(det) > 0
     # A triangle with no area in space has no surface (and no normal) to bake.
@@ -88,21 +94,31 @@ def prepare(mesh, width, height):
     xy_ccw[cw, 1], xy_ccw[cw, 2] = xy[cw, 2], xy[cw, 1]
     ea, eb, ec = _edges(xy_ccw)
     norm = np.hypot(ea, eb)
-    norm = np.where(valid[:, None] & (norm > 0), norm, 1.0)
+    norm[~(norm > 0)] = 1.0
+    norm[~valid] = 1.0
     edges = np.empty(ea.shape + (3,))
+    ef, nf = edges.reshape(-1, 3), norm.reshape(-1)
     for j, e in enumerate((ea, eb, ec)):
-        np.divide(e, norm, out=edges[:, :, j])
-    uv = mesh.uvs
-    outside = int((valid & np.any((uv < 0) | (uv > 1), axis=(1, 2))).sum())
+        np.divide(e.reshape(-1), nf, out=ef[:, j])
+    out_uv = (uv < 0) | (uv > 1)
+    of = out_uv.reshape(T, 6)
+    any_out = of[:, 0] | of[:, 1]
+    for j in range(2, 6):
+        any_out |= of[:, j]
+    outside = int((valid & any_out).sum())
     return UVTriangles(xy_ccw, xy, valid, degenerate=int((~valid).sum()) - degenerate_space,
                        degenerate_space=degenerate_space, outside=outside, edges=edges)
 
 
 def _corner_bounds(xy):
     """Per triangle of ``xy`` (T, 3, 2), the least and greatest (x, y) of its corners, each (T, 2):
-    elementwise over the three corners (numpy's reductions over an axis of 3 are several times slower)."""
-    return (np.minimum(np.minimum(xy[:, 0], xy[:, 1]), xy[:, 2]),
-            np.maximum(np.maximum(xy[:, 0], xy[:, 1]), xy[:, 2]))
+    elementwise over the three corners, coordinate by coordinate (numpy's reductions over an axis
+    of 3, and its loops over an inner axis of 2, are several times slower)."""
+    lo, hi = np.empty((len(xy), 2), xy.dtype), np.empty((len(xy), 2), xy.dtype)
+    for k in range(2):
+        np.minimum(np.minimum(xy[:, 0, k], xy[:, 1, k]), xy[:, 2, k], out=lo[:, k])
+        np.maximum(np.maximum(xy[:, 0, k], xy[:, 1, k]), xy[:, 2, k], out=hi[:, k])
+    return lo, hi
 
 
 def bin_triangles(tris, width, height, tile):
@@ -111,20 +127,22 @@ def bin_triangles(tris, width, height, tile):
     tile = np.broadcast_to(np.asarray(tile, dtype=np.int64), (2,))
     idx = np.flatnonzero(tris.valid)
     lo, hi = _corner_bounds(np.take(tris.xy, idx, axis=0))
-    lo = np.floor(lo).astype(np.int64)
+    lo = np.maximum(np.floor(lo).astype(np.int64), 0)
     hi = np.ceil(hi).astype(np.int64) - 1  # last texel the bbox reaches
-    lo = np.maximum(lo, 0)
-    hi = np.minimum(hi, [width - 1, height - 1])
-    ok = np.all(hi >= lo, axis=1)
+    # Column by column (numpy is slow over an inner axis of 2).
+    np.minimum(hi[:, 0], width - 1, out=hi[:, 0])
+    np.minimum(hi[:, 1], height - 1, out=hi[:, 1])
+    ok = np.flatnonzero((hi[:, 0] >= lo[:, 0]) & (hi[:, 1] >= lo[:, 1]))
     idx, lo, hi = idx[ok], lo[ok], hi[ok]
-    t_lo, t_hi = lo // tile, hi // tile  # (x, y) tile coordinates
-    nx = t_hi[:, 0] - t_lo[:, 0] + 1
-    ny = t_hi[:, 1] - t_lo[:, 1] + 1
+    lx, ly = lo[:, 0] // tile[0], lo[:, 1] // tile[1]  # (x, y) tile coordinates
+    nx = hi[:, 0] // tile[0] - lx + 1
+    ny = hi[:, 1] // tile[1] - ly + 1
     count = nx * ny
     rep = np.repeat(np.arange(len(idx)), count)
     k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
-    tx = t_lo[rep, 0] + k % nx[rep]
-    ty = t_lo[rep, 1] + k // nx[rep]
+    nr = nx[rep]
+    tx = lx[rep] + k % nr
+    ty = ly[rep] + k // nr
     tiles_x = -(-width // int(tile[0]))
     key = ty * tiles_x + tx
     order = np.argsort(key, kind="stable")

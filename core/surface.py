@@ -79,22 +79,33 @@ class SurfaceTable:
 
     @classmethod
     def build(cls, mesh, uvtris):
+        # Column by column (see core.mesh.face_geometry: numpy is slow over an inner axis of 2 or 3);
+        # the same operations as the (T, 2) and (T, 3) forms, so the same bits.
         xy = uvtris.corners
-        e1 = xy[:, 1] - xy[:, 0]
-        e2 = xy[:, 2] - xy[:, 0]
-        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        x0, y0 = xy[:, 0, 0], xy[:, 0, 1]
+        e1x, e1y = xy[:, 1, 0] - x0, xy[:, 1, 1] - y0
+        e2x, e2y = xy[:, 2, 0] - x0, xy[:, 2, 1] - y0
+        det = e1x * e2y - e1y * e2x
         safe = np.where(uvtris.valid, det, 1.0)
         # Barycentric weights b1, b2 of corners 1, 2 as linear functions of (x - x0, y - y0).
-        d1 = np.stack([e2[:, 1], -e2[:, 0]], axis=1) / safe[:, None]   # d b1 / d(x, y)
-        d2 = np.stack([-e1[:, 1], e1[:, 0]], axis=1) / safe[:, None]   # d b2 / d(x, y)
+        d1x, d1y = e2y / safe, -e2x / safe   # d b1 / d(x, y)
+        d2x, d2y = -e1y / safe, e1x / safe   # d b2 / d(x, y)
         P = corner_positions(mesh.positions, mesh.triangles)
         N = mesh.normals
-        dP1, dP2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-        dN1, dN2 = N[:, 1] - N[:, 0], N[:, 2] - N[:, 0]
-        return cls(origin=xy[:, 0].copy(), P0=P[:, 0].copy(), corners_xy=xy,
-                   Px=d1[:, 0, None] * dP1 + d2[:, 0, None] * dP2, Py=d1[:, 1, None] * dP1 + d2[:, 1, None] * dP2,
-                   N0=N[:, 0].copy(),
-                   Nx=d1[:, 0, None] * dN1 + d2[:, 0, None] * dN2, Ny=d1[:, 1, None] * dN1 + d2[:, 1, None] * dN2,
+        T = len(xy)
+        maps = {}
+        for name, V in (("P", P), ("N", N)):
+            vx, vy = np.empty((T, 3)), np.empty((T, 3))
+            for c in range(3):
+                v0 = V[:, 0, c]
+                dv1, dv2 = V[:, 1, c] - v0, V[:, 2, c] - v0
+                np.multiply(d1x, dv1, out=vx[:, c])
+                vx[:, c] += d2x * dv2
+                np.multiply(d1y, dv1, out=vy[:, c])
+                vy[:, c] += d2y * dv2
+            maps[name] = vx, vy
+        return cls(origin=xy[:, 0].copy(), P0=P[:, 0].copy(), corners_xy=xy, Px=maps["P"][0], Py=maps["P"][1],
+                   N0=N[:, 0].copy(), Nx=maps["N"][0], Ny=maps["N"][1],
                    FN=mesh.face_normals, corners=P, smooth=_smooth(mesh))
 
     def position(self, tri, x, y):

@@ -129,7 +129,9 @@ class Tracer:
         if len(meshes) > 1:
             corners = np.concatenate([corner_positions(m.positions, m.triangles) for m in meshes[1:]])  # (m, 3, 3)
             self._occ_lo, self._occ_hi = corners.min(axis=1), corners.max(axis=1)
-        lo, hi = positions.min(axis=0), positions.max(axis=0)
+        # Column by column: numpy's reductions over the long axis of a (V, 3) array are slow.
+        lo = np.array([positions[:, k].min() for k in range(3)])
+        hi = np.array([positions[:, k].max() for k in range(3)])
         self.extent = float(np.linalg.norm(hi - lo))
         self.ignore_backfaces = ignore_backfaces
         self.falloff = falloff
