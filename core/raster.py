@@ -259,8 +259,12 @@ class _Spans:
 
     def __init__(self, xy):
         order = np.argsort(xy[:, :, 1], axis=1, kind="stable")
-        c = np.take_along_axis(xy, order[:, :, None], axis=1)
-        (self.xl, self.yl), (self.xm, self.ym), (self.xh, self.yh) = c[:, 0].T, c[:, 1].T, c[:, 2].T
+        # The sorted corners column by column (numpy is slow over an inner axis of 2 or 3).
+        at = order + 3 * np.arange(len(xy))[:, None]
+        flat = xy.reshape(-1, 2)
+        X, Y = np.ascontiguousarray(flat[:, 0]), np.ascontiguousarray(flat[:, 1])
+        (self.xl, self.yl), (self.xm, self.ym), (self.xh, self.yh) = (
+            (np.take(X, at[:, k]), np.take(Y, at[:, k])) for k in range(3))
         with np.errstate(divide="ignore", invalid="ignore"):
             self.s_long = (self.xh - self.xl) / (self.yh - self.yl)
             self.s_low = np.where(self.ym > self.yl, (self.xm - self.xl) / (self.ym - self.yl), 0.0)
@@ -310,21 +314,25 @@ def _border_half_edges(xy):
     """(n, 3) bool: half-edges of the triangles ``xy`` (n, 3, 2), CCW, that have no twin among them
     (the same two points in the other direction, in exactly one other half-edge): island borders,
     seams, folds and edges shared by more than two triangles."""
+    # Column by column over the flat (triangle, corner) order (numpy is slow over an inner axis of
+    # 2 or 3): half-edge e = 3 t + k goes from corner k to corner k + 1 of triangle t.
     n = len(xy)
-    a = xy + 0.0  # -0.0 -> 0.0, so equal points have equal bits
-    b = np.roll(a, -1, axis=1)
-    swap = (a[..., 0] > b[..., 0]) | ((a[..., 0] == b[..., 0]) & (a[..., 1] > b[..., 1]))
-    p = np.where(swap[..., None], b, a).reshape(-1, 2)
-    q = np.where(swap[..., None], a, b).reshape(-1, 2)
-    swap = swap.ravel()
+    flat = xy.reshape(-1, 2)
+    ax, ay = flat[:, 0] + 0.0, flat[:, 1] + 0.0  # -0.0 -> 0.0, so equal points have equal bits
+    nxt = np.arange(1, 3 * n + 1)
+    nxt[2::3] -= 3
+    bx, by = np.take(ax, nxt), np.take(ay, nxt)
+    swap = (ax > bx) | ((ax == bx) & (ay > by))
+    px, py = np.where(swap, bx, ax), np.where(swap, by, ay)
+    qx, qy = np.where(swap, ax, bx), np.where(swap, ay, by)
     border = np.ones(3 * n, bool)
     if n == 0:
         return border.reshape(n, 3)
-    bits = np.concatenate([p, q], axis=1).view(np.uint64)
+    bits = [v.view(np.uint64) for v in (px, py, qx, qy)]
     h = np.full(3 * n, 0x9E3779B97F4A7C15, np.uint64)
     with np.errstate(over="ignore"):
-        for c in range(4):  # splitmix64's finaliser after each coordinate
-            h ^= bits[:, c]
+        for v in bits:  # splitmix64's finaliser after each coordinate
+            h ^= v
             h ^= h >> np.uint64(30)
             h *= np.uint64(0xBF58476D1CE4E5B9)
             h ^= h >> np.uint64(27)
@@ -344,9 +352,8 @@ def _border_half_edges(xy):
     two = first[size == 2]
     i, j = idx[two], idx[two + 1]
     twin = swap[i] != swap[j]
-    eq = np.take(bits, i, axis=0) == np.take(bits, j, axis=0)  # equal bits: equal points (no -0.0, NaN)
-    for c in range(4):
-        twin &= eq[:, c]
+    for v in bits:  # equal bits: equal points (no -0.0, NaN)
+        twin &= np.take(v, i) == np.take(v, j)
     border[i[twin]] = False
     border[j[twin]] = False
     # Larger groups (hash collisions or edges shared by more than two triangles): exactly, by points.
@@ -354,7 +361,7 @@ def _border_half_edges(xy):
         members = idx[f:f + int(sz)]
         groups = {}
         for e in members:
-            groups.setdefault((p[e, 0], p[e, 1], q[e, 0], q[e, 1]), []).append(e)
+            groups.setdefault((px[e], py[e], qx[e], qy[e]), []).append(e)
         for g in groups.values():
             if len(g) == 2 and swap[g[0]] != swap[g[1]]:
                 border[g] = False
@@ -509,7 +516,8 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
     li, loc_tex = li[order], loc_tex[order]
     lt = p_tri[li]
     e = np.take(E, lt, axis=0)
-    e[:, :, 2] += e[:, :, 0] * p_x[li, None] + e[:, :, 1] * p_y[li, None]
+    ef = e.reshape(-1, 3)  # each edge's (a, b, c), column by column
+    ef[:, 2] += ef[:, 0] * np.repeat(p_x[li], 3) + ef[:, 1] * np.repeat(p_y[li], 3)
     loc_start = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(loc_tex, minlength=n), out=loc_start[1:])
     return TileFragments(texels, full_of, sub_tex, sub_tri, sub_xy, sub_cdf, sub_start, coverage,

@@ -193,8 +193,9 @@ def build_units(frag, table, width):
     cand_tri = cand_tri[src]
     per_c = padded
     cand_tex = np.repeat(frag.texels[loc], per_c)
-    cand_coef = np.stack([(cand_tex % width) - table.origin[cand_tri, 0],
-                          (cand_tex // width) - table.origin[cand_tri, 1]], axis=1).astype(np.float32)
+    cand_coef = np.empty((len(cand_tri), 2), np.float32)  # column by column (see SurfaceTable.build)
+    cand_coef[:, 0] = (cand_tex % width) - np.take(table.origin[:, 0], cand_tri)
+    cand_coef[:, 1] = (cand_tex // width) - np.take(table.origin[:, 1], cand_tri)
     at = first[loc]
     kind[at] = LOCATED
     tri[at] = cand_tri[loc_start[loc]] if len(loc) else 0
@@ -215,8 +216,11 @@ def build_units(frag, table, width):
     cand_count[first[loc]] = per_c
     cand_first = np.zeros(U + 1, np.int64)
     np.cumsum(cand_count, out=cand_first[1:])
-    edges = (frag.loc_edges if frag.loc_edges is not None else np.zeros((0, 3, 3)))[src].astype(np.float32)
-    edges[~real] = (0.0, 0.0, -NEVER)
+    loc_edges = frag.loc_edges if frag.loc_edges is not None else np.zeros((0, 3, 3))
+    edges = np.take(loc_edges, src, axis=0, mode="clip").astype(np.float32)  # src: the fragments' own rows
+    pad = np.flatnonzero(~real)
+    if len(pad):
+        edges.reshape(-1, 9)[pad] = np.array([0.0, 0.0, -NEVER] * 3, np.float32)
     return Units(kind=kind, texel=texel, tri=tri, first=first, cdf=cdf, coef=coef, cand_first=cand_first,
                  cand_tri=cand_tri, cand_edges=edges, cand_coef=cand_coef)
 
