@@ -67,7 +67,10 @@ def _row_table(m, entries):
     """The matrices ``m`` (T, 6, cols) as a float32 table (entries, T) of their nonzero entries."""
     js = [j for c, rows in entries for j in rows]
     cs = [c for c, rows in entries for _ in rows]
-    return np.ascontiguousarray(m[:, js, cs].T)
+    out = np.empty((len(js), len(m)), m.dtype)
+    for e, (j, c) in enumerate(zip(js, cs)):  # entry by entry: a gather over the short axes is slower
+        out[e] = m[:, j, c]
+    return out
 
 
 def triangle_matrices(table, tris, offset, curved_all=False):
@@ -79,21 +82,42 @@ def triangle_matrices(table, tris, offset, curved_all=False):
         return np.take(a, rows, axis=0, mode="clip")  # numpy's a[rows] is 2-3 times slower on (T, 3[, 3]) arrays
 
     smooth = take(table.smooth, tris) | bool(curved_all)
+    n = len(tris)
+    # Column by column (numpy is slow over an inner axis of 2 or 3, and over a (T, 1) factor
+    # broadcast to 3 columns), with the same operations as the (T, 3) forms: the same bits.
     # The ray offset: from the largest |coordinate| on the triangle (at a corner: |.|_inf is convex).
-    c = np.abs(take(table.corners, tris)).reshape(len(tris), 9)
-    eps = offset(np.max(c, axis=1))
+    c = np.abs(take(table.corners, tris)).reshape(n, 9)
+    cmax = c[:, 0].copy()
+    for j in range(1, 9):
+        np.maximum(cmax, c[:, j], out=cmax)
+    eps = offset(cmax)
     fn = take(table.FN, tris)
     origin = take(table.origin, tris)
     cxy = take(table.corners_xy, tris)
-    centre = origin + ((cxy[:, 0] + cxy[:, 1] + cxy[:, 2]) / 3.0 - origin)
-    nref = table.normal(tris, centre[:, 0], centre[:, 1])
-    ln = np.linalg.norm(nref, axis=1)
-    nref = np.where((ln > 1e-12)[:, None], nref / np.where(ln > 0, ln, 1.0)[:, None], fn)
-    gn = np.where((np.einsum("ij,ij->i", fn, nref) < 0)[:, None], -fn, fn)  # to the shading side
-    nref = np.where(smooth[:, None], nref, gn)
+    centre = [origin[:, k] + ((cxy[:, 0, k] + cxy[:, 1, k] + cxy[:, 2, k]) / 3.0 - origin[:, k]) for k in range(2)]
+    nref = table.normal(tris, centre[0], centre[1])
+    ln = nref[:, 0] * nref[:, 0]
+    ln += nref[:, 1] * nref[:, 1]
+    ln += nref[:, 2] * nref[:, 2]
+    np.sqrt(ln, out=ln)
+    unit = ln > 1e-12
+    div = np.where(ln > 0, ln, 1.0)
+    nu = np.empty((n, 3))
+    for k in range(3):
+        nu[:, k] = np.where(unit, nref[:, k] / div, fn[:, k])
+    below = np.einsum("ij,ij->i", fn, nu) < 0
+    gn = np.empty((n, 3))
+    nref = np.empty((n, 3))
+    for k in range(3):
+        gn[:, k] = np.where(below, -fn[:, k], fn[:, k])  # to the shading side
+        nref[:, k] = np.where(smooth, nu[:, k], gn[:, k])
     sx, sy, sz, tx, ty, tz = warps.basis_components(nref[:, 0], nref[:, 1], nref[:, 2])
     fs, ft = np.stack([sx, sy, sz], 1), np.stack([tx, ty, tz], 1)
-    org = take(table.P0, tris) + gn * eps[:, None]  # the offset, folded into the constant row
+    p0 = take(table.P0, tris)
+    org = np.empty((n, 3))
+    for k in range(3):
+        np.multiply(gn[:, k], eps, out=org[:, k])
+        org[:, k] += p0[:, k]  # the offset, folded into the constant row
     slot = np.full(len(table.P0), -1, np.int64)
     flat_i, curved_i = np.flatnonzero(~smooth), np.flatnonzero(smooth)
     slot[tris[flat_i]] = np.arange(len(flat_i))
@@ -489,9 +513,9 @@ class Kernel:
         m = int(units.cand_first[unit[0] + 1] - first[0])
         if m == 1:
             return np.zeros((g, k), np.int64)
-        best = np.zeros((g, k), np.int64)
         if k < ROW_PIECES:
             # Short pieces: candidate by candidate over the samples.
+            best = np.zeros((g, k), np.int64)
             a = x[:, :, 0].reshape(-1)
             b = x[:, :, 1].reshape(-1)
             best_d = None
@@ -514,17 +538,12 @@ class Kernel:
             return best
         # Every candidate's three edge functions at every sample: one product (3m, 3) @ [a, b, 1]^T
         # per piece, rows (edge, candidate), samples along the last axis.
-        ec = units.cand_edges[first[:, None] + np.arange(m)]           # (g, m, edge, coef)
+        ec = np.take(units.cand_edges, first[:, None] + np.arange(m), axis=0, mode="clip")  # (g, m, edge, coef)
         coef = np.ascontiguousarray(ec.transpose(0, 2, 1, 3)).reshape(g, 3 * m, 3)
         e = np.matmul(coef, x[:, :, 0:3].transpose(0, 2, 1))          # (g, 3m, k)
         d = np.minimum(e[:, 0:m], e[:, m:2 * m])
         np.minimum(d, e[:, 2 * m:], out=d)                            # (g, m, k)
-        best_d = d[:, 0].copy()
-        for c in range(1, m):
-            better = d[:, c] > best_d
-            best[better] = c
-            np.maximum(best_d, d[:, c], out=best_d)
-        return best
+        return np.argmax(d, axis=1)  # the first of equals, as the loop over candidates above
 
 
 def _direction_sums(directions, value, weight, g, k, out):
