@@ -39,7 +39,7 @@ import numpy as np
 from . import warps
 from .patterns import TexelKeys
 from .surface import aligned_pieces
-from .tracing import FAR, Clock, RayBatch
+from .tracing import FAR, Clock, RayBatch, offset_points
 
 FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
 # The gathers below use np.take(..., mode="clip"): their indices are the kernel's own and always in
@@ -445,7 +445,7 @@ class Kernel:
                 else:
                     piece = unit[sel // k]
                     gn, eps = tile.unit_gn[piece], tile.unit_eps[piece]
-                touch = self.tracer.contact(origins[sel].astype(np.float64) - gn * eps[:, None], gn, eps)
+                touch = self.tracer.contact(offset_points(origins[sel], gn, -eps), gn, eps)
         if touch is not None and touch.any():
             value[sel[touch]] = 0
         if vectors is not None:

@@ -155,50 +155,56 @@ def bin_triangles(tris, width, height, tile):
     return out
 
 
-def _clip(poly, count, a, b, c):
-    """Clip convex polygons (P, K, 2) with ``count`` vertices by a*x + b*y + c >= 0 (vectorised).
+def _clip(X, Y, count, a, b, c):
+    """Clip convex polygons by a*x + b*y + c >= 0 (vectorised); the polygons are columns: vertex k
+    of polygon p at (X[k, p], Y[k, p]) (K, P), ``count`` (P,) vertices each.
 
-    Returns the clipped polygons (P, K + 1, 2), slots past their count zero, and their counts. Each
-    vertex is kept if inside, and each edge that crosses the line adds its crossing point, in
-    order; the kept and added points are packed to the front of each row through one flat index.
+    Returns the clipped polygons' (X, Y) (K + 1, P), slots past their count zero, and their counts.
+    Each vertex is kept if inside, and each edge that crosses the line adds its crossing point, in
+    order. Polygons are columns, not rows, so that every operation runs along the P polygons (numpy
+    is several times slower over a short inner axis of K slots).
     """
-    P, K, _ = poly.shape
-    x, y = poly[..., 0], poly[..., 1]
-    rows = np.arange(P)
+    K, P = X.shape
+    cols = np.arange(P)
     last = np.maximum(count, 1) - 1
 
     def following(v):
         """Each slot's next vertex: the slot after it, the first for the last vertex."""
         w = np.empty_like(v)
-        w[:, :-1] = v[:, 1:]
-        w[:, -1] = v[:, 0]
-        w[rows, last] = v[:, 0]
+        w[:-1] = v[1:]
+        w[-1] = v[0]
+        w[last, cols] = v[0]
         return w
 
-    dv = a[:, None] * x + b[:, None] * y + c[:, None]
+    dv = a * X + b * Y + c
     dw = following(dv)
-    alive = np.arange(K)[None, :] < count[:, None]
+    alive = np.arange(K)[:, None] < count
     inside_v = dv >= 0
     keep = alive & inside_v
     cross = alive & (inside_v != (dw >= 0))
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(cross, dv / (dv - dw), 0.0)
-    # Emit per slot: the vertex if kept, then the crossing point if the edge crosses.
-    emit = np.empty((P, 2 * K), bool)
-    emit[:, 0::2] = keep
-    emit[:, 1::2] = cross
-    flat = np.flatnonzero(emit)
-    new_count = np.count_nonzero(emit, axis=1)
-    start = np.cumsum(new_count) - new_count
-    r = flat // (2 * K)
-    dst = r * (K + 1) + (np.arange(len(flat)) - start[r])
-    out = np.zeros((P * (K + 1), 2))
-    pts = np.empty((P, 2 * K))
-    for j, v in enumerate((x, y)):
-        pts[:, 0::2] = v
-        pts[:, 1::2] = v + t * (following(v) - v)
-        out[dst, j] = pts.reshape(-1)[flat]
-    return out.reshape(P, K + 1, 2), new_count
+    # Emit per slot: the vertex if kept, then the crossing point if the edge crosses; each emitted
+    # point goes to the slot after the points emitted before it in its polygon.
+    emit = np.empty((2 * K, P), bool)
+    emit[0::2] = keep
+    emit[1::2] = cross
+    slot = np.empty((2 * K, P), np.int64)  # running count of emitted points, row by row
+    slot[0] = emit[0]
+    for i in range(1, 2 * K):
+        np.add(slot[i - 1], emit[i], out=slot[i])
+    src = np.flatnonzero(emit)
+    col = src % P
+    dst = (np.take(slot, src) - 1) * P + col
+    out = []
+    pts = np.empty((2 * K, P))
+    for v in (X, Y):
+        pts[0::2] = v
+        pts[1::2] = v + t * (following(v) - v)
+        o = np.zeros((K + 1, P))
+        o.reshape(-1)[dst] = np.take(pts, src)
+        out.append(o)
+    return out[0], out[1], slot[-1].copy()
 
 
 @dataclass
@@ -526,48 +532,52 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
 
 def _clip_pairs(xy, E, tri, px, py):
     """Clip texel squares (lower corners ``px``, ``py``) by the triangles ``xy[tri]``: fan
-    sub-triangles (m, 3, 2), their areas, and the pair each came from (index into ``tri``)."""
+    sub-triangles (m, 3, 2), their areas, and the pair each came from (index into ``tri``).
+    Polygons are worked as columns (see :func:`_clip`)."""
     n = len(tri)
-    poly = np.zeros((n, 7, 2))
-    cx = px[:, None] + np.array([0.0, 1.0, 1.0, 0.0])
-    cy = py[:, None] + np.array([0.0, 0.0, 1.0, 1.0])
-    poly[:, :4, 0], poly[:, :4, 1] = cx, cy
+    X, Y = np.zeros((7, n)), np.zeros((7, n))
+    sq_x, sq_y = [px + d for d in (0.0, 1.0, 1.0, 0.0)], [py + d for d in (0.0, 0.0, 1.0, 1.0)]
+    for j in range(4):
+        X[j], Y[j] = sq_x[j], sq_y[j]
     cnt = np.full(n, 4)
     # A triangle inside the texel is its own fragment (meshes with triangles smaller than texels).
     txy = np.take(xy, tri, axis=0)
     lo, hi = _corner_bounds(txy)
     within = (lo[:, 0] >= px) & (hi[:, 0] <= px + 1) & (lo[:, 1] >= py) & (hi[:, 1] <= py + 1)
-    poly[within, :3] = txy[within]
-    cnt[within] = 3
+    w = np.flatnonzero(within)
+    for k in range(3):
+        X[k, w], Y[k, w] = txy[w, k, 0], txy[w, k, 1]
+    cnt[w] = 3
     et = np.take(E, tri, axis=0)
     for e in range(3):
         a_e, b_e, c_e = et[:, e, 0], et[:, e, 1], et[:, e, 2]
         # Only the edges that cut a texel clip it (usually one): each pass takes the pairs it cuts.
-        cut = a_e * cx[:, 0] + b_e * cy[:, 0] + c_e < 0
+        cut = a_e * sq_x[0] + b_e * sq_y[0] + c_e < 0
         for j in range(1, 4):
-            cut |= a_e * cx[:, j] + b_e * cy[:, j] + c_e < 0
+            cut |= a_e * sq_x[j] + b_e * sq_y[j] + c_e < 0
         cuts = np.flatnonzero(cut & ~within)
         if not len(cuts):
             continue
         slots = int(cnt[cuts].max())
-        clipped, cnt[cuts] = _clip(poly[cuts, :slots], cnt[cuts], a_e[cuts], b_e[cuts], c_e[cuts])
-        poly[cuts, :slots + 1] = clipped
-        poly[cuts, slots + 1:] = 0.0
-    poly = poly[:, :max(int(cnt.max()) if len(cnt) else 3, 3)]
+        cx, cy, cnt[cuts] = _clip(X[:slots, cuts], Y[:slots, cuts], cnt[cuts], a_e[cuts], b_e[cuts], c_e[cuts])
+        X[:slots + 1, cuts], Y[:slots + 1, cuts] = cx, cy
+        X[slots + 1:, cuts] = 0.0
+        Y[slots + 1:, cuts] = 0.0
+    K = max(int(cnt.max()) if len(cnt) else 3, 3)
+    X, Y = X[:K], Y[:K]
     # Fan triangulation around vertex 0: sub-triangles (0, k, k+1), k = 1 .. cnt - 2.
-    K = poly.shape[1]
     ks = np.arange(1, K - 1)
-    fan_ok = ks[None, :] < (cnt[:, None] - 1)
-    a = poly[:, :1, :]
-    b = poly[:, 1:K - 1, :]
-    c = poly[:, 2:K, :]
-    fan_area = 0.5 * ((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
-                      - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+    fan_ok = ks[:, None] < (cnt - 1)
+    ax, ay = X[0], Y[0]
+    bx, by, cx, cy = X[1:K - 1], Y[1:K - 1], X[2:K], Y[2:K]
+    fan_area = 0.5 * ((bx - ax) * (cy - ay) - (by - ay) * (cx - ax))
     fan_area = np.where(fan_ok, np.abs(fan_area), 0.0)
-    real = fan_area.sum(axis=1) > MIN_FRAGMENT_AREA
-    ip = np.flatnonzero(real)
-    fan_ok, fan_area, b, c, a = fan_ok[real], fan_area[real], b[real], c[real], a[real]
+    ip = np.flatnonzero(fan_area.sum(axis=0) > MIN_FRAGMENT_AREA)
+    fan_ok, fan_area = fan_ok[:, ip], fan_area[:, ip]
     fan_ok &= fan_area > 0
-    rr, kk = np.nonzero(fan_ok)
-    sub_xy = np.stack([a[rr, 0], b[rr, kk], c[rr, kk]], axis=1)
-    return sub_xy, fan_area[rr, kk], tri[ip[rr]], ip[rr]
+    rr, kk = np.nonzero(fan_ok.T)  # pair by pair, each pair's fan in order
+    p = ip[rr]
+    sub_xy = np.empty((len(rr), 3, 2))
+    for corner, (vx, vy) in enumerate(((ax[p], ay[p]), (bx[kk, p], by[kk, p]), (cx[kk, p], cy[kk, p]))):
+        sub_xy[:, corner, 0], sub_xy[:, corner, 1] = vx, vy
+    return sub_xy, fan_area[kk, rr], tri[p], p
