@@ -197,9 +197,10 @@ class TexelPattern:
                    + int(replicate)) % self.patterns
         h = hash_more(str_, _TAG_ORDER)
         order = (h >> np.uint64(40)) & np.uint64(self.length - 1) if self.xor else _below(h, self.length)
-        shift = np.stack([(hash_more(str_, _TAG_SHIFT2) >> np.uint64(32)).astype(np.uint32),
-                          (hash_more(str_, _TAG_SHIFT3) >> np.uint64(32)).astype(np.uint32)], axis=-1)
-        shift &= self.shift_mask
+        shift = np.empty(t.shape + (2,), np.uint32)  # column by column: numpy is slow over an axis of 2
+        for c, tag in enumerate((_TAG_SHIFT2, _TAG_SHIFT3)):
+            np.bitwise_and((hash_more(str_, tag) >> np.uint64(32)).astype(np.uint32), self.shift_mask[c],
+                           out=shift[..., c])
         turn = warps.TWO_PI * _unit_float(hash_more(str_, _TAG_TURN))
         return TexelKeys(pattern, order.astype(np.int64), shift, np.cos(turn), np.sin(turn))
 
