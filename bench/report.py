@@ -190,6 +190,10 @@ def table(data):
         if tr and len(tr["rows"]) >= 2:
             L.append(f"  triangles: {tr['rows'][-1]['triangles']} take {tr['rows'][-1]['seconds'] / tr['rows'][0]['seconds']:.2f}x "
                      f"the time of {tr['rows'][0]['triangles']} ({tr['scene']})")
+            if all("seconds_all" in x for x in tr["rows"]):
+                L.append("  triangles, every repeat (the fastest counts; a process's first bake of a large mesh pays this VM's "
+                         "first touch of memory): " + "; ".join(
+                             f"{x['triangles']} " + ", ".join(f"{v:.2f}" for v in x["seconds_all"]) + " s" for x in tr["rows"]))
         if th:
             L.append(f"  speed-up 1 -> 2 threads: {th['speedup_1_to_2']:.2f}x (CPU/wall of the 2-thread bake "
                      f"{th['rows'][1]['cpu_per_wall']:.2f}); embreex alone on the bake's own rays, interleaved: "

@@ -89,10 +89,21 @@ def triangles(ctx):
     for n in cfg["tri_n"]:
         P, F, UV = displaced_grid(n)
         mesh = Mesh(P, F, UV, name=f"grid{n}")
-        r = mcao.core_bake(mesh, [], resolution=cfg["tri_res"], samples=cfg["tri_spp"], threads=ctx.threads,
-                           max_distance=0.5, margin=0)
-        rows.append(_bake_row(r, triangles=len(F), resolution=cfg["tri_res"], samples=cfg["tri_spp"]))
-        log(f"triangles {len(F)}: {r.seconds:.2f}s ({100 * rows[-1]['trace_share']:.0f}% in embreex)", ctx.clock)
+        # The fastest of the repeats counts, as everywhere in the bench. The first bake of a large
+        # mesh in a process is slower here for a reason of this machine's, not the code's: this VM
+        # backs its memory on first touch (a fresh 256 MB array fills in 300 ms the first time, 50
+        # ms after), and a million triangles' arrays are more than the process held before.
+        seconds = []
+        for _ in range(cfg["tri_repeats"]):
+            r = mcao.core_bake(mesh, [], resolution=cfg["tri_res"], samples=cfg["tri_spp"], threads=ctx.threads,
+                               max_distance=0.5, margin=0)
+            seconds.append(r.seconds)
+            if r.seconds <= min(seconds):
+                best = r
+        rows.append(_bake_row(best, triangles=len(F), resolution=cfg["tri_res"], samples=cfg["tri_spp"],
+                              seconds_all=seconds))
+        log(f"triangles {len(F)}: {best.seconds:.2f}s ({100 * rows[-1]['trace_share']:.0f}% in embreex; "
+            f"every repeat {', '.join(f'{x:.2f}' for x in seconds)} s)", ctx.clock)
     return {"scene": "displaced grid (smooth bumps), self-occluding, max distance 0.5", "rows": rows}
 
 
