@@ -381,6 +381,54 @@ def test_every_texel_in_contact_is_found_split_texels_too(resolution):
     assert r.ao[(r.mask & ~inside)].mean() > 0.5  # elsewhere the plane is mostly open
 
 
+def _dilate_by_hand(values, mask, margin):
+    """Ring by ring, texel by texel: each empty texel touching filled ones (8-neighbourhood) takes the
+    mean of those filled before this ring. Returns (values, filled)."""
+    v = np.where(mask, values, 0.0).astype(np.float64)
+    filled = mask.copy()
+    h, w = mask.shape
+    for _ in range(margin):
+        ring = {}
+        for i in range(h):
+            for j in range(w):
+                if filled[i, j]:
+                    continue
+                nb = [v[i + di, j + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1)
+                      if (di or dj) and 0 <= i + di < h and 0 <= j + dj < w and filled[i + di, j + dj]]
+                if nb:
+                    ring[i, j] = sum(nb) / len(nb)
+        for p, x in ring.items():
+            v[p] = x
+            filled[p] = True
+    return v, filled
+
+
+@pytest.mark.parametrize("margin", [1, 2, 5, 30])
+def test_margin_is_the_ring_by_ring_mean_of_filled_neighbours(margin):
+    """dilate against a texel-by-texel reference, on islands touching the image's edges, holes and
+    single texels; texels beyond the margin keep their values."""
+    from core.margin import dilate
+
+    rng = np.random.default_rng(7 + margin)
+    mask = np.zeros((37, 29), bool)
+    for _ in range(6):
+        y, x = rng.integers(-3, 37), rng.integers(-3, 29)
+        mask[max(y, 0):y + rng.integers(1, 9), max(x, 0):x + rng.integers(1, 9)] = True
+    mask[20, 3] = mask[0, 28] = True
+    mask[5:9, 10:14] = True
+    mask[6:8, 11:13] = False  # a hole
+    values = rng.random((37, 29)).astype(np.float32)  # under the empty texels too: kept beyond the margin
+    want, filled = _dilate_by_hand(values, mask, margin)
+    for threads in (1, 2):
+        got = dilate(values, mask, margin, threads=threads)
+        np.testing.assert_allclose(got[filled], want[filled], rtol=2e-6)
+        assert np.array_equal(got[~filled], values[~filled])
+    if margin == 1:
+        assert (~filled).any()  # some texels lie beyond the margin
+    if margin == 30:
+        assert filled.all()
+
+
 @pytest.mark.parametrize("margin", [3, 16])
 def test_margin_does_not_depend_on_the_number_of_threads(margin):
     # The margin is computed in bands of rows (each with `margin` rows of its neighbours) when
