@@ -95,7 +95,7 @@ def _unit_corner_normals(n, face_normals):
     np.sqrt(length, out=length)
     ok = length > 0
     d = np.where(ok, length, 1.0)
-    out = np.empty_like(n)
+    out = np.empty(n.shape, np.float64)  # C order: ``of`` must be a view of it
     of = out.reshape(-1, 3)
     fn = repeat_corners(face_normals).reshape(-1, 3)
     for c in range(3):
@@ -153,8 +153,10 @@ class Mesh:
             bad = int(((t < 0) | (t >= len(p))).any(axis=1).sum())
             raise MeshError(f"mesh {self.name!r}: {bad} triangles index vertices out of range "
                             f"(indices span {lo}..{hi}, the mesh has {len(p)} vertices)")
-        self.positions = p.astype(np.float64)
-        self.triangles = t.astype(np.int64)
+        # C order, whatever the input's (numpy's advanced indexing, e.g. corners reordered with a list,
+        # may return another layout; astype keeps it): the core reshapes these arrays into views.
+        self.positions = p.astype(np.float64, order="C")
+        self.triangles = t.astype(np.int64, order="C")
         T = len(t)
 
         self.uvs = None
@@ -170,7 +172,7 @@ class Mesh:
                     f"beyond +-{MAX_UV:g} (largest {float(np.abs(uv).max()):.3g}, first at triangle {tri}); "
                     "a UV map lies in [0, 1]: unwrap again or fix the UV map"
                 )
-            self.uvs = uv.astype(np.float64)
+            self.uvs = uv.astype(np.float64, order="C")
 
         self.areas, self.face_normals = face_geometry(corner_positions(self.positions, self.triangles))
 
@@ -181,7 +183,7 @@ class Mesh:
             n = _real_array(normals, "normals", self.name)
             _check_shape(n, (T, 3, 3), "normals (one normal per triangle corner)", self.name)
             _check_finite(n, "normals", self.name)
-            self.normals = _unit_corner_normals(n.astype(np.float64), self.face_normals)
+            self.normals = _unit_corner_normals(n.astype(np.float64, order="C"), self.face_normals)
             self.has_corner_normals = True
 
     def transformed(self, centre, scale):

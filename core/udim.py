@@ -134,25 +134,27 @@ def _rasterises(mesh, tile, tri_ids, w, h):
 
 
 def _overlap(tri, tu, tv):
-    """Area of each UV triangle (n, 3, 2) inside the unit square at (tu, tv)."""
+    """Area of each UV triangle (n, 3, 2) inside the unit square at (tu, tv). Polygons are columns
+    (vertex slots down, triangles across), as :func:`core.raster._clip` takes them."""
     n = len(tri)
-    poly = np.zeros((n, 8, 2))
-    poly[:, :3] = tri
+    X, Y = np.zeros((8, n)), np.zeros((8, n))
+    X[:3], Y[:3] = tri[:, :, 0].T, tri[:, :, 1].T
     cnt = np.full(n, 3)
     zero, one = np.zeros(n), np.ones(n)
     # x >= tu, x <= tu + 1, y >= tv, y <= tv + 1, as a x + b y + c >= 0.
     for a, b, c in ((one, zero, -tu), (-one, zero, tu + 1.0), (zero, one, -tv), (zero, -one, tv + 1.0)):
-        k = poly.shape[1] - 1
-        clipped, cnt = _clip(poly[:, :k], cnt, a, b, c.astype(np.float64))
-        poly = np.zeros((n, 8, 2))
-        poly[:, :k + 1] = clipped
-    x, y = poly[..., 0], poly[..., 1]
-    slot = np.arange(poly.shape[1])
-    nxt = np.where(slot[None, :] + 1 < cnt[:, None], slot[None, :] + 1, 0)
-    alive = slot[None, :] < cnt[:, None]
-    xn = np.take_along_axis(x, nxt, axis=1)
-    yn = np.take_along_axis(y, nxt, axis=1)
-    return 0.5 * np.abs(np.where(alive, x * yn - xn * y, 0.0).sum(axis=1))
+        k = X.shape[0] - 1
+        cx, cy, cnt = _clip(X[:k], Y[:k], cnt, a, b, c.astype(np.float64))
+        X, Y = np.zeros((8, n)), np.zeros((8, n))
+        X[:k + 1], Y[:k + 1] = cx, cy
+    slot = np.arange(X.shape[0])[:, None]
+    nxt = np.where(slot + 1 < cnt, slot + 1, 0)
+    alive = slot < cnt
+    xn = np.take_along_axis(X, nxt, axis=0)
+    yn = np.take_along_axis(Y, nxt, axis=0)
+    t = np.where(alive, X * yn - xn * Y, 0.0)
+    # The shoelace terms added pairwise, as numpy sums 8 values along a row (the same bits as before).
+    return 0.5 * np.abs(((t[0] + t[1]) + (t[2] + t[3])) + ((t[4] + t[5]) + (t[6] + t[7])))
 
 
 @dataclass
