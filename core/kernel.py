@@ -37,6 +37,7 @@ import threading
 import numpy as np
 
 from . import warps
+from .mesh import norms
 from .patterns import TexelKeys
 from .surface import aligned_pieces
 from .tracing import FAR, Clock, RayBatch, offset_points
@@ -96,10 +97,7 @@ def triangle_matrices(table, tris, offset, curved_all=False):
     cxy = take(table.corners_xy, tris)
     centre = [origin[:, k] + ((cxy[:, 0, k] + cxy[:, 1, k] + cxy[:, 2, k]) / 3.0 - origin[:, k]) for k in range(2)]
     nref = table.normal(tris, centre[0], centre[1])
-    ln = nref[:, 0] * nref[:, 0]
-    ln += nref[:, 1] * nref[:, 1]
-    ln += nref[:, 2] * nref[:, 2]
-    np.sqrt(ln, out=ln)
+    ln = norms(nref[:, 0], nref[:, 1], nref[:, 2])
     unit = ln > 1e-12
     div = np.where(ln > 0, ln, 1.0)
     nu = np.empty((n, 3))
