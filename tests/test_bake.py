@@ -132,18 +132,20 @@ def test_auto_tiles_cover_the_image_with_a_tile_per_thread(width, height, thread
     from core.settings import (LARGE_TILE_SAMPLES, LARGE_TILE_SIDE, LARGE_TILES_PER_THREAD, TILE_MULTIPLE,
                                TILE_SIDE, auto_tile_shape)
 
+    def side(v):
+        """The image's side rounded up to a multiple of TILE_MULTIPLE."""
+        return max(TILE_MULTIPLE, -(-v // TILE_MULTIPLE) * TILE_MULTIPLE)
+
     tw, th = auto_tile_shape(width, height, threads, samples)
     assert tw % TILE_MULTIPLE == 0 and th % TILE_MULTIPLE == 0
     large = -(-width // LARGE_TILE_SIDE) * -(-height // LARGE_TILE_SIDE)
     few = samples is not None and samples <= LARGE_TILE_SAMPLES and large >= LARGE_TILES_PER_THREAD * threads
     assert max(tw, th) <= (LARGE_TILE_SIDE if few else TILE_SIDE)
-    assert tw <= max(TILE_MULTIPLE, -(-width // TILE_MULTIPLE) * TILE_MULTIPLE)
-    assert th <= max(TILE_MULTIPLE, -(-height // TILE_MULTIPLE) * TILE_MULTIPLE)
+    assert tw <= side(width) and th <= side(height)
     tiles = -(-width // tw) * -(-height // th)
     if max(tw, th) > TILE_MULTIPLE:
         assert tiles >= threads
     if few:
-        side = lambda v: max(TILE_MULTIPLE, -(-v // TILE_MULTIPLE) * TILE_MULTIPLE)  # noqa: E731
         assert (tw, th) == (min(LARGE_TILE_SIDE, side(width)), min(LARGE_TILE_SIDE, side(height)))
 
 
