@@ -23,6 +23,10 @@ SCENES = sorted(path.stem for path in SAMPLES.glob("*.blend"))
 SCRIPT = str(ROOT / "scripts" / "bake_ao.py")
 #: The Blender (major, minor) that saves the shipped files: the manifest's blender_version_min.
 SAVED_BY = (4, 2)
+#: The Blenders whose UV unwrappers make the shipped UVs bit for bit (CI runs these two). Blender
+#: 5.2.3's Smart UV Project cuts Suzanne's islands otherwise (672 of its 23616 UV corners moved, by up
+#: to 0.23): there make_scenes.py makes the same geometry with other UVs, which only have to be valid.
+SAME_UVS = {(4, 2), (5, 0)}
 #: Extra arguments a scene needs for a meaningful bake (the README says why: the room is closed).
 EXTRA = {"room": ["--max-distance", "1"]}
 
@@ -96,7 +100,8 @@ def test_readme_lists_each_scene_with_its_objects(fresh):
 
 def test_make_scenes_makes_the_shipped_scenes(fresh, tmp_path):
     """make_scenes.py runs on this bpy and makes exactly the scenes the repository ships (bpy 4.2 and
-    5.0 make the same geometry and UVs, bit for bit, as of 4.2.23 and 5.0.1)."""
+    5.0 make the same geometry and UVs, bit for bit, as of 4.2.23 and 5.0.1; other Blenders the same
+    geometry, with UVs inside [0, 1]: see SAME_UVS)."""
     bpy = fresh
     proc = subprocess.run([sys.executable, str(SAMPLES / "make_scenes.py"), "--output", str(tmp_path)],
                           capture_output=True, text=True, timeout=600)
@@ -109,7 +114,10 @@ def test_make_scenes_makes_the_shipped_scenes(fresh, tmp_path):
             other = made[obj]
             np.testing.assert_array_equal(other[1], triangles, err_msg=f"{name}: {obj}")
             np.testing.assert_allclose(other[0], positions, atol=1e-6, err_msg=f"{name}: {obj}")
-            np.testing.assert_allclose(other[2], uvs, atol=1e-6, err_msg=f"{name}: {obj}")
+            if tuple(bpy.app.version[:2]) in SAME_UVS:
+                np.testing.assert_allclose(other[2], uvs, atol=1e-6, err_msg=f"{name}: {obj}")
+            else:
+                assert other[2].shape == uvs.shape and np.all((other[2] >= -1e-6) & (other[2] <= 1 + 1e-6)), f"{name}: {obj}"
 
 
 def test_make_scenes_leaves_the_shipped_files_to_blender_4_2(fresh, tmp_path):
