@@ -20,9 +20,10 @@ The texture stores it in one of three spaces (:func:`check_space`):
 - tangent space (:class:`TangentFrames`): Blender's normal-map convention, exactly as its normal
   bake and Cycles' Normal Map node do it (``RE_bake_normal_world_to_tangent``, ``svm_node_normal_map``):
   at the texel's centre, in the triangle that holds it, the barycentric interpolations of the corner
-  tangents T and shading normals N, *not normalised*, the bitangent sign s = sign of the interpolated
-  signs (+1 at 0), B = s (N x T), and the texel's value normalize([T | B | N]^-1 M b) (the inverse of
-  the frame, not dot products, so the Normal Map node's decoding gives back M b's direction).
+  tangents T and shading normals N, *not normalised* (Blender 5.1 and later normalise N: see
+  ``TangentFrames.unit_normal``), the bitangent sign s = sign of the interpolated signs (+1 at 0),
+  B = s (N x T), and the texel's value normalize([T | B | N]^-1 M b) (the inverse of the frame, not
+  dot products, so the Normal Map node's decoding gives back M b's direction).
   Encoded as RGB = n / 2 + 1/2 (:func:`encode`).
 
 Texels that a UV triangle covers only in part (island edges) use the triangle that holds the texel's
@@ -47,12 +48,17 @@ class TangentFrames:
         face normal).
     matrix : (3, 3) from world space to the space of the three above (Blender: the transpose of the
         object's 3x3 matrix, as its bake uses).
+    unit_normal : whether the decoder normalises the interpolated normal before it forms the frame:
+        Blender 5.1 and later's Normal Map node does (the tangent stays as interpolated), 4.2 to 5.0
+        use both as interpolated (measured: a map made for one convention, decoded by the other,
+        lands up to 1 degree off on a 16-segment sphere at 64^2; tests/blender/test_blender_bent.py).
     """
 
     tangents: np.ndarray
     signs: np.ndarray
     normals: np.ndarray
     matrix: np.ndarray
+    unit_normal: bool = False
 
     def checked(self, triangles, name):
         """A float64 copy, after checking the shapes against ``triangles`` triangles of mesh ``name``."""
@@ -66,7 +72,7 @@ class TangentFrames:
                 raise MeshError(f"mesh {name!r}: tangent frames' {what} must have shape {shape}, got {arr.shape}")
             if not np.all(np.isfinite(arr)):
                 raise MeshError(f"mesh {name!r}: tangent frames' {what} contain non-finite values")
-        return TangentFrames(t, s, n, m)
+        return TangentFrames(t, s, n, m, bool(self.unit_normal))
 
 
 def check_space(space, mesh):
@@ -153,6 +159,9 @@ def texel_directions(sums, tri, weights, world_normals, space):
     if isinstance(space, TangentFrames):
         T = np.einsum("nk,nkc->nc", weights, space.tangents[tri])
         N = np.einsum("nk,nkc->nc", weights, space.normals[tri])
+        if space.unit_normal:
+            size = np.linalg.norm(N, axis=1, keepdims=True)
+            N = N / np.where(size > 0, size, 1.0)  # a zero normal: the frame is singular either way
         s = np.where(np.einsum("nk,nk->n", weights, space.signs[tri]) < 0, -1.0, 1.0)
         B = s[:, None] * np.cross(N, T)
         b = sums @ space.matrix.T

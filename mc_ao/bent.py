@@ -7,7 +7,8 @@ space asked for (:mod:`core.bent`). Here:
   and bitangent signs per face corner from ``Mesh.calc_tangents`` on the evaluated mesh, for the
   bake's UV map (Blender's own bake takes the active UV map; the bake's map is the one the texture
   is read with), the corner normals, all in object space, and the transpose of the object's 3x3
-  matrix taking world vectors there (``RE_bake_normal_world_to_tangent``). ``calc_tangents`` works
+  matrix taking world vectors there (``RE_bake_normal_world_to_tangent``); the frame normalises the
+  interpolated normal from Blender 5.1 on, as its Normal Map node does (:func:`normal_map_unit_normal`). ``calc_tangents`` works
   on triangles and quads only: a mesh with faces of more corners is refused, naming the object
   (a Triangulate modifier, or Object space, bakes it);
 - object space: the inverse of the object's 3x3 matrix (``RE_bake_normal_world_to_object``);
@@ -20,6 +21,21 @@ import numpy as np
 
 from . import corelink
 from .extract import ExtractError, default_uv_map
+
+
+#: The first Blender whose Normal Map node normalises the interpolated normal (core.bent.TangentFrames).
+UNIT_NORMAL_SINCE = (5, 1, 0)
+
+
+def normal_map_unit_normal(version=None):
+    """Whether this Blender's (or ``version``'s) Normal Map node decodes with a unit normal: 5.1 and
+    later; 4.2 to 5.0 with the normal as interpolated (measured through Cycles: 4.2.23, 5.0.1, 5.1.2,
+    5.2.3)."""
+    if version is None:
+        import bpy
+
+        version = bpy.app.version
+    return tuple(version[:3]) >= UNIT_NORMAL_SINCE
 
 
 def frames_data(settings):
@@ -60,7 +76,7 @@ def frames_data(settings):
         loops = arrays.loops
         frames = bent.TangentFrames(tangents.reshape(-1, 3).astype(np.float64)[loops],
                                     signs.astype(np.float64)[loops], normals.reshape(-1, 3).astype(np.float64)[loops],
-                                    matrix.T)
+                                    matrix.T, unit_normal=normal_map_unit_normal())
         return {"bent_space": frames}
 
     return extra

@@ -121,30 +121,38 @@ def _random_frames(rng, n):
     return T, N, np.where(rng.random(n) < 0.5, -1.0, 1.0)
 
 
-def test_tangent_space_is_the_exact_inverse_of_the_normal_map_node():
+@pytest.mark.parametrize("unit_normal", [False, True])
+def test_tangent_space_is_the_exact_inverse_of_the_normal_map_node(unit_normal):
     """Random non-orthonormal frames, unnormalised interpolants, either bitangent sign: decoding the
     encoded texel value as Cycles' Normal Map node does (normalize(c.x T + c.y B + c.z N) with
-    B = sign (N x T)) gives back the bent normal's direction in the frame's space, exactly."""
+    B = sign (N x T); N normalised first with ``unit_normal``, as Blender 5.1 and later do) gives back
+    the bent normal's direction in the frame's space, exactly; the other convention does not."""
     rng = np.random.default_rng(3)
     n = 200
     tangents = rng.normal(size=(n, 3, 3))
     normals = rng.normal(size=(n, 3, 3)) + np.array([0, 0, 3.0])
     signs = np.where(rng.random((n, 3)) < 0.5, -1.0, 1.0)
     matrix = rng.normal(size=(3, 3)) + 2 * np.eye(3)
-    frames = TangentFrames(tangents, signs, normals, matrix)
+    frames = TangentFrames(tangents, signs, normals, matrix, unit_normal=unit_normal)
     weights = rng.dirichlet([1, 1, 1], size=n)
     sums = rng.normal(size=(n, 3))
     tri = np.arange(n)
     got = texel_directions(sums, tri, weights, None, frames).astype(float)
-    T = np.einsum("nk,nkc->nc", weights, tangents)
-    N = np.einsum("nk,nkc->nc", weights, normals)
-    s = np.where(np.einsum("nk,nk->n", weights, signs) < 0, -1.0, 1.0)
-    B = s[:, None] * np.cross(N, T)
-    decoded = got[:, :1] * T + got[:, 1:2] * B + got[:, 2:] * N
-    decoded /= np.linalg.norm(decoded, axis=1, keepdims=True)
     want = sums @ matrix.T
     want /= np.linalg.norm(want, axis=1, keepdims=True)
-    np.testing.assert_allclose(decoded, want, atol=2e-6)
+
+    def decode(unit):
+        T = np.einsum("nk,nkc->nc", weights, tangents)
+        N = np.einsum("nk,nkc->nc", weights, normals)
+        if unit:
+            N /= np.linalg.norm(N, axis=1, keepdims=True)
+        s = np.where(np.einsum("nk,nk->n", weights, signs) < 0, -1.0, 1.0)
+        B = s[:, None] * np.cross(N, T)
+        d = got[:, :1] * T + got[:, 1:2] * B + got[:, 2:] * N
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    np.testing.assert_allclose(decode(unit_normal), want, atol=2e-6)
+    assert np.abs(decode(not unit_normal) - want).max() > 1e-3
     np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-6)
 
 

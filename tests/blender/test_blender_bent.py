@@ -74,8 +74,10 @@ def cycles_decodes(bpy, scene, obj, tangent_image):
 def test_tangent_space_is_what_cycles_normal_map_node_decodes(bpy, scene):
     """The bake in Object space and in Tangent space (same seed: the same rays, the same bent
     normals); Cycles decodes the tangent-space map with its Normal Map node (its MikkTSpace tangents,
-    unnormalised interpolation, bitangent sign, a mirrored UV half included) and bakes the result in
-    object space: it is our object-space map, texel for texel, to a hundredth of a degree.
+    unnormalised interpolation, the normal normalised from Blender 5.1 on, bitangent sign, a mirrored
+    UV half included) and bakes the result in object space: it is our object-space map, texel for
+    texel, to a tenth of a degree (on 4.2.23, 5.0.1, 5.1.2 and 5.2.3; with the other versions'
+    convention the worst texel is 0.8-1.1 degrees off).
 
     Compared on texels inside one triangle (where both bakers use the same surface point) whose bent
     normal leans less than 40 degrees from the shading normal: Cycles bends a normal-mapped normal
@@ -126,6 +128,16 @@ def test_tangent_space_is_what_cycles_normal_map_node_decodes(bpy, scene):
     seen = pixels(bpy.data.images["Ball_AO"])[rows, cols, 0] > 0
     assert (~seen).any() and (near & seen).sum() > 300
     assert angle[near & seen].max() < 0.1, np.sort(angle[near & seen])[-5:]
+
+
+def test_the_normal_map_convention_follows_the_blender_version(bpy):
+    """Blender 5.1 changed its Normal Map node to normalise the interpolated normal: the frames made
+    for this Blender use its convention (the test above checks each against Cycles)."""
+    from mc_ao.bent import normal_map_unit_normal
+
+    assert not normal_map_unit_normal((4, 2, 23)) and not normal_map_unit_normal((5, 0, 1))
+    assert normal_map_unit_normal((5, 1, 0)) and normal_map_unit_normal((5, 2, 3))
+    assert normal_map_unit_normal() == (tuple(bpy.app.version[:2]) >= (5, 1))
 
 
 def test_a_bent_normal_image_beside_the_ao_image(bpy, scene):
