@@ -372,7 +372,8 @@ def cycles_bake(bpy, low, high):
     image = bpy.data.images.new("Cycles_AO", RES, RES, alpha=True, float_buffer=True)
     image.colorspace_settings.name = "Non-Color"
     mat = bpy.data.materials.new("Bake")
-    mat.use_nodes = True
+    if mat.node_tree is None:  # before 5.0 (where Material.use_nodes is deprecated, to go in 6.0)
+        mat.use_nodes = True
     node = mat.node_tree.nodes.new("ShaderNodeTexImage")
     node.image = image
     mat.node_tree.nodes.active = node
