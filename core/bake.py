@@ -457,6 +457,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         raise BakeCancelled("the bake was cancelled before it started")
 
     uvtris = prepare(target, w, h)
+    s = s.fit_tiles(R.uv_centres(uvtris))  # automatic tiles of dense meshes: fewer triangles each
     table = SurfaceTable.build(target, uvtris)
     bins = bin_triangles(uvtris, w, h, s.tile_shape)
     stage = None if s2a is None else _highpoly.HighPolyStage(s2a, target, occluders, uvtris, table, bins, s, unit,

@@ -121,6 +121,12 @@ def _corner_bounds(xy):
     return lo, hi
 
 
+def uv_centres(tris):
+    """(2, n): the texel-space centres (x row, y row) of the valid triangles of ``tris``."""
+    xy = np.take(tris.xy, np.flatnonzero(tris.valid), axis=0)
+    return np.stack([(xy[:, 0, k] + xy[:, 1, k] + xy[:, 2, k]) / 3.0 for k in range(2)])
+
+
 def bin_triangles(tris, width, height, tile):
     """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array (ascending), for tiles
     touched; ``tile`` the side of square tiles or (columns, rows)."""

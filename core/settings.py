@@ -7,6 +7,7 @@ setting and the problem, before any heavy work. Everything downstream reads this
 
 import math
 import os
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +34,13 @@ TILE_MULTIPLE = 16
 #: LARGE_TILES_PER_THREAD of them.
 TILE_SIDE, LARGE_TILE_SIDE = 256, 512
 LARGE_TILE_SAMPLES, LARGE_TILES_PER_THREAD = 16, 8
+#: Automatic tiles hold at most about this many triangles (counted by their UV centres): a tile's
+#: per-triangle passes (scans, island borders, the candidates' sort, the triangle matrices) cost more
+#: per triangle as their arrays outgrow the caches. A 1M-triangle grid at 512^2 x 16 on 2 threads,
+#: separate processes alternated: 256^2 tiles (250k triangles each) 5.03-6.52 s, 256 x 128 4.77-5.22,
+#: 128^2 (62k) 4.51-5.23 (median 4.75 against 5.30); 100k triangles (25k a tile) and 10k: no gain
+#: from smaller tiles (1.50-1.72 against 1.60-1.65 s; 1.21-1.33 against 1.05-1.21).
+TILE_TRIANGLES = 1 << 16
 
 
 def _positive_int(value, what, lo=1):
@@ -85,6 +93,7 @@ class BakeSettings:
     chunk_rays: int
     replicates: int = 2
     tile_height: int = None  # rows of a tile; None: tile_size (square tiles)
+    auto_tiles: bool = False  # the tiles were chosen by auto_tile_shape (and may shrink: fit_tiles)
 
     @property
     def tile_shape(self):
@@ -129,7 +138,8 @@ class BakeSettings:
         seed = _positive_int(seed, "seed", lo=0)
         threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
         chunk_rays = _positive_int(chunk_rays, "chunk_rays")
-        if tile_size is None:
+        auto_tiles = tile_size is None
+        if auto_tiles:
             tile_size = auto_tile_shape(w, h, threads, samples)
         if isinstance(tile_size, (tuple, list)) and len(tile_size) == 2:
             tile_size, tile_height = (_positive_int(t, "tile_size") for t in tile_size)
@@ -144,7 +154,27 @@ class BakeSettings:
                    target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
                    margin=margin, seed=seed, threads=threads, ignore_backfaces=bool(ignore_backfaces),
                    falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays, replicates=replicates,
-                   tile_height=tile_height)
+                   tile_height=tile_height, auto_tiles=auto_tiles)
+
+    def fit_tiles(self, centres):
+        """These settings with automatic tiles shrunk until no tile holds more than TILE_TRIANGLES
+        of the triangles whose UV centres (texel space, (2, n): x row, y row) are given: the longer
+        side halved each time, down to TILE_MULTIPLE. Unchanged for tiles the caller chose. The
+        tiling never changes a result."""
+        if not self.auto_tiles or centres.shape[1] <= TILE_TRIANGLES:
+            return self
+        x = np.clip(centres[0], 0, self.width - 1).astype(np.int64)
+        y = np.clip(centres[1], 0, self.height - 1).astype(np.int64)
+        tw, th = self.tile_shape
+        while max(tw, th) > TILE_MULTIPLE:
+            across = -(-self.width // tw)
+            if np.bincount((y // th) * across + x // tw).max() <= TILE_TRIANGLES:
+                break
+            if th >= tw:
+                th = _tile_side(th / 2)
+            else:
+                tw = _tile_side(tw / 2)
+        return dataclasses.replace(self, tile_size=int(tw), tile_height=int(th))
 
     @property
     def adaptive(self):
@@ -251,6 +281,9 @@ def auto_tile_shape(width, height, threads, samples=None):
     samples (``samples`` None: many) when there are LARGE_TILES_PER_THREAD of them per thread. 256^2
     -> 512^2 on 2 threads: 4096^2 x 1, 4, 16 5.16 -> 3.76, 8.67 -> 7.85, 17.95 -> 17.25 s; 2048^2 x
     1, 4 1.50 -> 1.18, 2.99 -> 2.61 s; 2048^2 x 64 (not taken) 12.19 -> 12.58 s.
+
+    Dense meshes: :meth:`BakeSettings.fit_tiles` shrinks these tiles further, once the triangles are
+    known, so that none holds more than TILE_TRIANGLES of them.
 
     The tiling never changes a result (texels draw their samples by (texel, index) alone), and tiles
     are traced in chunks of ``chunk_rays``, so a tile's samples bound neither memory nor the

@@ -149,6 +149,57 @@ def test_auto_tiles_cover_the_image_with_a_tile_per_thread(width, height, thread
         assert (tw, th) == (min(LARGE_TILE_SIDE, side(width)), min(LARGE_TILE_SIDE, side(height)))
 
 
+def _grid(n):
+    """An n x n quad grid over the unit square (2 n^2 triangles), its UVs the same square."""
+    i = np.arange(n + 1)
+    X, Y = np.meshgrid(i / n, i / n)
+    P = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    v = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).ravel()
+    F = np.concatenate([np.stack([v, v + 1, v + n + 2], 1), np.stack([v, v + n + 2, v + n + 1], 1)])
+    return Mesh(P, F, uvs=P[F][:, :, :2], name="grid")
+
+
+def test_automatic_tiles_of_a_dense_mesh_hold_at_most_tile_triangles():
+    """72200 triangles over a 64^2 image, one thread: the automatic tile (the whole image) would hold
+    them all; it is halved until each holds at most TILE_TRIANGLES (by UV centre), here 64 x 32. A
+    tile the caller chose is kept, and the result is the same bits either way."""
+    from core.settings import TILE_TRIANGLES
+
+    grid = _grid(190)
+    assert grid.triangle_count > TILE_TRIANGLES >= grid.triangle_count // 2
+    blocks, chosen = [], []
+    auto = bake_ao(grid, [], resolution=64, samples=2, threads=1, margin=0,
+                   on_tile=lambda r, c, a: blocks.append((r.stop - r.start, c.stop - c.start)))
+    fixed = bake_ao(grid, [], resolution=64, samples=2, threads=1, margin=0, tile_size=64,
+                    on_tile=lambda r, c, a: chosen.append((r.stop - r.start, c.stop - c.start)))
+    assert sorted(blocks) == [(32, 64), (32, 64)] and chosen == [(64, 64)]
+    assert np.array_equal(auto.ao, fixed.ao) and np.array_equal(auto.samples, fixed.samples)
+
+
+def test_fit_tiles_halves_the_longer_side_until_no_tile_holds_too_many_triangles():
+    from core.settings import TILE_MULTIPLE, TILE_TRIANGLES, BakeSettings
+
+    def settings(tile_size=None, threads=1):
+        return BakeSettings.from_arguments(512, 16, 16, 0.0, math.inf, "cosine", "sobol", 0, 0, threads, False,
+                                           0.0, tile_size, 1 << 16)
+
+    rng = np.random.default_rng(0)
+    # Uniform over the image: a 256^2 tile holds 1/4 of them, 256 x 128 1/8, 128^2 1/16.
+    spread = rng.random((2, 12 * TILE_TRIANGLES)) * 512
+    s = settings()
+    assert s.tile_shape == (256, 256)
+    assert s.fit_tiles(spread).tile_shape == (128, 128)           # 3, then 1.5, then 0.75 x TILE_TRIANGLES
+    assert s.fit_tiles(spread[:, ::2]).tile_shape == (256, 128)   # 1.5, then 0.75
+    assert s.fit_tiles(spread[:, :TILE_TRIANGLES]) is s           # few enough triangles: unchanged
+    assert settings(tile_size=256).fit_tiles(spread).tile_shape == (256, 256)  # the caller's tiles
+    heap = np.full((2, TILE_TRIANGLES + 1), 3.5)          # all in one texel: down to the smallest tile
+    assert s.fit_tiles(heap).tile_shape == (TILE_MULTIPLE, TILE_MULTIPLE)
+    fitted = s.fit_tiles(spread)
+    x, y = spread.astype(np.int64)
+    counts = np.bincount((y // fitted.tile_shape[1]) * (512 // fitted.tile_shape[0]) + x // fitted.tile_shape[0])
+    assert counts.max() <= TILE_TRIANGLES
+
+
 def test_mesh_arrays_in_any_memory_layout_make_the_same_mesh_and_bake():
     """Fortran-ordered, reversed and fancy-indexed inputs (what an add-on's corner reordering for a
     mirrored object gives: numpy's advanced indexing picks its own layout) make the same Mesh, bit
