@@ -160,8 +160,7 @@ def texel_directions(sums, tri, weights, world_normals, space):
         T = np.einsum("nk,nkc->nc", weights, space.tangents[tri])
         N = np.einsum("nk,nkc->nc", weights, space.normals[tri])
         if space.unit_normal:
-            size = np.linalg.norm(N, axis=1, keepdims=True)
-            N = N / np.where(size > 0, size, 1.0)  # a zero normal: the frame is singular either way
+            N = _unit_rows(N)  # a zero normal stays zero: the frame is singular either way
         s = np.where(np.einsum("nk,nk->n", weights, space.signs[tri]) < 0, -1.0, 1.0)
         B = s[:, None] * np.cross(N, T)
         b = sums @ space.matrix.T
@@ -181,8 +180,13 @@ def texel_directions(sums, tri, weights, world_normals, space):
         out = np.where(none[:, None], fallback, sums)
         if space is not None:
             out = out @ space.T
-    size = np.linalg.norm(out, axis=1)
-    return (out / np.where(size > 0, size, 1.0)[:, None]).astype(np.float32)
+    return _unit_rows(out).astype(np.float32)
+
+
+def _unit_rows(v):
+    """Each row of ``v`` (n, 3) divided by its length; rows of length 0 stay as they are."""
+    size = np.linalg.norm(v, axis=1)
+    return v / np.where(size > 0, size, 1.0)[:, None]
 
 
 def encode(bent, filled, tangent):

@@ -5,9 +5,9 @@
 setting and the problem, before any heavy work. Everything downstream reads this object.
 """
 
+import dataclasses
 import math
 import os
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,10 +170,7 @@ class BakeSettings:
             across = -(-self.width // tw)
             if np.bincount((y // th) * across + x // tw).max() <= TILE_TRIANGLES:
                 break
-            if th >= tw:
-                th = _tile_side(th / 2)
-            else:
-                tw = _tile_side(tw / 2)
+            tw, th = _halve_longer(tw, th)
         return dataclasses.replace(self, tile_size=int(tw), tile_height=int(th))
 
     @property
@@ -297,11 +294,14 @@ def auto_tile_shape(width, height, threads, samples=None):
             side = LARGE_TILE_SIDE
     tw, th = min(side, _tile_side(width)), min(side, _tile_side(height))
     while -(-width // tw) * -(-height // th) < threads and max(tw, th) > TILE_MULTIPLE:
-        if th >= tw:
-            th = _tile_side(th / 2)
-        else:
-            tw = _tile_side(tw / 2)
+        tw, th = _halve_longer(tw, th)
     return int(tw), int(th)
+
+
+def _halve_longer(tw, th):
+    """(columns, rows) of a tile with its longer side (the rows when equal) halved, rounded up to a
+    multiple of TILE_MULTIPLE."""
+    return (tw, _tile_side(th / 2)) if th >= tw else (_tile_side(tw / 2), th)
 
 
 def _tile_side(v):
