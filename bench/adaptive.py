@@ -78,16 +78,22 @@ def numpy_scenes(res):
     return [("box", _plane(), [box], 0.15, None), ("disk", _plane(), [disk], math.inf, truth)]
 
 
+def room_scene(bpy):
+    """The room scene as (name, target, occluders, max_distance, exact or None): sample_scenes/room.blend
+    opened in ``bpy`` (the file stays open), read back through the add-on's extraction."""
+    from . import scene
+
+    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "room.blend"), load_ui=False)
+    ta, oa = scene.scene_arrays(bpy, "Room")
+    target, occluders = scene.core_meshes(ta, oa)
+    return ("room", target, occluders, 1.0, None)
+
+
 def blender_scenes(ctx):
     """The benchmark scene and the room, read back through the add-on's extraction."""
     from . import scene
 
-    out = [("suzanne", ctx.target, ctx.occluders, scene.DISTANCE, None)]
-    bpy = ctx.bpy
-    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "room.blend"), load_ui=False)
-    ta, oa = scene.scene_arrays(bpy, "Room")
-    target, occluders = scene.core_meshes(ta, oa)
-    out.append(("room", target, occluders, 1.0, None))
+    out = [("suzanne", ctx.target, ctx.occluders, scene.DISTANCE, None), room_scene(ctx.bpy)]
     ctx.restore_scene()
     return out
 

@@ -39,7 +39,7 @@ if str(ROOT) not in sys.path:
 
 from core import bake_ao  # noqa: E402
 
-from .adaptive import numpy_scenes  # noqa: E402
+from .adaptive import numpy_scenes, room_scene  # noqa: E402
 from .common import Clock, log  # noqa: E402
 
 FULL = dict(res=96, counts=(16, 32, 64, 128, 256, 512, 1024), seeds=8, ref_spp=8192)
@@ -137,17 +137,6 @@ def oracle_scene(name, target, occluders, distance, truth, cfg, threads):
                 bound_independent=float(np.mean(np.sqrt(var)) ** 2 / var.mean()))
 
 
-def _room():
-    import bpy
-
-    from . import scene
-
-    bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "room.blend"), load_ui=False)
-    ta, oa = scene.scene_arrays(bpy, "Room")
-    target, occluders = scene.core_meshes(ta, oa)
-    return ("room", target, occluders, 1.0, None)
-
-
 def main(argv=None):
     import argparse
 
@@ -163,7 +152,9 @@ def main(argv=None):
     t, o, d = load_scene(ROOT / "bench" / "data" / "scene_suzanne.npz")
     scenes = numpy_scenes(cfg["res"]) + [("suzanne", t, o, d, None)]
     if not a.no_blender:
-        scenes.append(_room())
+        import bpy
+
+        scenes.append(room_scene(bpy))
     print(f"oracle allocation, {cfg['res']}^2, counts {cfg['counts']}, {cfg['seeds']} seeds: the samples per texel "
           "an allocation knowing each texel's expected error needs for the fixed count's RMSE")
     for s in scenes:
