@@ -8,8 +8,8 @@ triangle. Each sample's pattern point (:mod:`core.patterns`) comes as a feature 
 (a, b: the sample's position in the triangle's texel space, from u2, u3 after the texel's shift,
 through Heitz's map for a unit that is a piece of triangle, and the unit's map; f: the direction
 features of u0, u1, lifted once for the whole pool, turned by the texel's own angle about the
-normal), and everything a ray needs is linear in x, so one batched product Y = X M per chunk, with
-one matrix M per triangle, gives every ray's origin and direction:
+normal), and everything a ray needs is linear in x, so one product Y = X M per piece, with one
+matrix M per triangle, gives every ray's origin and direction:
 
 - flat-shaded triangles (the shading normal is the face normal): f = Malley's polar map of (u0, u1)
   in the triangle's tangent frame; M maps x to [origin (3), direction (3)];
@@ -18,12 +18,17 @@ one matrix M per triangle, gives every ray's origin and direction:
   sample's direction is normalize(n) + v: cosine-distributed about the sample's own shading normal,
   with no per-sample frame (or v folded onto n's side, for uniform directions).
 
+The kernel holds X and Y as planes, one contiguous (n,) array per feature and per output column:
+numpy's passes over a column of (n, 6) rows cost 2-4 times as much as over a plane, a piece's
+(6, k) planes are one matrix for BLAS (rows n apart), and Embree reads origins and directions as
+(n, 3) views of the planes (embreex takes any strides).
+
 Turning each texel's directions by its own random angle (:meth:`core.patterns.TexelPattern.keys`)
 means texels that share a pool pattern trace different directions. Directions below the geometric
 surface are not traced (tfar 0) and count as occluded.
 
 Where to extend it: a stage that moves sample points elsewhere (onto a high-poly surface) can take
-the origins and the interpolated normals the smooth path computes (columns 0:3 and 3:6 of Y), replace
+the origins and the interpolated normals the smooth path computes (planes 0:3 and 3:6 of Y), replace
 them per sample, and form directions as normalize(n) + v exactly as that path does (the sphere form
 needs no frame, so any per-sample normal works); a miss mask joins ``below``. Points that are not
 texels (mesh vertices) are units of a degenerate triangle (position and normal constant, Px = Py =
@@ -51,6 +56,8 @@ FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
 #: from the matrices' nonzero entries gathered per ray (a batched product of tiny matrices costs
 #: about 100 ns a row); longer pieces take one product per piece.
 ROW_PIECES = 8
+#: The feature planes gathered from the pool (plane 2 is the constant 1).
+_VARYING = (0, 1, 3, 4, 5)
 #: Located pieces of ROW_PIECES samples or more whose candidates' matrices together have at most
 #: this many columns take one product of all of them per piece and keep each sample's own columns;
 #: more candidates go row by row (the product's cost grows with them, the rows' does not).
@@ -167,6 +174,8 @@ class TileContext:
         pos = np.searchsorted(tris, units.tri)
         self.unit_gn, self.unit_eps = gn[pos], eps[pos]
         self.coef = units.coef.astype(np.float32)
+        self.flat_mt = np.ascontiguousarray(self.flat_m.transpose(0, 2, 1))
+        self.curved_mt = np.ascontiguousarray(self.curved_m.transpose(0, 2, 1))
         self.flat_rows = _row_table(self.flat_m, FLAT_ENTRIES)
         self.curved_rows = _row_table(self.curved_m, CURVED_ENTRIES)
         # Located samples: one matrix per candidate triangle, all in one form.
@@ -261,13 +270,17 @@ class Kernel:
         tex = units.texel[unit]
         kt = tex if replicates is None else tex + replicates * tile.texels  # the pieces' rows of keys
         e, o = keys.pattern[kt], keys.order[kt]
-        # Feature rows of the pieces' samples. Xor-ordered patterns map an aligned power-of-two block
-        # of samples onto consecutive pool rows (in another order), whole rows of a (rows / size,
-        # size, 6) view: a call whose pieces all start at the same sample takes its samples as such
-        # blocks (a piece of 56 from sample 8: blocks of 8, 16 and 32), others go row by row.
-        feats = self.pattern.features(self.kinds[curved])
-        xf = ws.x[:n]
-        x = xf.reshape(g, k, 6)
+        # Feature planes of the pieces' samples: x[j] (g, k) is feature j of every sample, each
+        # plane contiguous (numpy's passes over a column of (n, 6) rows cost 2-4 times as much, and
+        # a piece's (6, k) planes are one matrix for BLAS, rows n apart). Xor-ordered patterns map
+        # an aligned power-of-two block of samples onto consecutive pool rows (in another order),
+        # whole rows of a (rows / size, size) view of each plane: a call whose pieces all start at
+        # the same sample takes its samples as such blocks (a piece of 56 from sample 8: blocks of
+        # 8, 16 and 32), others go sample by sample. Plane 2 is the constant 1.
+        feats = self.pattern.feature_planes(self.kinds[curved])
+        xf = ws.x[:6 * n].reshape(6, n)
+        xf[2].fill(1.0)
+        x = xf.reshape(6, g, k)
         blocks = None
         if self.pattern.xor:
             if (k & (k - 1)) == 0 and not np.any(start & (k - 1)):
@@ -280,11 +293,13 @@ class Kernel:
             for at, size_b, start_b in blocks:
                 first_b = self.pattern.block_rows(e, o, start_b, size_b)
                 firsts.append(first_b)
-                rows = feats.reshape(-1, size_b, 6)
-                if size_b == k:
-                    np.take(rows, first_b // size_b, axis=0, out=x, mode="clip")
-                else:
-                    x[:, at:at + size_b] = np.take(rows, first_b // size_b, axis=0, mode="clip")
+                block = first_b // size_b
+                for j in _VARYING:
+                    rows = feats[j].reshape(-1, size_b)
+                    if size_b == k:
+                        np.take(rows, block, axis=0, out=x[j], mode="clip")
+                    else:
+                        x[j, :, at:at + size_b] = np.take(rows, block, axis=0, mode="clip")
         else:
             first = self.pattern.block_rows(e, o, start, k)
             idx = ws.idx[:n].reshape(g, k)
@@ -294,14 +309,15 @@ class Kernel:
                 idx += (e * self.pattern.span)[:, None]
             else:
                 np.add(first[:, None], ws.ramp[None, :k], out=idx)
-            np.take(feats, idx.reshape(n), axis=0, out=xf, mode="clip")
-        xu = x.view(np.uint32)
+            for j in _VARYING:
+                np.take(feats[j], idx.reshape(n), out=xf[j], mode="clip")
+        xu = xf.view(np.uint32).reshape(6, g, k)
         shift = keys.shift[kt]
-        a, b = x[:, :, 0], x[:, :, 1]
+        a, b = x[0], x[1]
         for c, dst in ((0, a), (1, b)):
             # The texel's shift of the position coordinate, in place, then to [0, 1) in float32.
-            self.pattern.shift_positions(xu[:, :, c], _per_piece(shift[:, c], k))
-            np.copyto(dst, xu[:, :, c], casting="unsafe")
+            self.pattern.shift_positions(xu[c], _per_piece(shift[:, c], k))
+            np.copyto(dst, xu[c], casting="unsafe")
             dst *= np.float32(2.0 ** -32)
         # (u, v) -> the triangle's texel space: a translation for squares, Heitz's map and the
         # piece's corners for pieces of triangles; located samples find their triangle first.
@@ -332,12 +348,13 @@ class Kernel:
         # The texel's turn about the normal: a rotation of the first two direction features.
         cos_t = _per_piece(keys.cos_turn[kt].astype(np.float32), k)
         sin_t = _per_piece(keys.sin_turn[kt].astype(np.float32), k)
-        f0, f1 = x[:, :, 3], x[:, :, 4]
+        f0, f1 = x[3], x[4]
         t0 = f0 * cos_t
         t0 -= f1 * sin_t
         f1 *= cos_t
         f1 += f0 * sin_t
         f0[...] = t0
+        entries = CURVED_ENTRIES if curved else FLAT_ENTRIES
         if located and zselect:
             # Every candidate's matrix (its translation to the texel folded into the constant row)
             # in one product per piece; each sample keeps its own candidate's columns.
@@ -347,40 +364,39 @@ class Kernel:
             mc[:, :, 2] += tr[:, :, 0, None] * mc[:, :, 0]
             mc[:, :, 2] += tr[:, :, 1, None] * mc[:, :, 1]
             cols = mc.shape[3]
-            z = np.matmul(x, np.ascontiguousarray(mc.transpose(0, 2, 1, 3)).reshape(g, 6, m * cols))
+            z = np.matmul(x.transpose(1, 2, 0), np.ascontiguousarray(mc.transpose(0, 2, 1, 3)).reshape(g, 6, m * cols))
             row = ws.idx[:n]
             np.multiply(ws.ramp[:n], m, out=row)
             row += best.reshape(n)
-            y = np.take(z.reshape(n * m, cols), row, axis=0, mode="clip")
-        elif located or k < ROW_PIECES:
-            # Row by row, each ray's own triangle's entries (a located sample's, or its piece's).
+            y = np.take(z.reshape(n * m, cols), row, axis=0, mode="clip").T  # planes (cols, n), strided
+        else:
+            # Y = X M as planes, from each matrix's nonzero entries: per ray (a located sample's own
+            # triangle's, or those of a short piece's) or per piece, broadcast over its samples.
             if located:
                 table, slot = tile.loc_rows, tile.loc_slot[tri_s]
             else:
                 table = tile.curved_rows if curved else tile.flat_rows
                 slot = tile.slot[units.tri[unit]]
-                if k > 1:
+            y = ws.y[:len(entries) * n].reshape(len(entries), n)
+            if located or k < ROW_PIECES:
+                if not located and k > 1:
                     slot = np.repeat(slot, k)
-            y = self._rows(table, CURVED_ENTRIES if curved else FLAT_ENTRIES, slot, xf, ws)
-            cols = y.shape[1]
-        else:
-            m = (tile.curved_m if curved else tile.flat_m)[tile.slot[units.tri[unit]]]
-            cols = m.shape[2]
-            y = ws.y[:n * cols].reshape(g, k, cols)
-            np.matmul(x, m, out=y)
-            y = y.reshape(n, cols)
-        origins = y[:, 0:3]
+                self._linear(np.take(table, slot, axis=1, mode="clip"), entries, xf, y, ws.f2[:n])
+            else:
+                mt = (tile.curved_mt if curved else tile.flat_mt)[slot]   # (g, cols, 6)
+                np.matmul(mt, x.transpose(1, 0, 2), out=y.reshape(len(entries), g, k).transpose(1, 0, 2))
+        origins = y[0:3].T
         tfar = ws.tfar[:n]
         below = ws.below[:n]
         weight = None
         if not curved:
-            directions = y[:, 3:6]
+            directions = y[3:6].T
             below.fill(False)  # the shading hemisphere is the face's own
             tfar.fill(self.reach)
             if self.uniform:
-                weight = 2.0 * xf[:, 5]                                  # 2 cos(theta), uniform hemisphere
+                weight = 2.0 * xf[5]                                     # 2 cos(theta), uniform hemisphere
         else:
-            nx, ny, nz = y[:, 3], y[:, 4], y[:, 5]
+            nx, ny, nz = y[3], y[4], y[5]
             length, tmp = ws.f1[:n], ws.f2[:n]
             np.multiply(nx, nx, out=length)
             np.multiply(ny, ny, out=tmp)
@@ -388,15 +404,16 @@ class Kernel:
             np.multiply(nz, nz, out=tmp)
             length += tmp
             np.sqrt(length, out=length)
-            directions = ws.dirs[:n]
+            dirs = ws.dirs[:3 * n].reshape(3, n)
+            directions = dirs.T
             if self.uniform:
-                nv = nx * y[:, 6]
-                nv += ny * y[:, 7]
-                nv += nz * y[:, 8]
+                nv = nx * y[6]
+                nv += ny * y[7]
+                nv += nz * y[8]
                 side = np.where(nv < 0, np.float32(-1), np.float32(1))
                 for c in range(3):
-                    np.multiply(y[:, 6 + c], side, out=directions[:, c])
-                np.multiply(y[:, 10], side, out=tmp)
+                    np.multiply(y[6 + c], side, out=dirs[c])
+                np.multiply(y[10], side, out=tmp)
                 np.less_equal(tmp, 0, out=below)
                 weight = 2.0 * np.abs(nv) / np.maximum(length, 1e-30)
                 tfar.fill(self.reach)
@@ -405,13 +422,13 @@ class Kernel:
                 size2 = ws.f3[:n]
                 size2.fill(0)
                 for c in range(3):
-                    dc = directions[:, c]
-                    np.multiply(y[:, 6 + c], length, out=dc)
-                    dc += y[:, 3 + c]
+                    dc = dirs[c]
+                    np.multiply(y[6 + c], length, out=dc)
+                    dc += y[3 + c]
                     np.multiply(dc, dc, out=tmp)
                     size2 += tmp
-                np.multiply(y[:, 10], length, out=tmp)
-                tmp += y[:, 9]
+                np.multiply(y[10], length, out=tmp)
+                tmp += y[9]
                 np.less_equal(tmp, 0, out=below)
                 below |= size2 < 1e-20
                 if self.reach < FAR:
@@ -475,34 +492,30 @@ class Kernel:
 
 
     @staticmethod
-    def _rows(table, entries, slot, xf, ws):
-        """Y = X M row by row: (n, cols), a view of (cols, n) columns computed from the entries
-        ``table[:, slot]`` of each row's matrix."""
-        n = len(slot)
-        g = np.take(table, slot, axis=1, mode="clip")  # (entries, n)
-        y = ws.y[:len(entries) * n].reshape(len(entries), n)
-        tmp = ws.f2[:n]
+    def _linear(entries_of, entries, x, y, tmp):
+        """Y = X M as planes: ``y[c]`` (output column c) from the feature planes ``x[j]`` and the
+        matrices' nonzero entries ``entries_of`` (entries, ...), which broadcast against a plane
+        (one row per ray, or per piece over its samples): the same operations either way."""
         i = 0
         for c, rows in entries:
             out = y[c]
             if rows[0] == 2:  # position: M[2] + a M[0] + b M[1]
-                np.multiply(xf[:, 0], g[i + 1], out=out)
-                out += g[i]
-                np.multiply(xf[:, 1], g[i + 2], out=tmp)
+                np.multiply(x[0], entries_of[i + 1], out=out)
+                out += entries_of[i]
+                np.multiply(x[1], entries_of[i + 2], out=tmp)
                 out += tmp
             else:  # direction: f0 M[3] + f1 M[4] + f2 M[5]
-                np.multiply(xf[:, 3], g[i], out=out)
-                np.multiply(xf[:, 4], g[i + 1], out=tmp)
+                np.multiply(x[3], entries_of[i], out=out)
+                np.multiply(x[4], entries_of[i + 1], out=tmp)
                 out += tmp
-                np.multiply(xf[:, 5], g[i + 2], out=tmp)
+                np.multiply(x[5], entries_of[i + 2], out=tmp)
                 out += tmp
             i += 3
-        return y.T
 
     @staticmethod
     def _locate(units, unit, x, k):
         """Each sample's candidate among its located texel's (an index into the texel's run, (g, k)),
-        at its texel-local position (a, b) = x[..., 0:2] (x: (g, k, 6) feature rows): the
+        at its texel-local position (a, b) = x[0:2] (x: (6, g, k) feature planes): the
         candidate whose least edge function there is largest (the one containing the point; the
         first of equals). Every piece of the call has the same number of candidates (the baker
         groups them so), so each piece's arithmetic does not depend on the others."""
@@ -514,8 +527,8 @@ class Kernel:
         if k < ROW_PIECES:
             # Short pieces: candidate by candidate over the samples.
             best = np.zeros((g, k), np.int64)
-            a = x[:, :, 0].reshape(-1)
-            b = x[:, :, 1].reshape(-1)
+            a = x[0].reshape(-1)
+            b = x[1].reshape(-1)
             best_d = None
             for c in range(m):
                 e = units.cand_edges[first + c]
@@ -538,10 +551,16 @@ class Kernel:
         # per piece, rows (edge, candidate), samples along the last axis.
         ec = np.take(units.cand_edges, first[:, None] + np.arange(m), axis=0, mode="clip")  # (g, m, edge, coef)
         coef = np.ascontiguousarray(ec.transpose(0, 2, 1, 3)).reshape(g, 3 * m, 3)
-        e = np.matmul(coef, x[:, :, 0:3].transpose(0, 2, 1))          # (g, 3m, k)
+        e = np.matmul(coef, x[0:3].transpose(1, 0, 2))                # (g, 3m, k)
         d = np.minimum(e[:, 0:m], e[:, m:2 * m])
         np.minimum(d, e[:, 2 * m:], out=d)                            # (g, m, k)
-        return np.argmax(d, axis=1)  # the first of equals, as the loop over candidates above
+        best = np.zeros((g, k), np.int64)
+        top = d[:, 0].copy()
+        for c in range(1, m):
+            dc = d[:, c]
+            np.copyto(best, c, where=dc > top)
+            np.maximum(top, dc, out=top)
+        return best
 
 
 def _direction_sums(directions, value, weight, g, k, out):
@@ -562,12 +581,12 @@ class _Workspace:
         self.n = n
         self.ramp = np.arange(n, dtype=np.int64)
         self.idx = np.empty(n, np.int64)
-        self.x = np.empty((n, 6), np.float32)
-        self.y = np.empty(n * CURVED_COLUMNS, np.float32)
+        self.x = np.empty(6 * n, np.float32)                  # feature planes
+        self.y = np.empty(len(CURVED_ENTRIES) * n, np.float32)  # output planes
         self.u32 = np.empty(n, np.uint32)
         self.tfar = np.empty(n, np.float32)
         self.below = np.empty(n, bool)
-        self.dirs = np.empty((n, 3), np.float32)
+        self.dirs = np.empty(3 * n, np.float32)              # direction planes
         self.f1 = np.empty(n, np.float32)
         self.f2 = np.empty(n, np.float32)
         self.f3 = np.empty(n, np.float32)

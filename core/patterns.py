@@ -268,6 +268,11 @@ class TexelPattern:
         """
         return self._pool.features(kind)
 
+    def feature_planes(self, kind):
+        """:meth:`features` as planes, float32 (6, span * patterns): plane j is column j of every
+        row (what the kernel gathers, one contiguous plane per feature)."""
+        return self._pool.feature_planes(kind)
+
 
 def _lift(q, kind):
     u0 = q[:, 0].astype(np.float64) * _TWO_M32
@@ -307,6 +312,16 @@ class _Pool:
                 f.setflags(write=False)
                 self._features[kind] = f
             return f
+
+    def feature_planes(self, kind):
+        f = self.features(kind)
+        with self._lock:
+            p = self._features.get((kind, "planes"))
+            if p is None:
+                p = np.ascontiguousarray(f.T)
+                p.setflags(write=False)
+                self._features[(kind, "planes")] = p
+            return p
 
 
 _POOLS = OrderedDict()
