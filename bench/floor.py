@@ -37,6 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from core.kernel import smooth_cosine_rays  # noqa: E402
+
 N_RAYS = 1 << 16          # rays per call, as core.bake_ao's chunk_rays
 POOL = 1 << 18            # pool points, as core.patterns.POOL_POINTS
 SPAN = 1024
@@ -149,27 +151,8 @@ class Chunk:
             i += 3
 
     def finish_planes(self, s):
-        y, t0, t1, length = self.y, self.tmp[0], self.tmp[1], self.tmp[2]
-        np.multiply(y[3], y[3], out=length)
-        for c in (4, 5):
-            np.multiply(y[c], y[c], out=t0)
-            length += t0
-        np.sqrt(length, out=length)
-        t1.fill(0)
-        for c in range(3):
-            d = self.dirs[c]
-            np.multiply(y[6 + c], length, out=d)
-            d += y[3 + c]
-            np.multiply(d, d, out=t0)
-            t1 += t0
-        np.multiply(y[10], length, out=t0)
-        t0 += y[9]
-        np.less_equal(t0, 0, out=self.below)
-        self.below |= t1 < 1e-20
-        np.sqrt(t1, out=self.tfar)
-        np.maximum(self.tfar, np.float32(1e-37), out=self.tfar)
-        np.divide(np.float32(1.0), self.tfar, out=self.tfar)
-        self.tfar[self.below] = 0.0
+        # The kernel's own code (core.kernel.smooth_cosine_rays), with the reach of a finite distance.
+        smooth_cosine_rays(self.y, 1.0, self.dirs, self.tfar, self.below, self.tmp[2], self.tmp[0], self.tmp[1])
 
     def sum(self, s):
         return self.below.view(np.uint8).reshape(self.t, self.k).sum(axis=1, dtype=np.int64).astype(np.float64)

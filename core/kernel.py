@@ -398,15 +398,12 @@ class Kernel:
         else:
             nx, ny, nz = y[3], y[4], y[5]
             length, tmp = ws.f1[:n], ws.f2[:n]
-            np.multiply(nx, nx, out=length)
-            np.multiply(ny, ny, out=tmp)
-            length += tmp
-            np.multiply(nz, nz, out=tmp)
-            length += tmp
-            np.sqrt(length, out=length)
             dirs = ws.dirs[:3 * n].reshape(3, n)
             directions = dirs.T
-            if self.uniform:
+            if not self.uniform:
+                smooth_cosine_rays(y, self.reach, dirs, tfar, below, length, tmp, ws.f3[:n])
+            else:
+                _normal_lengths(y, length, tmp)
                 nv = nx * y[6]
                 nv += ny * y[7]
                 nv += nz * y[8]
@@ -417,28 +414,7 @@ class Kernel:
                 np.less_equal(tmp, 0, out=below)
                 weight = 2.0 * np.abs(nv) / np.maximum(length, 1e-30)
                 tfar.fill(self.reach)
-            else:
-                # |n| (n / |n| + v): cosine-distributed about the sample's own normal n.
-                size2 = ws.f3[:n]
-                size2.fill(0)
-                for c in range(3):
-                    dc = dirs[c]
-                    np.multiply(y[6 + c], length, out=dc)
-                    dc += y[3 + c]
-                    np.multiply(dc, dc, out=tmp)
-                    size2 += tmp
-                np.multiply(y[10], length, out=tmp)
-                tmp += y[9]
-                np.less_equal(tmp, 0, out=below)
-                below |= size2 < 1e-20
-                if self.reach < FAR:
-                    # Ray lengths are in units of the direction, which is not unit length here.
-                    np.sqrt(size2, out=tfar)
-                    np.maximum(tfar, np.float32(self.reach / FAR), out=tfar)  # at most FAR long
-                    np.divide(np.float32(self.reach), tfar, out=tfar)
-                else:
-                    tfar.fill(FAR)
-            tfar[below] = 0.0
+                tfar[below] = 0.0
         traced_tfar = tfar.copy() if self.on_rays is not None else None
         clock = Clock()
         touch = None
@@ -561,6 +537,45 @@ class Kernel:
             np.copyto(best, c, where=dc > top)
             np.maximum(top, dc, out=top)
         return best
+
+
+def _normal_lengths(y, length, tmp):
+    """|n| of the interpolated normals, output planes 3-5, into ``length``."""
+    np.multiply(y[3], y[3], out=length)
+    np.multiply(y[4], y[4], out=tmp)
+    length += tmp
+    np.multiply(y[5], y[5], out=tmp)
+    length += tmp
+    np.sqrt(length, out=length)
+
+
+def smooth_cosine_rays(y, reach, dirs, tfar, below, length, tmp, size2):
+    """The rays of smooth-shaded samples with cosine directions, from the output planes ``y`` of
+    their map (origin, interpolated normal n, sphere point v, n . gn, v . gn): each direction
+    |n| (n / |n| + v), cosine-distributed about the sample's own normal, into the planes ``dirs``;
+    its length ``tfar`` in units of the direction (``reach`` long; 0 where the direction points
+    below the geometric surface, which ``below`` marks). ``length``, ``tmp`` and ``size2`` are
+    scratch planes (``length`` ends as |n|)."""
+    _normal_lengths(y, length, tmp)
+    size2.fill(0)
+    for c in range(3):
+        dc = dirs[c]
+        np.multiply(y[6 + c], length, out=dc)
+        dc += y[3 + c]
+        np.multiply(dc, dc, out=tmp)
+        size2 += tmp
+    np.multiply(y[10], length, out=tmp)
+    tmp += y[9]
+    np.less_equal(tmp, 0, out=below)
+    below |= size2 < 1e-20
+    if reach < FAR:
+        # Ray lengths are in units of the direction, which is not unit length here.
+        np.sqrt(size2, out=tfar)
+        np.maximum(tfar, np.float32(reach / FAR), out=tfar)  # at most FAR long
+        np.divide(np.float32(reach), tfar, out=tfar)
+    else:
+        tfar.fill(FAR)
+    tfar[below] = 0.0
 
 
 def _direction_sums(directions, value, weight, g, k, out):
