@@ -227,13 +227,6 @@ class TexelPattern:
         row = (first - pattern * self.span)[:, None] + np.arange(size)[None, :]
         return row ^ order[:, None] if self.xor else row - order[:, None]
 
-    def block_features(self, kind, size):
-        """The lifted features as overlapping windows: ``[first]`` gives the (size, 6) rows of a
-        block without copying, so ``[firsts]`` gathers whole blocks with one copy each."""
-        f = self.features(kind)
-        return np.lib.stride_tricks.as_strided(f, shape=(len(f) - size + 1, size, f.shape[1]),
-                                               strides=(f.strides[0], f.strides[0], f.strides[1]), writeable=False)
-
     def shift_positions(self, q, shift):
         """Apply the texels' position shifts to uint32 position coordinates ``q`` (..., 2) in place."""
         if self.shift_add:
