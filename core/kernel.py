@@ -72,19 +72,21 @@ CURVED_ENTRIES = tuple((c, _POSITION_ROWS if c in (0, 1, 2, 3, 4, 5, 9) else _DI
 
 
 def _row_table(m, entries):
-    """The matrices ``m`` (T, 6, cols) as a float32 table (entries, T) of their nonzero entries."""
+    """The matrices ``m`` (T, cols, 6) (transposed) as a float32 table (entries, T) of their nonzero
+    entries."""
     js = [j for c, rows in entries for j in rows]
     cs = [c for c, rows in entries for _ in rows]
     out = np.empty((len(js), len(m)), m.dtype)
     for e, (j, c) in enumerate(zip(js, cs)):  # entry by entry: a gather over the short axes is slower
-        out[e] = m[:, j, c]
+        out[e] = m[:, c, j]
     return out
 
 
 def triangle_matrices(table, tris, offset, curved_all=False):
-    """Per triangle of ``tris`` (unique ids), the float32 matrix (6, 6) (flat-shaded) or (6, 11)
+    """Per triangle of ``tris`` (unique ids), the float32 matrix M (6, 6) (flat-shaded) or (6, 11)
     (smooth-shaded, or every triangle with ``curved_all``: a flat triangle's normal is constant)
-    taking a feature row to what its rays need; returns (flat, curved, slot, gn, eps), slot mapping
+    taking a feature row to what its rays need, stored transposed, (cols, 6): the form the kernel's
+    product per piece takes. Returns (flat, curved, slot, gn, eps), slot mapping
     a triangle id to its row in the array of its kind (-1 for triangles not in ``tris``)."""
     def take(a, rows):
         return np.take(a, rows, axis=0, mode="clip")  # numpy's a[rows] is 2-3 times slower on (T, 3[, 3]) arrays
@@ -130,26 +132,26 @@ def triangle_matrices(table, tris, offset, curved_all=False):
 
     i = flat_i
     ti = tris[i]
-    mf = np.zeros((len(i), 6, FLAT_COLUMNS), np.float32)
-    mf[:, 0, 0:3] = take(table.Px, ti)
-    mf[:, 1, 0:3] = take(table.Py, ti)
-    mf[:, 2, 0:3] = take(org, i)
-    mf[:, 3, 3:6] = take(fs, i)
-    mf[:, 4, 3:6] = take(ft, i)
-    mf[:, 5, 3:6] = take(nref, i)
+    mf = np.zeros((len(i), FLAT_COLUMNS, 6), np.float32)
+    mf[:, 0:3, 0] = take(table.Px, ti)
+    mf[:, 0:3, 1] = take(table.Py, ti)
+    mf[:, 0:3, 2] = take(org, i)
+    mf[:, 3:6, 3] = take(fs, i)
+    mf[:, 3:6, 4] = take(ft, i)
+    mf[:, 3:6, 5] = take(nref, i)
 
     i = curved_i
     t = tris[i]
     g = take(gn, i)
-    mc = np.zeros((len(i), 6, CURVED_COLUMNS), np.float32)
+    mc = np.zeros((len(i), CURVED_COLUMNS, 6), np.float32)
     for r, (e, f) in enumerate(((take(table.Px, t), take(table.Nx, t)), (take(table.Py, t), take(table.Ny, t)),
                                 (take(org, i), take(table.N0, t)))):
-        mc[:, r, 0:3] = e
-        mc[:, r, 3:6] = f
-        mc[:, r, 9] = np.einsum("ij,ij->i", f, g)
+        mc[:, 0:3, r] = e
+        mc[:, 3:6, r] = f
+        mc[:, 9, r] = np.einsum("ij,ij->i", f, g)
     for r, v in ((3, take(fs, i)), (4, take(ft, i)), (5, take(nref, i))):
-        mc[:, r, 6:9] = v
-        mc[:, r, 10] = np.einsum("ij,ij->i", v, g)
+        mc[:, 6:9, r] = v
+        mc[:, 10, r] = np.einsum("ij,ij->i", v, g)
     return mf, mc, slot, gn, eps
 
 
@@ -174,8 +176,6 @@ class TileContext:
         pos = np.searchsorted(tris, units.tri)
         self.unit_gn, self.unit_eps = gn[pos], eps[pos]
         self.coef = units.coef.astype(np.float32)
-        self.flat_mt = np.ascontiguousarray(self.flat_m.transpose(0, 2, 1))
-        self.curved_mt = np.ascontiguousarray(self.curved_m.transpose(0, 2, 1))
         self.flat_rows = _row_table(self.flat_m, FLAT_ENTRIES)
         self.curved_rows = _row_table(self.curved_m, CURVED_ENTRIES)
         # Located samples: one matrix per candidate triangle, all in one form.
@@ -359,12 +359,12 @@ class Kernel:
             # Every candidate's matrix (its translation to the texel folded into the constant row)
             # in one product per piece; each sample keeps its own candidate's columns.
             cand = units.cand_first[unit][:, None] + np.arange(m)
-            mc = tile.loc_m[tile.loc_slot[units.cand_tri[cand]]]       # (g, m, 6, cols)
+            mc = tile.loc_m[tile.loc_slot[units.cand_tri[cand]]]       # (g, m, cols, 6)
             tr = units.cand_coef[cand]
-            mc[:, :, 2] += tr[:, :, 0, None] * mc[:, :, 0]
-            mc[:, :, 2] += tr[:, :, 1, None] * mc[:, :, 1]
-            cols = mc.shape[3]
-            z = np.matmul(x.transpose(1, 2, 0), np.ascontiguousarray(mc.transpose(0, 2, 1, 3)).reshape(g, 6, m * cols))
+            mc[:, :, :, 2] += tr[:, :, 0, None] * mc[:, :, :, 0]
+            mc[:, :, :, 2] += tr[:, :, 1, None] * mc[:, :, :, 1]
+            cols = mc.shape[2]
+            z = np.matmul(x.transpose(1, 2, 0), np.ascontiguousarray(mc.transpose(0, 3, 1, 2)).reshape(g, 6, m * cols))
             row = ws.idx[:n]
             np.multiply(ws.ramp[:n], m, out=row)
             row += best.reshape(n)
@@ -383,7 +383,7 @@ class Kernel:
                     slot = np.repeat(slot, k)
                 self._linear(np.take(table, slot, axis=1, mode="clip"), entries, xf, y, ws.f2[:n])
             else:
-                mt = (tile.curved_mt if curved else tile.flat_mt)[slot]   # (g, cols, 6)
+                mt = (tile.curved_m if curved else tile.flat_m)[slot]   # (g, cols, 6)
                 np.matmul(mt, x.transpose(1, 0, 2), out=y.reshape(len(entries), g, k).transpose(1, 0, 2))
         origins = y[0:3].T
         tfar = ws.tfar[:n]
@@ -396,7 +396,6 @@ class Kernel:
             if self.uniform:
                 weight = 2.0 * xf[5]                                     # 2 cos(theta), uniform hemisphere
         else:
-            nx, ny, nz = y[3], y[4], y[5]
             length, tmp = ws.f1[:n], ws.f2[:n]
             dirs = ws.dirs[:3 * n].reshape(3, n)
             directions = dirs.T
@@ -404,6 +403,7 @@ class Kernel:
                 smooth_cosine_rays(y, self.reach, dirs, tfar, below, length, tmp, ws.f3[:n])
             else:
                 _normal_lengths(y, length, tmp)
+                nx, ny, nz = y[3], y[4], y[5]
                 nv = nx * y[6]
                 nv += ny * y[7]
                 nv += nz * y[8]
@@ -598,7 +598,6 @@ class _Workspace:
         self.idx = np.empty(n, np.int64)
         self.x = np.empty(6 * n, np.float32)                  # feature planes
         self.y = np.empty(len(CURVED_ENTRIES) * n, np.float32)  # output planes
-        self.u32 = np.empty(n, np.uint32)
         self.tfar = np.empty(n, np.float32)
         self.below = np.empty(n, bool)
         self.dirs = np.empty(3 * n, np.float32)              # direction planes
