@@ -37,14 +37,12 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from core.kernel import smooth_cosine_rays  # noqa: E402
+from core.kernel import CURVED_ENTRIES, FLAT_ENTRIES, Kernel, _row_table, smooth_cosine_rays  # noqa: E402
 
 N_RAYS = 1 << 16          # rays per call, as core.bake_ao's chunk_rays
 POOL = 1 << 18            # pool points, as core.patterns.POOL_POINTS
 SPAN = 1024
 TEXELS = 1 << 15
-#: Output columns of the smooth map whose rows are position rows (origin, normal, n . gn).
-SMOOTH_POSITION_COLUMNS = (0, 1, 2, 3, 4, 5, 9)
 
 
 class Chunk:
@@ -65,15 +63,15 @@ class Chunk:
         turn = rng.random(TEXELS) * 2 * np.pi
         self.cos, self.sin = np.cos(turn).astype(np.float32), np.sin(turn).astype(np.float32)
         self.corner = rng.random((TEXELS, 2)).astype(np.float32)
+        # Per texel a matrix with the kernel's nonzero entries (core.kernel's FLAT_ENTRIES or
+        # CURVED_ENTRIES), as rows (6, cols), transposed (cols, 6) and as the kernel's entry table.
+        self.entries = CURVED_ENTRIES if columns == 11 else FLAT_ENTRIES
         m = np.zeros((TEXELS, 6, columns), np.float32)
-        for c in range(columns):
-            rows_c = (2, 0, 1) if (c < 3 or (columns == 11 and c in SMOOTH_POSITION_COLUMNS)) else (3, 4, 5)
+        for c, rows_c in self.entries:
             m[:, rows_c, c] = rng.standard_normal((TEXELS, 3)).astype(np.float32)
         self.m = m
         self.mt = np.ascontiguousarray(m.transpose(0, 2, 1))
-        self.entries = [(c, (2, 0, 1) if (c < 3 or (columns == 11 and c in SMOOTH_POSITION_COLUMNS)) else (3, 4, 5))
-                        for c in range(columns)]
-        self.table = np.stack([m[:, j, c] for c, rows_c in self.entries for j in rows_c])  # (entries, texels)
+        self.table = _row_table(self.mt, self.entries)  # (entries, texels)
         t, k = self.t, self.k
         self.x_rows = np.empty((t, k, 6), np.float32)
         self.x = np.empty((6, t, k), np.float32)
@@ -135,20 +133,8 @@ class Chunk:
         np.matmul(self.mt[s], self.x.transpose(1, 0, 2), out=self.y.transpose(1, 0, 2))
 
     def map_planes_elementwise(self, s):
-        g = np.take(self.table, s, axis=1)[:, :, None]
-        x, y, tmp = self.x, self.y, self.tmp[0]
-        i = 0
-        for c, rows in self.entries:
-            out = y[c]
-            np.multiply(x[rows[1]], g[i + 1], out=out)
-            if rows[0] == 2:
-                out += g[i]
-            else:
-                np.multiply(x[rows[0]], g[i], out=tmp)
-                out += tmp
-            np.multiply(x[rows[2]], g[i + 2], out=tmp)
-            out += tmp
-            i += 3
+        # The kernel's own code (core.kernel.Kernel._linear), each texel's entries broadcast.
+        Kernel._linear(np.take(self.table, s, axis=1)[:, :, None], self.entries, self.x, self.y, self.tmp[0])
 
     def finish_planes(self, s):
         # The kernel's own code (core.kernel.smooth_cosine_rays), with the reach of a finite distance.
