@@ -176,6 +176,7 @@ class TileContext:
         pos = np.searchsorted(tris, units.tri)
         self.unit_gn, self.unit_eps = gn[pos], eps[pos]
         self.coef = units.coef.astype(np.float32)
+        self.coef_planes = np.ascontiguousarray(self.coef.T)  # (6, units): columns to gather from
         self.flat_rows = _row_table(self.flat_m, FLAT_ENTRIES)
         self.curved_rows = _row_table(self.curved_m, CURVED_ENTRIES)
         # Located samples: one matrix per candidate triangle, all in one form.
@@ -312,16 +313,15 @@ class Kernel:
             for j in _VARYING:
                 np.take(feats[j], idx.reshape(n), out=xf[j], mode="clip")
         xu = xf.view(np.uint32).reshape(6, g, k)
-        shift = keys.shift[kt]
         a, b = x[0], x[1]
         for c, dst in ((0, a), (1, b)):
             # The texel's shift of the position coordinate, in place, then to [0, 1) in float32.
-            self.pattern.shift_positions(xu[c], _per_piece(shift[:, c], k))
+            # Gathered column by column: numpy's gather of (2,) rows costs 5 times as much.
+            self.pattern.shift_positions(xu[c], _per_piece(keys.shift[:, c][kt], k))
             np.copyto(dst, xu[c], casting="unsafe")
             dst *= np.float32(2.0 ** -32)
         # (u, v) -> the triangle's texel space: a translation for squares, Heitz's map and the
         # piece's corners for pieces of triangles; located samples find their triangle first.
-        coef = tile.coef[unit]
         tri_s = None
         if located:
             best = self._locate(units, unit, x, k)
@@ -336,13 +336,13 @@ class Kernel:
                 b += tr[:, :, 1]
             squares = g
         sq = slice(0, squares)
-        if not located:
-            a[sq] += _per_piece(coef[sq, 0], k)
-            b[sq] += _per_piece(coef[sq, 3], k)
+        if not located:  # the squares' translations, two planes of tile.coef_planes gathered
+            a[sq] += _per_piece(np.take(tile.coef_planes[0], unit[sq]), k)
+            b[sq] += _per_piece(np.take(tile.coef_planes[3], unit[sq]), k)
         if squares < g:
             tr = slice(squares, g)
             u, v = warps.square_to_triangle(a[tr], b[tr])
-            ct = coef[tr]
+            ct = tile.coef[unit[tr]]
             a[tr] = _per_piece(ct[:, 0], k) + _per_piece(ct[:, 1], k) * u + _per_piece(ct[:, 2], k) * v
             b[tr] = _per_piece(ct[:, 3], k) + _per_piece(ct[:, 4], k) * u + _per_piece(ct[:, 5], k) * v
         # The texel's turn about the normal: a rotation of the first two direction features.

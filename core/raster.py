@@ -393,12 +393,20 @@ def _crosses(xa, ya, xb, yb, px, py):
     return box & (lo < 0) & (hi > 0)
 
 
-def _row_sums(r, lo, hi, weight, y0, x0, th, tw):
-    """Per texel of the tile's (th, tw) grid, the sum of ``weight`` over the runs [lo, hi) of rows
-    ``r`` that cover it (a difference array along each row, then a running sum)."""
+def _run_bins(r, lo, hi, y0, x0, tw):
+    """The bins where the runs [lo, hi) of rows ``r`` start and end in a tile's difference array
+    (:func:`_row_sums`), rows of tw + 1 bins."""
     base = (r - y0) * (tw + 1) - x0
+    return base + lo, base + hi
+
+
+def _row_sums(bins, weight, th, tw):
+    """Per texel of the tile's (th, tw) grid, the sum of ``weight`` (None: 1, an integer count)
+    over the runs whose bins :func:`_run_bins` gave that cover it (a difference array along each
+    row, then a running sum)."""
     n = th * (tw + 1)
-    d = np.bincount(base + lo, weights=weight, minlength=n) - np.bincount(base + hi, weights=weight, minlength=n)
+    d = np.bincount(bins[0], weights=weight, minlength=n)
+    d -= np.bincount(bins[1], weights=weight, minlength=n)
     return np.cumsum(d.reshape(th, tw + 1), axis=1)[:, :tw].ravel()
 
 
@@ -424,11 +432,12 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
     p_lo, p_hi, p_own, p_r = p_lo[live], p_hi[live], p_own[live], p_r[live]
     # Counts per texel without listing the texels of full runs (most of a texture): how many
     # triangles contain it, the sum of their indices (the triangle when there is one), how many cross it.
+    # The counts are integers, the sum of indices exact in float64 (indices < 2^53).
     fsel = np.flatnonzero(has_full)
-    one = np.ones(len(fsel))
-    n_full = _row_sums(r[fsel], f_lo[fsel], f_hi[fsel], one, y0, x0, th, tw)
-    id_sum = _row_sums(r[fsel], f_lo[fsel], f_hi[fsel], own[fsel].astype(np.float64), y0, x0, th, tw)
-    n_part = _row_sums(p_r, p_lo, p_hi, np.ones(len(p_lo)), y0, x0, th, tw)
+    f_bins = _run_bins(r[fsel], f_lo[fsel], f_hi[fsel], y0, x0, tw)
+    n_full = _row_sums(f_bins, None, th, tw)
+    id_sum = _row_sums(f_bins, own[fsel].astype(np.float64), th, tw)
+    n_part = _row_sums(_run_bins(p_r, p_lo, p_hi, y0, x0, tw), None, th, tw)
     kind = np.full(tw * th, -1, np.int64)  # per local texel: triangle, -1 split, LOCATED
     simple = (n_full == 1) & (n_part == 0)
     kind[simple] = tri_ids[np.rint(id_sum[simple]).astype(np.int64)]

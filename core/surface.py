@@ -178,9 +178,9 @@ def build_units(frag, table, width):
     # Squares: a translation to the texel's corner.
     kind[at] = SQUARE
     tri[at] = tri_s
-    coef[at, 0] = (tex % width) - table.origin[tri_s, 0]
+    coef[at, 0] = (tex % width) - np.take(table.origin[:, 0], tri_s)  # np.take: origin[tri_s, 0] costs twice
     coef[at, 1] = 1.0
-    coef[at, 3] = (tex // width) - table.origin[tri_s, 1]
+    coef[at, 3] = (tex // width) - np.take(table.origin[:, 1], tri_s)
     coef[at, 5] = 1.0
     # Located texels: a square each; its candidates' translations.
     loc = np.flatnonzero(full == _LOCATED)
@@ -316,8 +316,14 @@ def contact_texels(frag, table, width, tracer, samples):
         return np.zeros(n_tex, bool)
     # Only triangles whose bounding box, grown by twice the largest offset, meets an occluder's can
     # touch one: the probes go to their texels alone.
+    # The tile's triangles, ascending: marked in a table of every triangle (a tile's texels name
+    # them a hundred thousand times over at 4096^2, where sorting them cost more than the probes).
     loc_tri = frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64)
-    tris = np.unique(np.concatenate([frag.full_tri[frag.full_tri >= 0], frag.sub_tri, loc_tri]))
+    seen = np.zeros(len(table.P0), bool)
+    seen[frag.full_tri[frag.full_tri >= 0]] = True
+    seen[frag.sub_tri] = True
+    seen[loc_tri] = True
+    tris = np.flatnonzero(seen)
     corners3 = table.corners[tris]
     grow = 2.0 * tracer.offset(np.abs(corners3).max(axis=(1, 2)))[:, None]
     near = np.zeros(len(table.P0), bool)

@@ -461,6 +461,24 @@ def test_every_texel_in_contact_is_found_split_texels_too(resolution):
     assert r.ao[(r.mask & ~inside)].mean() > 0.5  # elsewhere the plane is mostly open
 
 
+def test_contact_is_found_on_triangles_that_no_texel_lies_inside():
+    # Every texel of this 2 x 2 image is split (the UV island [0.05, 0.95]^2 leaves a border in each):
+    # the plane's triangles reach the contact probes through split texels alone. A block rests on
+    # the middle of the plane; within the rays' reach of 0.01 only contact can occlude the part of
+    # each texel under it, 0.0324 / 0.2025 = 16% of its covered area: AO about 0.84 (without the
+    # probes, about 0.99). Tolerance: 4 binomial standard deviations of 1024 samples (an upper bound
+    # for the stratified positions), plus 0.02 for rays that meet the block's walls.
+    p = plane()
+    halves = Mesh(p.positions, p.triangles, p.uvs * 0.9 + 0.05, name="bordered")
+    frag = rasterize_tile(prepare(halves, 2, 2), np.arange(2), 2, 2, 0, 0, 2, 2)
+    assert len(frag.texels) == 4 and np.all(frag.full_tri == -1)
+    r = bake_ao(halves, [box((0.3, 0.3, 0.0), (0.7, 0.7, 0.6))], resolution=2, samples=1024, max_distance=0.01,
+                margin=0)
+    under = 0.0324 / 0.2025
+    tol = 4 * math.sqrt(under * (1 - under) / 1024)
+    assert np.all(r.ao > 1 - under - tol - 0.02) and np.all(r.ao < 1 - under + tol), r.ao
+
+
 def _dilate_by_hand(values, mask, margin):
     """Ring by ring, texel by texel: each empty texel touching filled ones (8-neighbourhood) takes the
     mean of those filled before this ring. Returns (values, filled)."""
