@@ -172,11 +172,11 @@ class TileContext:
         tris = np.unique(units.tri) if tris is None else np.asarray(tris, np.int64)
         self.flat_m, self.curved_m, self.slot, gn, eps = triangle_matrices(table, tris, offset)
         self.smooth = table.smooth
-        # The geometric normal and offset of each unit (for contact probes).
-        pos = np.searchsorted(tris, units.tri)
-        self.unit_gn, self.unit_eps = gn[pos], eps[pos]
-        self.coef = units.coef.astype(np.float32)
-        self.coef_planes = np.ascontiguousarray(self.coef.T)  # (6, units): columns to gather from
+        # The geometric normal and offset of each of ``tris`` (for contact probes, looked up for the
+        # few samples probed: per unit up front they cost more than the probes).
+        self.tris, self.gn, self.eps = tris, gn, eps
+        # The units' maps (A0, A1, A2, B0, B1, B2) as float32 planes (6, units), gathered by column.
+        self.coef_planes = np.ascontiguousarray(units.coef.T, dtype=np.float32)
         self.flat_rows = _row_table(self.flat_m, FLAT_ENTRIES)
         self.curved_rows = _row_table(self.curved_m, CURVED_ENTRIES)
         # Located samples: one matrix per candidate triangle, all in one form.
@@ -342,9 +342,9 @@ class Kernel:
         if squares < g:
             tr = slice(squares, g)
             u, v = warps.square_to_triangle(a[tr], b[tr])
-            ct = tile.coef[unit[tr]]
-            a[tr] = _per_piece(ct[:, 0], k) + _per_piece(ct[:, 1], k) * u + _per_piece(ct[:, 2], k) * v
-            b[tr] = _per_piece(ct[:, 3], k) + _per_piece(ct[:, 4], k) * u + _per_piece(ct[:, 5], k) * v
+            ct = np.take(tile.coef_planes, unit[tr], axis=1)
+            a[tr] = _per_piece(ct[0], k) + _per_piece(ct[1], k) * u + _per_piece(ct[2], k) * v
+            b[tr] = _per_piece(ct[3], k) + _per_piece(ct[4], k) * u + _per_piece(ct[5], k) * v
         # The texel's turn about the normal: a rotation of the first two direction features.
         cos_t = _per_piece(keys.cos_turn[kt].astype(np.float32), k)
         sin_t = _per_piece(keys.sin_turn[kt].astype(np.float32), k)
@@ -434,8 +434,8 @@ class Kernel:
                     row = tile.loc_pos[tri_s[sel]]
                     gn, eps = tile.loc_gn[row], tile.loc_eps[row]
                 else:
-                    piece = unit[sel // k]
-                    gn, eps = tile.unit_gn[piece], tile.unit_eps[piece]
+                    row = np.searchsorted(tile.tris, units.tri[unit[sel // k]])
+                    gn, eps = tile.gn[row], tile.eps[row]
                 touch = self.tracer.contact(offset_points(origins[sel], gn, -eps), gn, eps)
         if touch is not None and touch.any():
             value[sel[touch]] = 0

@@ -408,6 +408,25 @@ def test_a_block_resting_on_the_surface_occludes_it_completely(samples):
     assert np.all(g.ao == 1.0)
 
 
+def test_contact_probes_take_each_triangle_own_normal():
+    # One mesh, a wall (normal +x, its triangles first) and a floor (normal +z), each half of the UV
+    # square. The block resting on the floor puts the floor under it in contact: AO 0 there. Each
+    # sample's probe crosses the surface along its own triangle's normal; along the wall's normal
+    # it would run within the floor's plane and find nothing.
+    P = np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1],  # wall x = 0
+                  [0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)  # floor z = 0
+    F = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    uv = np.array([[0, 0], [0.5, 0], [0.5, 1], [0, 1], [0.5, 0], [1, 0], [1, 1], [0.5, 1]], float)
+    corner = Mesh(P, F, uv[F], name="corner")
+    assert corner.face_normals[0] @ [1, 0, 0] > 0.99 and corner.face_normals[2] @ [0, 0, 1] > 0.99
+    r = bake_ao(corner, [box((0.4, 0.3, 0.0), (0.8, 0.7, 0.6))], resolution=32, samples=64, max_distance=0.1,
+                margin=0)
+    # Floor texels wholly under the block: u = 0.5 + x / 2 in [0.7, 0.9], v = y in [0.3, 0.7].
+    under = r.ao[11:21, 23:28]
+    assert np.all(under == 0.0), under
+    assert r.ao[2:8, 18:30].mean() > 0.8  # the floor in front of the block stays open
+
+
 def _rotated_box(centre, half, height, angle):
     c, s_ = math.cos(angle), math.sin(angle)
     b = box((-half, -half, 0.0), (half, half, height))
