@@ -81,18 +81,20 @@ def _rings(values, mask, margin):
         claim[c] = ar
         return c[claim[c] == ar]
 
-    # The first ring: empty neighbours of covered texels that have an empty texel in their 3 x 3.
-    empty = np.zeros((h + 2, W2), bool)
-    empty[1:-1, 1:-1] = ~mask
-    near = empty.copy()
-    near[:, 1:] |= empty[:, :-1]
-    near[:, :-1] |= empty[:, 1:]
+    # The first ring: the empty texels with a covered one in their 3 x 3, the covered texels
+    # dilated by one (along rows, then along columns), ascending. (Listing the empty neighbours of
+    # the covered texels at the islands' edges and making them unique gives the same set, at
+    # twice the cost on a 4096^2 image.) Each ring's texels depend on the rings before it only,
+    # never on their order.
+    filled = np.zeros((h + 2, W2), bool)
+    filled[1:-1, 1:-1] = mask
+    near = filled.copy()
+    near[:, 1:] |= filled[:, :-1]
+    near[:, :-1] |= filled[:, 1:]
     near3 = near.copy()
     near3[1:] |= near[:-1]
     near3[:-1] |= near[1:]
-    edge = np.flatnonzero(near3 & (S == _FILLED)).astype(it)
-    cand = (offsets[:, None] + edge).ravel()
-    frontier = unique(cand[np.take(Sf, cand, mode="clip") == _EMPTY])
+    frontier = np.flatnonzero(near3 & (S == _EMPTY)).astype(it)
     done_idx, done_val = [], []
     for _ in range(margin):
         if not len(frontier):
