@@ -86,11 +86,11 @@ def _rings(values, mask, margin):
     # the covered texels at the islands' edges and making them unique gives the same set, at
     # twice the cost on a 4096^2 image.) Each ring's texels depend on the rings before it only,
     # never on their order.
-    filled = np.zeros((h + 2, W2), bool)
-    filled[1:-1, 1:-1] = mask
-    near = filled.copy()
-    near[:, 1:] |= filled[:, :-1]
-    near[:, :-1] |= filled[:, 1:]
+    covered = np.zeros((h + 2, W2), bool)
+    covered[1:-1, 1:-1] = mask
+    near = covered.copy()
+    near[:, 1:] |= covered[:, :-1]
+    near[:, :-1] |= covered[:, 1:]
     near3 = near.copy()
     near3[1:] |= near[:-1]
     near3[:-1] |= near[1:]
