@@ -314,22 +314,24 @@ def contact_texels(frag, table, width, tracer, samples):
     n_tex = len(frag.texels)
     if tracer.contact_scene is None or n_tex == 0:
         return np.zeros(n_tex, bool)
-    # Only triangles whose bounding box, grown by twice the largest offset, meets an occluder's can
-    # touch one: the probes go to their texels alone.
     # The tile's triangles, ascending: marked in a table of every triangle (a tile's texels name
     # them a hundred thousand times over at 4096^2, where sorting them cost more than the probes).
+    inside = frag.full_tri >= 0
+    full_tri = frag.full_tri[inside]
     loc_tri = frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64)
     seen = np.zeros(len(table.P0), bool)
-    seen[frag.full_tri[frag.full_tri >= 0]] = True
+    seen[full_tri] = True
     seen[frag.sub_tri] = True
     seen[loc_tri] = True
     tris = np.flatnonzero(seen)
+    # Only triangles whose bounding box, grown by twice the largest offset, meets an occluder's can
+    # touch one: the probes go to their texels alone.
     corners3 = table.corners[tris]
     grow = 2.0 * tracer.offset(np.abs(corners3).max(axis=(1, 2)))[:, None]
     near = np.zeros(len(table.P0), bool)
     near[tris] = tracer.near_occluders(corners3.min(axis=1) - grow, corners3.max(axis=1) + grow)
     candidates = np.zeros(n_tex, bool)
-    candidates[frag.full_tri >= 0] = near[frag.full_tri[frag.full_tri >= 0]]
+    candidates[inside] = near[full_tri]
     candidates[frag.sub_texel[near[frag.sub_tri]]] = True
     # A located texel's samples may lie on any of its candidates: each sample is probed (its own
     # triangle's normal) when one of them is near an occluder.
@@ -343,7 +345,7 @@ def contact_texels(frag, table, width, tracer, samples):
     if samples <= 8:
         return candidates  # as few samples as probe points: probe the samples themselves
     corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0.5, 0.5]])
-    simple = np.flatnonzero((frag.full_tri >= 0) & candidates)
+    simple = np.flatnonzero(inside & candidates)
     tex = frag.texels[simple]
     xy_s = (np.stack([tex % width, tex // width], 1)[:, None, :] + corners[None]).reshape(-1, 2)
     tri_s = np.repeat(frag.full_tri[simple], len(corners))
