@@ -105,7 +105,8 @@ def _cancelled(cancel):
 
 
 class _Shared:
-    """State the worker threads share: progress, cancellation, errors, timing.
+    """State the worker threads share: progress, cancellation, errors, timing, and the chunks of
+    rays a thread with no tile left may trace for another (:meth:`run_chunks`).
 
     Progress is reported on the bake's own events (each chunk of rays traced, each tile finished),
     never throttled by a clock: what a caller sees does not depend on how fast the machine is.
@@ -122,13 +123,23 @@ class _Shared:
         self.trace_seconds = 0.0
         self.trace_cpu_seconds = 0.0
         self.rays = 0
+        # Chunks open to helpers (see run_chunks); set up by _run_all when it runs several threads.
+        self.jobs = None
+        self.changed = threading.Condition(threading.Lock())
+        self.pending = 0
 
     def check(self):
         if self.stop.is_set():
             raise _Stop()
         if _cancelled(self.cancel):
-            self.stop.set()
+            self.halt()
             raise _Stop()
+
+    def halt(self):
+        """Stop every worker: set ``stop`` and wake the threads waiting for chunks to help with."""
+        self.stop.set()
+        with self.changed:
+            self.changed.notify_all()
 
     def advance(self, work, rays=0, trace_seconds=0.0, trace_cpu_seconds=0.0):
         with self.lock:
@@ -139,11 +150,93 @@ class _Shared:
             if self.progress is not None and work > 0:
                 self.progress(min(self.done / self.total, 1.0))
 
+    def run_chunks(self, chunks, compute, commit):
+        """commit(chunk, compute(chunk)) for every chunk, the commits in order on this thread.
+
+        With several threads, the chunks are open to the threads that have no item of their own
+        left (the last tiles of a bake): any thread may compute a chunk, this one commits them in
+        order. So a texel's sums are added in the same order whoever traced its rays, and the
+        result does not depend on the threads. This thread computes chunks too while it waits for
+        the next one to commit.
+        """
+        if self.jobs is None or len(chunks) < 2:
+            for c in chunks:
+                commit(c, compute(c))
+            return
+        job = _Chunks(chunks, compute)
+        with self.changed:
+            self.jobs.append(job)
+            self.changed.notify_all()
+        try:
+            for i, c in enumerate(chunks):
+                commit(c, job.result(i))
+        finally:
+            with self.changed:
+                self.jobs.remove(job)
+
+    def help(self):
+        """Compute other threads' chunks until every item is done (or the bake stops)."""
+        with self.changed:
+            while not self.stop.is_set() and self.pending > 0:
+                job = max(self.jobs, key=_Chunks.left, default=None)
+                i = job.claim() if job is not None else None
+                if i is None:
+                    self.changed.wait()
+                    continue
+                self.changed.release()
+                try:
+                    job.run(i)
+                finally:
+                    self.changed.acquire()
+
+
+class _Chunks:
+    """The chunks of one round of one tile, claimed in order by its own thread and by helpers."""
+
+    def __init__(self, chunks, compute):
+        self.chunks, self.compute = chunks, compute
+        self.lock = threading.Lock()
+        self.next = 0
+        self.results = [None] * len(chunks)
+        self.ready = [threading.Event() for _ in chunks]
+
+    def left(self):
+        return len(self.chunks) - self.next
+
+    def claim(self):
+        """The index of the next chunk no thread has taken, or None."""
+        with self.lock:
+            i = self.next
+            if i >= len(self.chunks):
+                return None
+            self.next = i + 1
+            return i
+
+    def run(self, i):
+        try:
+            self.results[i] = (True, self.compute(self.chunks[i]))
+        except BaseException as e:  # raised on the committing thread, in its turn
+            self.results[i] = (False, e)
+        self.ready[i].set()
+
+    def result(self, i):
+        """Chunk i's result, computing the next open chunks (this one or later ones) until it is
+        ready."""
+        while not self.ready[i].is_set():
+            j = self.claim()
+            if j is None:
+                self.ready[i].wait()
+                break
+            self.run(j)
+        ok, value = self.results[i]
+        self.results[i] = None
+        if not ok:
+            raise value
+        return value
+
 
 class _Stop(Exception):
     """Raised inside workers once the bake is cancelled or another worker failed."""
-
-
 
 
 def allocation_seeds(settings):
@@ -157,7 +250,12 @@ def allocation_seeds(settings):
 def _run_all(work, items, threads, shared, progress):
     """work(item) for every item, on ``threads`` threads; the first error stops the others and is
     raised, a cancel (``shared.stop``) raises BakeCancelled; progress reaches 1 at the end. Shared by
-    the texel bake and the vertex bake (core.vertices)."""
+    the texel bake and the vertex bake (core.vertices).
+
+    With several threads, each takes the next item until none is left, then helps the threads
+    still working with their chunks of rays (:meth:`_Shared.run_chunks`) until every item is done:
+    no thread idles while the last tiles are traced, and one tile alone is traced by all of them.
+    """
 
     def guarded(item):
         try:
@@ -165,15 +263,34 @@ def _run_all(work, items, threads, shared, progress):
         except _Stop:
             pass
         except BaseException:
-            shared.stop.set()
+            shared.halt()
             raise
 
-    if threads == 1 or len(items) <= 1:
+    if threads == 1:
         for item in items:
             guarded(item)
     else:
+        queue = iter(list(items))
+        shared.jobs, shared.pending = [], len(items)
+
+        def worker():
+            try:
+                while not shared.stop.is_set():
+                    with shared.changed:
+                        item = next(queue, _Stop)
+                    if item is _Stop:
+                        break
+                    try:
+                        guarded(item)
+                    finally:
+                        with shared.changed:
+                            shared.pending -= 1
+                            shared.changed.notify_all()
+            finally:
+                shared.help()
+
         with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="mc_ao") as pool:
-            for f in [pool.submit(guarded, item) for item in items]:
+            for f in [pool.submit(worker) for _ in range(threads)]:
                 f.result()
     if shared.stop.is_set():
         raise BakeCancelled("the bake was cancelled; nothing was written")
@@ -264,29 +381,40 @@ class _TileBaker:
                                                             curved[order], cands[order], key[order], rep[order])
         several = len(shares) > 1
         bounds = np.flatnonzero(np.diff(key >> 1)) + 1
+        chunks = []
         for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(size)]])):
             k = int(size[lo])
             # A located call holds 3 * candidates edge values per sample: bound it like the rays.
             step = max(1, s.chunk_rays // (k * max(1, int(cands[lo]) // 2)))
-            for c0 in range(lo, hi, step):
-                shared.check()
-                c = slice(c0, min(c0 + step, hi))
-                squares = int(np.count_nonzero(kind[c] == SQUARE))
-                vec = None if sums is None else np.empty((c.stop - c.start, 3))
-                s1, s2, rays, sec, cpu = self.kernel.run(tile, bool(curved[lo]), unit[c], first[c], k, squares,
-                                                         located=bool(kind[lo] == LOCATED), vectors=vec,
-                                                         replicates=rep[c])
-                texel = units.texel[unit[c]]
-                if several:
-                    for r, *_ in shares:
-                        sel = rep[c] == r
-                        if sel.any():
-                            est.add(texel[sel], k, s1[sel], s2[sel], r)
-                else:
-                    est.add(texel, k, s1, s2, shares[0][0])
-                if vec is not None:
-                    np.add.at(sums, texel, vec)
-                shared.advance(rays, rays, sec, cpu)
+            chunks += [(int(lo), slice(int(c0), int(min(c0 + step, hi))), k) for c0 in range(lo, hi, step)]
+
+        def compute(chunk):
+            lo, c, k = chunk
+            shared.check()
+            squares = int(np.count_nonzero(kind[c] == SQUARE))
+            vec = None if sums is None else np.empty((c.stop - c.start, 3))
+            s1, s2, rays, sec, cpu = self.kernel.run(tile, bool(curved[lo]), unit[c], first[c], k, squares,
+                                                     located=bool(kind[lo] == LOCATED), vectors=vec,
+                                                     replicates=rep[c])
+            shared.advance(rays, rays, sec, cpu)
+            return s1, s2, vec
+
+        def commit(chunk, result):
+            _, c, k = chunk
+            s1, s2, vec = result
+            texel = units.texel[unit[c]]
+            if several:
+                for r, *_ in shares:
+                    sel = rep[c] == r
+                    if sel.any():
+                        est.add(texel[sel], k, s1[sel], s2[sel], r)
+            else:
+                est.add(texel, k, s1, s2, shares[0][0])
+            if vec is not None:
+                np.add.at(sums, texel, vec)
+
+        # Chunks are committed in this order whichever thread traces them (the same sums, bit for bit).
+        shared.run_chunks(chunks, compute, commit)
 
 
 #: Occluders farther than this many target sizes from the target are refused: float32 rays cannot

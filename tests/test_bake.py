@@ -110,6 +110,82 @@ def test_same_seed_is_bit_identical_for_any_thread_count():
     assert not np.array_equal(a.ao, c.ao)
 
 
+class _OneTileOnTwoThreads:
+    """on_rays for a bake of a single tile on two threads. The first thread to trace waits in that
+    call until the other thread has made ``wait_for`` calls, so the second thread must be tracing
+    that same tile's chunks (the timeout is reached only when it never does); ``helper`` runs on
+    every call of the second thread."""
+
+    def __init__(self, wait_for=1, helper=None):
+        self.cond = threading.Condition()
+        self.names, self.others, self.wait_for, self.helper = [], 0, wait_for, helper
+
+    def __call__(self, batch):
+        me = threading.current_thread().name
+        with self.cond:
+            self.names.append(me)
+            first = self.names[0] == me
+            if first and len(self.names) == 1:
+                self.cond.wait_for(lambda: self.others >= self.wait_for, timeout=60)
+            elif not first:
+                self.others += 1
+                self.cond.notify_all()
+        if not first and self.helper is not None:
+            self.helper()
+
+
+def test_threads_with_no_tile_left_trace_another_tile_chunks_bit_for_bit():
+    # One replicate of 56 = 32 + 16 + 8 samples a texel, so every texel's sums add three pieces from
+    # three calls, and terms that are not whole numbers (uniform directions, falloff): their sums
+    # depend on the order the pieces are added in, as do the bent normals' sums.
+    kw = dict(resolution=8, samples=56, replicates=1, tile_size=16, chunk_rays=256, margin=0,
+              distribution="uniform", max_distance=0.6, falloff=1.0, bent_normals=True)
+    calls = []
+    a = bake_ao(plane(), [lid_mesh()], threads=1, on_rays=calls.append, **kw)
+    # The first call's thread waits until the other has traced every other chunk: it finishes last.
+    spy = _OneTileOnTwoThreads(wait_for=len(calls) - 1)
+    b = bake_ao(plane(), [lid_mesh()], threads=2, on_rays=spy, **kw)
+    assert len(set(spy.names)) == 2 and spy.others == len(calls) - 1
+    for name in ("ao", "stderr", "samples", "mask", "bent"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert not np.all(a.ao == np.round(a.ao * 56) / 56)  # the terms are not whole numbers
+
+
+def test_chunks_traced_by_another_thread_are_committed_in_their_order():
+    from core.bake import _run_all, _Shared
+
+    chunks = list(range(12))
+    shared = _Shared(1, None, None)
+    cond, computed, by, committed = threading.Condition(), [], {}, []
+
+    def compute(c):
+        with cond:
+            by[c] = threading.current_thread().name
+            if c == chunks[0]:  # the first chunk finishes last (the timeout: only if no thread helps)
+                cond.wait_for(lambda: len(computed) == len(chunks) - 1, timeout=60)
+            computed.append(c)
+            cond.notify_all()
+        return c * 10
+
+    _run_all(lambda item: shared.run_chunks(chunks, compute, lambda c, r: committed.append((c, r))),
+             ["one tile"], 2, shared, None)
+    assert computed[-1] == chunks[0] and len(set(by.values())) == 2
+    assert committed == [(c, c * 10) for c in chunks]
+
+
+def test_an_error_or_a_cancel_in_a_helping_thread_stops_the_bake():
+    kw = dict(resolution=16, samples=48, tile_size=16, chunk_rays=256, margin=0, threads=2)
+
+    def fail():
+        raise ValueError("raised while helping")
+
+    with pytest.raises(ValueError, match="raised while helping"):
+        bake_ao(plane(), [lid_mesh()], on_rays=_OneTileOnTwoThreads(helper=fail), **kw)
+    cancel = threading.Event()
+    with pytest.raises(BakeCancelled):
+        bake_ao(plane(), [lid_mesh()], on_rays=_OneTileOnTwoThreads(helper=cancel.set), cancel=cancel, **kw)
+
+
 def test_result_does_not_depend_on_tiling_or_chunking():
     a = bake_ao(plane(), [lid_mesh()], resolution=20, samples=32, tile_size=8, chunk_rays=100, margin=0)
     b = bake_ao(plane(), [lid_mesh()], resolution=20, samples=32, tile_size=32, chunk_rays=1 << 16, margin=0)
