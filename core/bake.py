@@ -520,8 +520,10 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         final (before margin dilation); ``rows``, ``cols`` are slices of the (H, W) result.
     tile_size, chunk_rays : the unit of work a thread takes, in texels: a side (square tiles) or
         (columns, rows), rounded up to multiples of 16 (None: :func:`core.settings.auto_tile_shape`
-        of the resolution, threads and samples), and rays traced per call into Embree (bounds memory).
-        Neither changes the result: texels draw their samples by (texel, index) alone.
+        of the resolution, threads and samples), and rays traced per call into Embree (bounds memory;
+        a thread with no tile left traces chunks of the tiles still running). Neither changes the
+        result: texels draw their samples by (texel, index) alone, and each tile adds its chunks'
+        sums in the same order whichever thread traced them.
     on_rays : called as on_rays(batch) from worker threads after every call into Embree, with a
         :class:`core.tracing.RayBatch` (origins, directions, lengths, Embree's answer, the texel and
         sample index of every ray, the call's time). Its arrays are valid during the call only.
