@@ -134,7 +134,8 @@ class Units:
     kind : SQUARE, TRIANGLE or LOCATED; texel : the unit's texel, as an index into the tile's texel
     list; tri : its triangle (a located unit's first candidate); first : (n_texels + 1,) units of
     texel k are first[k]:first[k + 1]; cdf : cumulative area fraction of the texel's covered area up
-    to and including the unit; coef : (U, 6) float64, (A0, A1, A2, B0, B1, B2) of the map above.
+    to and including the unit; coef : (U, 6) float64, (A0, A1, A2, B0, B1, B2) of the map above
+    (from build_units: a view of (6, U) planes).
     Candidates of located units: cand_first (U + 1,) offsets (empty runs for other units), cand_tri
     (c,) triangles, cand_edges (c, 3, 3) float32 edge functions (a, b, c) in texel-local
     coordinates, cand_coef (c, 2) float32 the translation (A0, B0) to each candidate's texel space;
@@ -170,7 +171,10 @@ def build_units(frag, table, width):
     kind = np.empty(U, np.int8)
     tri = np.empty(U, np.int64)
     cdf = np.ones(U)
-    coef = np.zeros((U, 6))
+    # The maps as planes (6, U), one contiguous row per coefficient: the writes below run along a
+    # plane, and the kernel's float32 planes are one conversion of them (TileContext). ``coef`` is
+    # their (U, 6) view.
+    planes = np.zeros((6, U))
     simple = np.flatnonzero(full >= 0)
     at = first[simple]
     tri_s = full[simple]
@@ -178,10 +182,10 @@ def build_units(frag, table, width):
     # Squares: a translation to the texel's corner.
     kind[at] = SQUARE
     tri[at] = tri_s
-    coef[at, 0] = (tex % width) - np.take(table.origin[:, 0], tri_s)  # np.take: origin[tri_s, 0] costs twice
-    coef[at, 1] = 1.0
-    coef[at, 3] = (tex // width) - np.take(table.origin[:, 1], tri_s)
-    coef[at, 5] = 1.0
+    planes[0, at] = (tex % width) - np.take(table.origin[:, 0], tri_s)  # np.take: origin[tri_s, 0] costs twice
+    planes[1, at] = 1.0
+    planes[3, at] = (tex // width) - np.take(table.origin[:, 1], tri_s)
+    planes[5, at] = 1.0
     # Located texels: a square each; its candidates' translations.
     loc = np.flatnonzero(full == _LOCATED)
     loc_start = frag.loc_start if frag.loc_start is not None else np.zeros(n + 1, np.int64)
@@ -204,8 +208,8 @@ def build_units(frag, table, width):
     at = first[loc]
     kind[at] = LOCATED
     tri[at] = cand_tri[loc_start[loc]] if len(loc) else 0
-    coef[at, 1] = 1.0
-    coef[at, 5] = 1.0
+    planes[1, at] = 1.0
+    planes[5, at] = 1.0
     # Sub-triangles: corner 2 plus the weights of corners 0 and 1 times the edges to them.
     tri_t = frag.sub_tri
     at = first[frag.sub_texel] + (np.arange(len(tri_t)) - frag.sub_start[frag.sub_texel])
@@ -213,8 +217,10 @@ def build_units(frag, table, width):
     kind[at] = TRIANGLE
     tri[at] = tri_t
     cdf[at] = frag.sub_cdf
-    coef[at] = np.stack([c[:, 2, 0], c[:, 0, 0] - c[:, 2, 0], c[:, 1, 0] - c[:, 2, 0],
-                         c[:, 2, 1], c[:, 0, 1] - c[:, 2, 1], c[:, 1, 1] - c[:, 2, 1]], axis=1)
+    for k in range(2):
+        planes[3 * k, at] = c[:, 2, k]
+        planes[3 * k + 1, at] = c[:, 0, k] - c[:, 2, k]
+        planes[3 * k + 2, at] = c[:, 1, k] - c[:, 2, k]
     texel = np.repeat(np.arange(n), per)
     # Candidate runs follow the units: located units in texel order are the fragments' runs.
     cand_count = np.zeros(U, np.int64)
@@ -226,7 +232,7 @@ def build_units(frag, table, width):
     pad = np.flatnonzero(~real)
     if len(pad):
         edges.reshape(-1, 9)[pad] = np.array([0.0, 0.0, -NEVER] * 3, np.float32)
-    return Units(kind=kind, texel=texel, tri=tri, first=first, cdf=cdf, coef=coef, cand_first=cand_first,
+    return Units(kind=kind, texel=texel, tri=tri, first=first, cdf=cdf, coef=planes.T, cand_first=cand_first,
                  cand_tri=cand_tri, cand_edges=edges, cand_coef=cand_coef)
 
 
