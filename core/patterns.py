@@ -193,8 +193,9 @@ class TexelPattern:
         # A texel's replicates take distinct patterns (consecutive ones from its first: each pattern
         # is an independent randomisation), so that replicates are independent of each other.
         first = str_ if replicate == 0 else hash_more(st, np.uint64(0))
-        pattern = (_below(hash_more(first, _TAG_PATTERN), self.patterns).astype(np.int64)
-                   + int(replicate)) % self.patterns
+        pattern = _below(hash_more(first, _TAG_PATTERN), self.patterns).astype(np.int64)
+        if replicate:  # (below patterns already for replicate 0: an int64 remainder a texel saved)
+            pattern = (pattern + int(replicate)) % self.patterns
         h = hash_more(str_, _TAG_ORDER)
         order = (h >> np.uint64(40)) & np.uint64(self.length - 1) if self.xor else _below(h, self.length)
         shift = np.empty(t.shape + (2,), np.uint32)  # column by column: numpy is slow over an axis of 2
