@@ -235,9 +235,14 @@ def test_texel_keys_are_hashes_of_seed_texel_replicate_and_tag(replicate):
     for j, tag in enumerate((P._TAG_SHIFT2, P._TAG_SHIFT3)):
         np.testing.assert_array_equal(k.shift[:, j], (hash64(p.seed, t, r, tag) >> np.uint64(32)).astype(np.uint32)
                                       & p.shift_mask[j])
-    turn = 2 * np.pi * P.hash_uniform(p.seed, t, r, P._TAG_TURN)
+    u = (hash64(p.seed, t, r, P._TAG_TURN) >> np.uint64(40)).astype(np.float32) * np.float32(2.0 ** -24)
+    turn = np.float32(2 * np.pi) * u
+    assert k.cos_turn.dtype == k.sin_turn.dtype == np.float32
     np.testing.assert_array_equal(k.cos_turn, np.cos(turn))
     np.testing.assert_array_equal(k.sin_turn, np.sin(turn))
+    # The turn is uniform over the circle: chi-square of its angle in 64 bins.
+    angle = np.arctan2(k.sin_turn.astype(np.float64), k.cos_turn.astype(np.float64)) % (2 * np.pi)
+    assert chi2_uniform(np.minimum(angle / (2 * np.pi), np.nextafter(1.0, 0.0)), 64) > ALPHA
 
 
 class TestSobol(PatternContract):
