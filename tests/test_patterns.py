@@ -104,16 +104,19 @@ def t_value(points, m):
 # ---------------------------------------------------------------------------------------------
 
 
+@pytest.fixture(scope="class")
+def full(request):
+    """Every test texel's N points of the test class's source, drawn at once: (texels, N, 4). (A
+    module-level fixture: class-scoped fixtures defined as methods are deprecated in pytest 9.)"""
+    return np.asarray(request.cls.make().points(TEXELS, 0, N), dtype=np.float64)
+
+
 class PatternContract:
     source = None
 
-    def make(self, seed=20261201, max_samples=N):
-        return TexelPattern(self.source, seed, max_samples)
-
-    @pytest.fixture(scope="class")
-    def full(self):
-        """Every test texel's N points, drawn at once: (texels, N, 4)."""
-        return np.asarray(self.make().points(TEXELS, 0, N), dtype=np.float64)
+    @classmethod
+    def make(cls, seed=20261201, max_samples=N):
+        return TexelPattern(cls.source, seed, max_samples)
 
     def test_shape_and_bounds(self, full):
         assert full.shape == (len(TEXELS), N, DIMS)
