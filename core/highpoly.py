@@ -544,8 +544,8 @@ class HighPolyBaker:
         first_sample = (start[piece] + point % k) * g
         samples = first_sample[:, None] + np.arange(g, dtype=np.int64)[None, :]       # (nh, g)
         f = self.features[pattern.rows_of(e[piece], o[piece], samples).reshape(-1)].reshape(nh, g, 6)
-        cos_t = keys.cos_turn[tex[piece]].astype(np.float32)[:, None]
-        sin_t = keys.sin_turn[tex[piece]].astype(np.float32)[:, None]
+        cos_t = keys.cos_turn[tex[piece]][:, None]
+        sin_t = keys.sin_turn[tex[piece]][:, None]
         f0, f1, f2 = f[:, :, 3], f[:, :, 4], f[:, :, 5]
         t0 = f0 * cos_t - f1 * sin_t                 # the texel's turn about the normal
         t1 = f1 * cos_t + f0 * sin_t

@@ -346,8 +346,8 @@ class Kernel:
             a[tr] = _per_piece(ct[0], k) + _per_piece(ct[1], k) * u + _per_piece(ct[2], k) * v
             b[tr] = _per_piece(ct[3], k) + _per_piece(ct[4], k) * u + _per_piece(ct[5], k) * v
         # The texel's turn about the normal: a rotation of the first two direction features.
-        cos_t = _per_piece(keys.cos_turn[kt].astype(np.float32), k)
-        sin_t = _per_piece(keys.sin_turn[kt].astype(np.float32), k)
+        cos_t = _per_piece(keys.cos_turn[kt], k)
+        sin_t = _per_piece(keys.sin_turn[kt], k)
         f0, f1 = x[3], x[4]
         t0 = f0 * cos_t
         t0 -= f1 * sin_t
