@@ -646,7 +646,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
 
     miss, missed, extra = baker.finish(mask) if stage is not None else (None, 0, {})
     if s.margin > 0:
-        ao = dilate(ao, mask, s.margin, threads=s.threads)
+        dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:
         bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, dilate)
     seconds = time.perf_counter() - t_start
