@@ -24,8 +24,9 @@ def dilate(values, mask, margin, threads=1, out=None):
     one band per thread, and none above BAND_TEXELS texels. Small bands keep each band's working
     arrays (a padded copy of its values and its texels' states) in memory the process already holds:
     in a 4096^2 bake, one band of the whole image spent most of its time in the first touch of fresh
-    pages (0.9-2.0 s on one thread against 0.42 s for the same call repeated), and bands of 512 rows
-    0.20-0.27 s (0.53-0.84 -> 0.13-0.19 s on two threads).
+    pages (0.87-2.0 s on one thread, against 0.42-0.56 s for the same call repeated outside a bake),
+    and bands of 512 rows take 0.20-0.27 s (two threads: 0.29-1.18 s, medians 0.41-0.62, ->
+    0.13-0.19 s).
 
     Parameters
     ----------
