@@ -648,7 +648,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     if s.margin > 0:
         dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:
-        bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, dilate)
+        bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, s.threads)
     seconds = time.perf_counter() - t_start
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=shared.rays)
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import MeshError, SettingsError
+from .margin import margin_texels
 
 
 @dataclass(frozen=True)
@@ -200,20 +201,36 @@ def encode(bent, filled, tangent):
     return rgb
 
 
-def dilate_directions(bent, mask, margin, dilate):
+def dilate_directions(bent, mask, margin, threads=1):
     """Extend the covered texels' unit vectors into the margin (per component, then normalised).
 
-    Returns (bent, filled): the dilated (H, W, 3) float32 vectors and which texels hold one.
+    Returns (bent, filled): the dilated (H, W, 3) float32 vectors and which texels hold one (the
+    rest hold 0). The three components share the margin's rings
+    (:func:`core.margin.margin_texels`), and only the covered and margin texels are normalised, one
+    component plane at a time: a 4096^2 image took 5.4-7.7 s in a bake when each component was
+    dilated into a copy of the image, stacked, and normalised over the whole image.
     """
     if margin <= 0:
         return bent, mask.copy()
-    out = np.stack([dilate(bent[..., c], mask, margin) for c in range(3)], axis=-1)
-    marker = dilate(mask.astype(np.float32), mask, margin) > 0
-    size = np.linalg.norm(out, axis=-1)
-    good = marker & (size > 0)
-    out[good] /= size[good][:, None]
-    out[~good] = 0.0
-    return out.astype(np.float32), good | mask
+    h, w = mask.shape
+    flat = np.ascontiguousarray(bent, np.float32).reshape(-1)
+    idx, vals = margin_texels(bent, mask, margin, threads)
+    cov = np.flatnonzero(mask)
+    out = np.zeros(h * w * 3, np.float32)
+    filled = mask.copy()
+    for ids, comps in ((cov, [np.take(flat, 3 * cov + c) for c in range(3)]),
+                       (idx, [np.ascontiguousarray(vals[:, c], np.float32) for c in range(3)])):
+        x, y, z = comps
+        # |v| summed as numpy's norm over a last axis of 3 sums it, (x^2 + y^2) + z^2: the bits of
+        # np.linalg.norm(v, axis=-1) (numpy 1.26 and 2.x).
+        size = np.sqrt((x * x + y * y) + z * z)
+        good = size > 0
+        for c, comp in enumerate(comps):
+            np.divide(comp, size, out=comp, where=good)  # zero vectors stay 0
+            out[3 * ids + c] = comp
+        if ids is idx:
+            filled.reshape(-1)[idx[good]] = True
+    return out.reshape(h, w, 3), filled
 
 
 __all__ = ["TangentFrames", "check_space", "primary_pieces", "barycentric", "texel_directions", "encode",

@@ -30,23 +30,48 @@ def dilate(values, mask, margin, threads=1, out=None):
 
     Parameters
     ----------
-    values : (H, W) array; mask : (H, W) bool, the covered texels; margin : rings to add;
-    threads : bands computed at the same time; out : (H, W) array to write the result into, which
-    may be ``values`` itself (the bake's own image: no copy of it); None: a new array.
+    values : (H, W) array, or (H, W, C): C channels share the rings (the same texels; each channel
+    the mean of its own values); mask : (H, W) bool, the covered texels; margin : rings to add;
+    threads : bands computed at the same time; out : C-contiguous array of values' shape to write
+    the result into, which may be ``values`` itself (the bake's own image: no copy of it); None: a
+    new array.
 
     Returns
     -------
-    ``out``, or a new (H, W) array of values' dtype.
+    ``out``, or a new array of values' shape and dtype.
     """
-    h, w = values.shape
-    margin = int(margin)
     if out is None:
         out = values.copy()
-    elif out is not values:
-        np.copyto(out, values)
+    else:
+        if out.shape != values.shape or not out.flags.c_contiguous:
+            raise ValueError("out must be a C-contiguous array of the values' shape")
+        if out is not values:
+            np.copyto(out, values)
+    flat = out.reshape((-1,) + values.shape[2:])
+    for idx, vals in _bands(values, mask, margin, threads):
+        flat[idx] = vals
+    return out
+
+
+def margin_texels(values, mask, margin, threads=1):
+    """The texels :func:`dilate` fills and their values, without an image: (flat indices (n,)
+    int64, values (n,) or (n, C) of values' dtype), band by band, each texel once."""
+    parts = _bands(values, mask, margin, threads)
+    if not parts:
+        return np.zeros(0, np.int64), np.zeros((0,) + values.shape[2:], values.dtype)
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def _bands(values, mask, margin, threads):
+    """(flat indices, values) of the margin texels, a pair per band of rows (see dilate)."""
+    h, w = mask.shape
+    margin = int(margin)
+    if values.shape[:2] != (h, w) or values.ndim not in (2, 3):
+        raise ValueError(f"values of shape {values.shape} do not match the mask's {mask.shape}")
     if margin <= 0 or not mask.any() or mask.all():
-        return out
-    bands = max(int(threads), -(-h * w // BAND_TEXELS))
+        return []
+    channels = values.shape[2] if values.ndim == 3 else 1
+    bands = max(int(threads), -(-h * w * channels // BAND_TEXELS))
     bands = max(1, min(bands, h // max(4 * margin, 64)))
     cuts = [h * i // bands for i in range(bands + 1)]
 
@@ -58,40 +83,38 @@ def dilate(values, mask, margin, threads=1, out=None):
         keep = (rows >= r0 - w0) & (rows < r1 - w0)
         return idx[keep].astype(np.int64) + w0 * w, vals[keep]
 
-    # Every band is computed from ``values`` before any is written (``out`` may be ``values``).
+    # Every band is computed from ``values`` before any is written (dilate's ``out`` may be ``values``).
     if bands == 1 or int(threads) <= 1:
-        parts = [band(i) for i in range(bands)]
-    else:
-        with ThreadPoolExecutor(max_workers=min(bands, int(threads)), thread_name_prefix="mc_ao-margin") as pool:
-            parts = list(pool.map(band, range(bands)))
-    flat = out.reshape(-1)
-    for idx, vals in parts:
-        flat[idx] = vals
-    return out
+        return [band(i) for i in range(bands)]
+    with ThreadPoolExecutor(max_workers=min(bands, int(threads)), thread_name_prefix="mc_ao-margin") as pool:
+        return list(pool.map(band, range(bands)))
 
 
 def _rings(values, mask, margin):
     """The margin texels of one band: (flat indices into the band, of int32 below 2^31 texels, their
-    values).
+    values (n,), or (n, C) for (h, w, C) values: the channels share the rings, the counts and the
+    claims; each is summed as a single channel is).
 
     Neighbours are gathered as (8, n) rows (one per direction), so the sums and counts run along
     the frontier (numpy is several times slower over a short inner axis of 8), added in the same
     order as before (the same bits); each ring's next frontier is made unique by a claim array (the
     last of equal entries keeps its place), not by sorting.
     """
-    h, w = values.shape
+    h, w = mask.shape
     W2 = w + 2
-    V = np.zeros((h + 2, W2), np.float32)
-    np.copyto(V[1:-1, 1:-1], values, where=mask)  # empty texels hold 0: sums need no mask
+    chan = values.ndim == 3
+    V = np.zeros((values.shape[2] if chan else 1, h + 2, W2), np.float32)
+    for c in range(len(V)):  # empty texels hold 0: sums need no mask
+        np.copyto(V[c, 1:-1, 1:-1], values[..., c] if chan else values, where=mask)
     S = np.full((h + 2, W2), _PAD, np.uint8)
     S[1:-1, 1:-1] = mask
-    Vf, Sf = V.reshape(-1), S.reshape(-1)
+    Vf, Sf = V.reshape(len(V), -1), S.reshape(-1)
     it = np.int32 if Sf.size < 2 ** 31 else np.int64
     offsets = np.array([-W2 - 1, -W2, -W2 + 1, -1, 1, W2 - 1, W2, W2 + 1], it)
     # The claim array is V's own memory read as integers where it can be: the candidates are empty
     # texels, which hold 0 (the bits of 0 either way) and are set back to 0 once claimed, before
     # any sum reads them; a claim array of its own was a fresh image-sized array to touch.
-    claim = Vf.view(np.int32) if it is np.int32 else np.empty(Sf.size, it)
+    claim = Vf[0].view(np.int32) if it is np.int32 else np.empty(Sf.size, it)
 
     def unique(c):
         ar = np.arange(len(c), dtype=it)
@@ -123,21 +146,24 @@ def _rings(values, mask, margin):
         # np.take(mode="clip"): the neighbours of padded texels are always in range, and numpy's
         # fancy indexing checks each index (a third slower).
         st = np.take(Sf, nb, mode="clip")
-        vg = np.take(Vf, nb, mode="clip")
         filled = st == _FILLED
         count = filled[0].astype(np.float32)
         for j in range(1, 8):
             count += filled[j]
-        # (v0 + v4) + (v2 + v6) + ((v1 + v5) + (v3 + v7)), the order of the sums before.
-        val = ((vg[0] + vg[4]) + (vg[2] + vg[6])) + ((vg[1] + vg[5]) + (vg[3] + vg[7]))
-        val /= count
-        Vf[frontier] = val
+        vals = []
+        for Vc in Vf:
+            vg = np.take(Vc, nb, mode="clip")
+            # (v0 + v4) + (v2 + v6) + ((v1 + v5) + (v3 + v7)), the order of the sums before.
+            val = ((vg[0] + vg[4]) + (vg[2] + vg[6])) + ((vg[1] + vg[5]) + (vg[3] + vg[7]))
+            val /= count
+            Vc[frontier] = val
+            vals.append(val)
         Sf[frontier] = _FILLED
         done_idx.append(frontier)
-        done_val.append(val)
+        done_val.append(np.stack(vals, axis=1) if chan else vals[0])
         frontier = unique(nb[st == _EMPTY])
     if not done_idx:
-        return np.zeros(0, it), np.zeros(0, values.dtype)
+        return np.zeros(0, it), np.zeros((0,) + values.shape[2:], values.dtype)
     # (row - 1) * w + (column - 1) of the padded index, in its own integer type (int32 below 2^31
     # texels, where numpy's division is several times faster than int64's).
     idx = np.concatenate(done_idx)

@@ -684,3 +684,29 @@ def test_margin_bands_of_any_height_give_the_same_texels(monkeypatch, margin):
     # as bookkeeping leaks into the values.
     zeros = np.zeros_like(values)
     assert not M.dilate(zeros, mask, margin, threads=1).any()
+
+
+def test_channels_share_the_margin_rings_and_get_each_the_one_channel_bits(monkeypatch):
+    """dilate of (H, W, C) values equals dilate of each channel alone, bit for bit, in any bands and
+    threads; margin_texels lists exactly the texels dilate fills, with their values."""
+    from core import margin as M
+
+    rng = np.random.default_rng(11)
+    h, w = 700, 60
+    mask = np.zeros((h, w), bool)
+    for _ in range(30):
+        y, x = rng.integers(0, h), rng.integers(0, w)
+        mask[y:y + rng.integers(1, 25), x:x + rng.integers(1, 25)] = True
+    values = np.where(mask[..., None], rng.standard_normal((h, w, 3)), 0).astype(np.float32)
+    for rows, threads in ((h, 1), (64, 1), (90, 2)):
+        monkeypatch.setattr(M, "BAND_TEXELS", rows * w)
+        got = M.dilate(values, mask, 5, threads=threads)
+        for c in range(3):
+            assert np.array_equal(got[..., c], M.dilate(np.ascontiguousarray(values[..., c]), mask, 5, threads=threads))
+        idx, vals = M.margin_texels(values, mask, 5, threads=threads)
+        assert len(np.unique(idx)) == len(idx) and not mask.reshape(-1)[idx].any()
+        assert np.array_equal(got.reshape(-1, 3)[idx], vals)
+        changed = np.flatnonzero(np.any(got != values, axis=-1))
+        assert set(changed) <= set(idx) and len(idx) > 0
+    with pytest.raises(ValueError):
+        M.dilate(values, mask, 5, out=np.zeros((h, w, 3), np.float32)[:, ::-1])

@@ -205,6 +205,34 @@ def test_margin_texels_hold_unit_vectors_and_the_rest_the_unbaked_fill():
     assert np.all(encode(r.bent, filled, tangent=False)[~filled] == 0)
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_dilated_directions_are_the_componentwise_margin_normalised(threads):
+    """dilate_directions against its definition: each component through the margin's dilate alone,
+    then every vector normalised where it is not zero (covered texels too); texels beyond the
+    margin hold 0 and are not filled."""
+    from core.bent import dilate_directions
+    from core.margin import dilate
+
+    rng = np.random.default_rng(5)
+    h, w, margin = 300, 80, 4
+    mask = np.zeros((h, w), bool)
+    for _ in range(12):
+        y, x = rng.integers(0, h), rng.integers(0, w)
+        mask[y:y + rng.integers(2, 30), x:x + rng.integers(2, 30)] = True
+    v = rng.standard_normal((h, w, 3))  # of any length: the covered vectors are normalised too
+    bent = np.where(mask[..., None], v, 0).astype(np.float32)
+    bent[np.flatnonzero(mask)[:3] // w, np.flatnonzero(mask)[:3] % w] = 0.0  # covered zero vectors stay 0
+    out, filled = dilate_directions(bent, mask, margin, threads)
+    ref = np.stack([dilate(np.ascontiguousarray(bent[..., c]), mask, margin) for c in range(3)], axis=-1)
+    reach = dilate(mask.astype(np.float32), mask, margin) > 0
+    size = np.linalg.norm(ref, axis=-1)
+    want = np.where((reach & (size > 0))[..., None], ref / np.where(size > 0, size, 1)[..., None], 0)
+    np.testing.assert_allclose(out, want, rtol=3e-7, atol=0)
+    assert np.array_equal(filled, mask | (reach & (size > 0)))
+    assert (filled & ~mask).any() and (~filled).any() and not out[~filled].any()
+    np.testing.assert_allclose(np.linalg.norm(out[filled & (size > 0)], axis=-1), 1.0, atol=1e-6)
+
+
 def test_every_ray_of_every_replicate_and_round_counts_in_the_bent_normal():
     """With replicates and adaptive rounds (texels stopping at different counts), a texel's bent
     normal is the normalised sum of the unit directions of all its unoccluded rays, over every
