@@ -218,8 +218,10 @@ def dilate_directions(bent, mask, margin, threads=1):
     cov = np.flatnonzero(mask)
     out = np.zeros(h * w * 3, np.float32)
     filled = mask.copy()
-    for ids, comps in ((cov, [np.take(flat, 3 * cov + c) for c in range(3)]),
-                       (idx, [np.ascontiguousarray(vals[:, c], np.float32) for c in range(3)])):
+    # Component c of texel t is flat[3 t + c] = flat[c:][3 t]: one index array serves all three.
+    cov3 = 3 * cov
+    for ids, ids3, comps in ((cov, cov3, [np.take(flat[c:], cov3) for c in range(3)]),
+                             (idx, 3 * idx, [np.ascontiguousarray(vals[:, c], np.float32) for c in range(3)])):
         x, y, z = comps
         # |v| summed as numpy's norm over a last axis of 3 sums it, (x^2 + y^2) + z^2: the bits of
         # np.linalg.norm(v, axis=-1) (numpy 1.26 and 2.x).
@@ -227,7 +229,7 @@ def dilate_directions(bent, mask, margin, threads=1):
         good = size > 0
         for c, comp in enumerate(comps):
             np.divide(comp, size, out=comp, where=good)  # zero vectors stay 0
-            out[3 * ids + c] = comp
+            out[c:][ids3] = comp
         if ids is idx:
             filled.reshape(-1)[idx[good]] = True
     return out.reshape(h, w, 3), filled
