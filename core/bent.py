@@ -224,7 +224,7 @@ def dilate_directions(bent, mask, margin, threads=1):
                              (idx, 3 * idx, [np.ascontiguousarray(vals[:, c], np.float32) for c in range(3)])):
         x, y, z = comps
         # |v| summed as numpy's norm over a last axis of 3 sums it, (x^2 + y^2) + z^2: the bits of
-        # np.linalg.norm(v, axis=-1) (numpy 1.26 and 2.x).
+        # np.linalg.norm(v, axis=-1) (numpy 1.26, 2.2 and 2.5).
         size = np.sqrt((x * x + y * y) + z * z)
         good = size > 0
         for c, comp in enumerate(comps):
