@@ -215,23 +215,22 @@ def dilate_directions(bent, mask, margin, threads=1):
     h, w = mask.shape
     flat = np.ascontiguousarray(bent, np.float32).reshape(-1)
     idx, vals = margin_texels(bent, mask, margin, threads)
+    vals = vals.astype(np.float32, copy=False)
     cov = np.flatnonzero(mask)
+    # The covered texels, then the margin's: component c of texel t is flat[3 t + c] = flat[c:][3 t],
+    # so one index array serves all three components.
+    ids3 = 3 * np.concatenate([cov, idx])
+    x, y, z = comps = [np.concatenate([np.take(flat[c:], ids3[:len(cov)]), vals[:, c]]) for c in range(3)]
+    # |v| summed as numpy's norm over a last axis of 3 sums it, (x^2 + y^2) + z^2: the bits of
+    # np.linalg.norm(v, axis=-1) (numpy 1.26, 2.2 and 2.5).
+    size = np.sqrt((x * x + y * y) + z * z)
+    good = size > 0
     out = np.zeros(h * w * 3, np.float32)
+    for c, comp in enumerate(comps):
+        np.divide(comp, size, out=comp, where=good)  # zero vectors stay 0
+        out[c:][ids3] = comp
     filled = mask.copy()
-    # Component c of texel t is flat[3 t + c] = flat[c:][3 t]: one index array serves all three.
-    cov3 = 3 * cov
-    for ids, ids3, comps in ((cov, cov3, [np.take(flat[c:], cov3) for c in range(3)]),
-                             (idx, 3 * idx, [np.ascontiguousarray(vals[:, c], np.float32) for c in range(3)])):
-        x, y, z = comps
-        # |v| summed as numpy's norm over a last axis of 3 sums it, (x^2 + y^2) + z^2: the bits of
-        # np.linalg.norm(v, axis=-1) (numpy 1.26, 2.2 and 2.5).
-        size = np.sqrt((x * x + y * y) + z * z)
-        good = size > 0
-        for c, comp in enumerate(comps):
-            np.divide(comp, size, out=comp, where=good)  # zero vectors stay 0
-            out[c:][ids3] = comp
-        if ids is idx:
-            filled.reshape(-1)[idx[good]] = True
+    filled.reshape(-1)[idx[good[len(cov):]]] = True
     return out.reshape(h, w, 3), filled
 
 
