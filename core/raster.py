@@ -394,20 +394,32 @@ def _crosses(xa, ya, xb, yb, px, py):
 
 
 def _run_bins(r, lo, hi, y0, x0, tw):
-    """The bins where the runs [lo, hi) of rows ``r`` start and end in a tile's difference array
-    (:func:`_row_sums`), rows of tw + 1 bins."""
-    base = (r - y0) * (tw + 1) - x0
-    return base + lo, base + hi
+    """Where the runs [lo, hi) of rows ``r`` start and end in a tile's difference array
+    (:func:`_row_sums`), texel (row, column) of the tile at row * tw + column: the start bins, the
+    end bins of the runs that end inside their row, and which runs those are (a run reaching the
+    row's last texel needs no end: each row's running sum starts afresh)."""
+    base = (r - y0) * tw - x0
+    inside = hi - x0 < tw
+    return base + lo, (base + hi)[inside], inside
 
 
 def _row_sums(bins, weight, th, tw):
-    """Per texel of the tile's (th, tw) grid, the sum of ``weight`` (None: 1, an integer count)
-    over the runs whose bins :func:`_run_bins` gave that cover it (a difference array along each
-    row, then a running sum)."""
-    n = th * (tw + 1)
-    d = np.bincount(bins[0], weights=weight, minlength=n)
-    d -= np.bincount(bins[1], weights=weight, minlength=n)
-    return np.cumsum(d.reshape(th, tw + 1), axis=1)[:, :tw].ravel()
+    """Per texel of the tile's (th, tw) grid, the sum of ``weight`` (None: 1; else integers) over
+    the runs whose bins :func:`_run_bins` gave that cover it (a difference array along each row,
+    then a running sum along each row), int64. The sums are integers: bincount's float64 sums of
+    integer weights are exact (below 2^53), and the running sum is taken in int64, 5 times as fast
+    as float64's (its additions wait on each other: 0.18 against 0.89 ms over a 512^2 tile)."""
+    start, end, inside = bins
+    n = th * tw
+    if weight is None:
+        d = np.bincount(start, minlength=n)
+        d -= np.bincount(end, minlength=n)
+    else:
+        w = np.asarray(weight, np.float64)
+        f = np.bincount(start, weights=w, minlength=n)
+        f -= np.bincount(end, weights=w[inside], minlength=n)
+        d = f.astype(np.int64)
+    return np.cumsum(d.reshape(th, tw), axis=1).reshape(n)
 
 
 def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
@@ -432,15 +444,15 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
     p_lo, p_hi, p_own, p_r = p_lo[live], p_hi[live], p_own[live], p_r[live]
     # Counts per texel without listing the texels of full runs (most of a texture): how many
     # triangles contain it, the sum of their indices (the triangle when there is one), how many cross it.
-    # The counts are integers, the sum of indices exact in float64 (indices < 2^53).
+    # All three are integers, exact (indices < 2^53).
     fsel = np.flatnonzero(has_full)
     f_bins = _run_bins(r[fsel], f_lo[fsel], f_hi[fsel], y0, x0, tw)
     n_full = _row_sums(f_bins, None, th, tw)
-    id_sum = _row_sums(f_bins, own[fsel].astype(np.float64), th, tw)
+    id_sum = _row_sums(f_bins, own[fsel], th, tw)
     n_part = _row_sums(_run_bins(p_r, p_lo, p_hi, y0, x0, tw), None, th, tw)
     kind = np.full(tw * th, -1, np.int64)  # per local texel: triangle, -1 split, LOCATED
     simple = (n_full == 1) & (n_part == 0)
-    kind[simple] = tri_ids[np.rint(id_sum[simple]).astype(np.int64)]
+    kind[simple] = tri_ids[id_sum[simple]]
 
     # Partial pairs, texel by texel of each run.
     pr, p_x = _runs(p_lo, p_hi)

@@ -174,7 +174,10 @@ def build_units(frag, table, width):
     # The maps as planes (6, U), one contiguous row per coefficient: the writes below run along a
     # plane, and the kernel's float32 planes are one conversion of them (TileContext). ``coef`` is
     # their (U, 6) view.
+    # A1 and B2 are 1 for every square (and located texel's square); sub-triangles write theirs.
     planes = np.zeros((6, U))
+    planes[1].fill(1.0)
+    planes[5].fill(1.0)
     simple = np.flatnonzero(full >= 0)
     at = first[simple]
     tri_s = full[simple]
@@ -183,9 +186,7 @@ def build_units(frag, table, width):
     kind[at] = SQUARE
     tri[at] = tri_s
     planes[0, at] = (tex % width) - np.take(table.origin[:, 0], tri_s)  # np.take: origin[tri_s, 0] costs twice
-    planes[1, at] = 1.0
     planes[3, at] = (tex // width) - np.take(table.origin[:, 1], tri_s)
-    planes[5, at] = 1.0
     # Located texels: a square each; its candidates' translations.
     loc = np.flatnonzero(full == _LOCATED)
     loc_start = frag.loc_start if frag.loc_start is not None else np.zeros(n + 1, np.int64)
@@ -208,8 +209,6 @@ def build_units(frag, table, width):
     at = first[loc]
     kind[at] = LOCATED
     tri[at] = cand_tri[loc_start[loc]] if len(loc) else 0
-    planes[1, at] = 1.0
-    planes[5, at] = 1.0
     # Sub-triangles: corner 2 plus the weights of corners 0 and 1 times the edges to them.
     tri_t = frag.sub_tri
     at = first[frag.sub_texel] + (np.arange(len(tri_t)) - frag.sub_start[frag.sub_texel])
@@ -221,7 +220,7 @@ def build_units(frag, table, width):
         planes[3 * k, at] = c[:, 2, k]
         planes[3 * k + 1, at] = c[:, 0, k] - c[:, 2, k]
         planes[3 * k + 2, at] = c[:, 1, k] - c[:, 2, k]
-    texel = np.repeat(np.arange(n), per)
+    texel = np.arange(n) if U == n else np.repeat(np.arange(n), per)
     # Candidate runs follow the units: located units in texel order are the fragments' runs.
     cand_count = np.zeros(U, np.int64)
     cand_count[first[loc]] = per_c

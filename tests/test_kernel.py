@@ -326,3 +326,42 @@ def test_an_adaptive_rounds_per_texel_counts_allocate_as_each_texel_alone(locate
         mine = owner == t
         assert together[2][mine].sum() == count[i]
         assert together[1][mine].min() == start[i] and (together[1] + together[2])[mine].max() == start[i] + count[i]
+
+
+@pytest.mark.parametrize("locate", [False, True])
+def test_every_units_map_takes_the_unit_square_onto_its_piece(locate):
+    """Units' maps (A0 + A1 u + A2 v, B0 + B1 u + B2 v), in the texel space of the unit's triangle
+    (its first corner at 0): a square's take (0, 0), (1, 0) and (0, 1) to its texel's corners (a
+    located texel's the same, less its translation, which each candidate has of its own), a
+    sub-triangle's to its corners 2, 0 and 1 (Heitz's weights of corners 0 and 1), whichever
+    consumer specialises a kind (the kernel reads a square's translation alone)."""
+    from core.raster import prepare, rasterize_tile
+    from core.surface import SQUARE, TRIANGLE, SurfaceTable, build_units
+
+    mesh = plane()
+    w, h = 16, 13
+    uvtris = prepare(mesh, w, h)
+    table = SurfaceTable.build(mesh, uvtris)
+    frag = rasterize_tile(uvtris, np.arange(len(mesh.triangles)), w, h, 0, 0, w, h, locate=locate)
+    units = build_units(frag, table, w)
+    coef = units.coef
+    origin = table.origin[units.tri]
+
+    def at(u, v):
+        return (np.stack([coef[:, 0] + coef[:, 1] * u + coef[:, 2] * v,
+                          coef[:, 3] + coef[:, 4] * u + coef[:, 5] * v], 1) + origin)
+
+    tex = frag.texels[units.texel]
+    corner = np.stack([tex % w, tex // w], 1).astype(float)
+    square = units.kind != TRIANGLE
+    assert square.sum() > 10 and np.any(units.kind == SQUARE)
+    assert ((~square).sum() > 10) != locate  # the diagonal's texels: split, or located squares
+    # A located texel's translation is per candidate (cand_coef); its square's linear part is here.
+    own = units.kind == SQUARE
+    for (u, v), step in (((0, 0), (0, 0)), ((1, 0), (1, 0)), ((0, 1), (0, 1))):
+        np.testing.assert_allclose(at(u, v)[own], corner[own] + step, atol=1e-9)
+        np.testing.assert_allclose((at(u, v) - at(0, 0))[square], np.broadcast_to(step, (square.sum(), 2)), atol=1e-9)
+    sub = np.flatnonzero(~square)
+    piece = frag.sub_start[units.texel[sub]] + (sub - units.first[units.texel[sub]])
+    for (u, v), k in (((0, 0), 2), ((1, 0), 0), ((0, 1), 1)):
+        np.testing.assert_allclose(at(u, v)[sub], frag.sub_xy[piece, k], atol=1e-9)
