@@ -1,11 +1,6 @@
 """The benchmark's printed table, from the results dictionary that run.py also writes as JSON."""
 
 
-def _times(v):
-    """A speed-up as '1.93x', '-' when unknown."""
-    return "-" if v is None else f"{v:.2f}x"
-
-
 def _fmt(v, spec):
     if v is None:
         return "-"
@@ -253,7 +248,8 @@ def table(data):
                         "serial share"],
                        [[x["threads"], _fmt(x["seconds"], ".2f"), _fmt(base / x["seconds"], ".2f") + "x",
                          _fmt(x["mrays_per_s"], ".2f"), _fmt(100 * x["trace_share"], ".0f") + "%",
-                         _times(x.get("embree_alone_speedup")), _times(x.get("outside_embree_speedup")),
+                         _fmt(x.get("embree_alone_speedup"), ".2f") + "x",
+                         _fmt(x.get("outside_embree_speedup"), ".2f") + "x",
                          _fmt(x.get("outside_embree_serial_share"), ".2f")] for x in dv["rows"]])
             L.append("  (speed-ups from the first row; embreex alone: synthetic rays of the scene; outside embree: the "
                      "same bake with Embree's answer a constant, and Amdahl's serial share of it)")
