@@ -23,9 +23,7 @@ keeps AO continuous across smooth-shaded terminators.
 """
 
 import math
-import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,16 +31,18 @@ import numpy as np
 from . import bent as bent_mod
 from ._version import __version__
 from .errors import BakeCancelled, BakeMemoryError, MeshError, SettingsError
-from .estimators import ErrorModel, SamplingPlan, TexelEstimates, TexelWindows, interval_half_width
-from .kernel import Kernel, TileContext
+from .estimators import ErrorModel, interval_half_width
+from .kernel import Kernel
 from .margin import dilate
 from .mesh import Mesh
-from .patterns import TexelPattern, hash64
+from .patterns import TexelPattern
 from . import raster as R
-from .raster import bin_triangles, prepare, rasterize_tile
+from .raster import bin_triangles, prepare
+from .scheduler import Scheduler, is_cancelled, run_all
 from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE, BakeSettings, auto_tile_shape,
                        available_memory, estimate_memory)
-from .surface import LOCATED, SQUARE, TRIANGLE, SurfaceTable, allocate, build_units, contact_texels
+from .surface import SurfaceTable
+from .tilebaker import SurfaceStart, TileBaker
 from .tracing import Tracer
 from . import highpoly as _highpoly
 
@@ -74,6 +74,12 @@ class BakeResult:
         UV island (averaged over all surfaces covering them), covered texels.
     bent : None, or with ``bent_normals``, (H, W, 3) float32 unit bent normals in the bake's
         ``bent_space`` (covered and margin texels; zero elsewhere), see :mod:`core.bent`.
+
+    The same type for every target. Mesh corners (:func:`core.bake_vertex_ao`): the arrays are per
+    corner, (C,) (``bent`` (C, 3)), ``mask`` all true, and ``unit`` (C,) int64 names the sample point
+    whose estimate each corner has (corners of one vertex and one normal share one). UDIM tiles
+    (:func:`core.bake_udim`): ``tiles`` maps each tile number to its own BakeResult, the arrays are the
+    tiles' stacked, (N, H, W) in the order of ``tiles``, and the times and rays are their sums.
     """
 
     ao: np.ndarray
@@ -90,331 +96,12 @@ class BakeResult:
     bent: np.ndarray = None
     miss: np.ndarray = None
     missed: int = 0
+    unit: np.ndarray = None
+    tiles: dict = None
 
     @property
     def rays_per_second(self):
         return self.rays / self.seconds if self.seconds > 0 else float("nan")
-
-
-def _cancelled(cancel):
-    if cancel is None:
-        return False
-    if hasattr(cancel, "is_set"):
-        return cancel.is_set()
-    return bool(cancel())
-
-
-class _Shared:
-    """State the worker threads share: progress, cancellation, errors, timing, and the chunks of
-    rays a thread with no tile left may trace for another (:meth:`run_chunks`).
-
-    Progress is reported on the bake's own events (each chunk of rays traced, each tile finished),
-    never throttled by a clock: what a caller sees does not depend on how fast the machine is.
-    Callers that draw a progress bar throttle their drawing themselves.
-    """
-
-    def __init__(self, total_work, progress, cancel):
-        self.lock = threading.Lock()
-        self.total = max(total_work, 1)
-        self.done = 0
-        self.progress = progress
-        self.cancel = cancel
-        self.stop = threading.Event()
-        self.trace_seconds = 0.0
-        self.trace_cpu_seconds = 0.0
-        self.rays = 0
-        # Chunks open to helpers (see run_chunks); set up by _run_all when it runs several threads.
-        self.jobs = None
-        self.changed = threading.Condition(threading.Lock())
-        self.pending = 0
-
-    def check(self):
-        if self.stop.is_set():
-            raise _Stop()
-        if _cancelled(self.cancel):
-            self.halt()
-            raise _Stop()
-
-    def halt(self):
-        """Stop every worker: set ``stop`` and wake the threads waiting for chunks to help with."""
-        self.stop.set()
-        with self.changed:
-            self.changed.notify_all()
-
-    def advance(self, work, rays=0, trace_seconds=0.0, trace_cpu_seconds=0.0):
-        with self.lock:
-            self.done += work
-            self.rays += rays
-            self.trace_seconds += trace_seconds
-            self.trace_cpu_seconds += trace_cpu_seconds
-            if self.progress is not None and work > 0:
-                self.progress(min(self.done / self.total, 1.0))
-
-    def run_chunks(self, chunks, compute, commit):
-        """commit(chunk, compute(chunk)) for every chunk, the commits in order on this thread.
-
-        With several threads, the chunks are open to the threads that have no item of their own
-        left (the last tiles of a bake): any thread may compute a chunk, this one commits them in
-        order. So a texel's sums are added in the same order whoever traced its rays, and the
-        result does not depend on the threads. This thread computes chunks too while it waits for
-        the next one to commit.
-        """
-        if self.jobs is None or len(chunks) < 2:
-            for c in chunks:
-                commit(c, compute(c))
-            return
-        job = _Chunks(chunks, compute)
-        with self.changed:
-            self.jobs.append(job)
-            self.changed.notify_all()
-        try:
-            for i, c in enumerate(chunks):
-                commit(c, job.result(i))
-        finally:
-            with self.changed:
-                self.jobs.remove(job)
-
-    def help(self):
-        """Compute other threads' chunks until every item is done (or the bake stops)."""
-        with self.changed:
-            while not self.stop.is_set() and self.pending > 0:
-                job = max(self.jobs, key=_Chunks.left, default=None)
-                i = job.claim() if job is not None else None
-                if i is None:
-                    self.changed.wait()
-                    continue
-                self.changed.release()
-                try:
-                    job.run(i)
-                finally:
-                    self.changed.acquire()
-
-
-class _Chunks:
-    """The chunks of one round of one tile, claimed in order by its own thread and by helpers."""
-
-    def __init__(self, chunks, compute):
-        self.chunks, self.compute = chunks, compute
-        self.lock = threading.Lock()
-        self.next = 0
-        self.results = [None] * len(chunks)
-        self.ready = [threading.Event() for _ in chunks]
-
-    def left(self):
-        return len(self.chunks) - self.next
-
-    def claim(self):
-        """The index of the next chunk no thread has taken, or None."""
-        with self.lock:
-            i = self.next
-            if i >= len(self.chunks):
-                return None
-            self.next = i + 1
-            return i
-
-    def run(self, i):
-        try:
-            self.results[i] = (True, self.compute(self.chunks[i]))
-        except BaseException as e:  # raised on the committing thread, in its turn
-            self.results[i] = (False, e)
-        self.ready[i].set()
-
-    def result(self, i):
-        """Chunk i's result, computing the next open chunks (this one or later ones) until it is
-        ready."""
-        while not self.ready[i].is_set():
-            j = self.claim()
-            if j is None:
-                self.ready[i].wait()
-                break
-            self.run(j)
-        ok, value = self.results[i]
-        self.results[i] = None
-        if not ok:
-            raise value
-        return value
-
-
-class _Stop(Exception):
-    """Raised inside workers once the bake is cancelled or another worker failed."""
-
-
-def allocation_seeds(settings):
-    """Per replicate, the seed :func:`core.surface.allocate` splits texels' samples with. Replicate 0
-    keeps the bake's seed (one replicate traces what a bake always traced); the others allocate from
-    seeds of their own, independent of it (also used by :class:`core.highpoly.HighPolyBaker`)."""
-    return [np.uint64(settings.seed)] + [hash64(np.uint64(settings.seed), np.uint64(r), np.uint64(31))
-                                         for r in range(1, settings.replicates)]
-
-
-def _run_all(work, items, threads, shared, progress):
-    """work(item) for every item, on ``threads`` threads; the first error stops the others and is
-    raised, a cancel (``shared.stop``) raises BakeCancelled; progress reaches 1 at the end. Shared by
-    the texel bake and the vertex bake (core.vertices).
-
-    With several threads, each takes the next item until none is left, then helps the threads
-    still working with their chunks of rays (:meth:`_Shared.run_chunks`) until every item is done:
-    no thread idles while the last tiles are traced, and one tile alone is traced by all of them.
-    """
-
-    def guarded(item):
-        try:
-            work(item)
-        except _Stop:
-            pass
-        except BaseException:
-            shared.halt()
-            raise
-
-    if threads == 1:
-        for item in items:
-            guarded(item)
-    else:
-        queue = iter(list(items))
-        shared.jobs, shared.pending = [], len(items)
-
-        def worker():
-            try:
-                while not shared.stop.is_set():
-                    with shared.changed:
-                        item = next(queue, _Stop)
-                    if item is _Stop:
-                        break
-                    try:
-                        guarded(item)
-                    finally:
-                        with shared.changed:
-                            shared.pending -= 1
-                            shared.changed.notify_all()
-            finally:
-                shared.help()
-
-        with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="mc_ao") as pool:
-            for f in [pool.submit(worker) for _ in range(threads)]:
-                f.result()
-    if shared.stop.is_set():
-        raise BakeCancelled("the bake was cancelled; nothing was written")
-    if progress is not None:
-        progress(1.0)
-
-
-class _TileBaker:
-    """Bakes one tile: rasterise, build its sample units, trace the plan's rounds, estimate.
-
-    ``bent``: also sum each texel's unoccluded directions (bent normals, :mod:`core.bent`).
-    """
-
-    def __init__(self, uvtris, table, kernel, tracer, pattern, settings, shared, bent=False):
-        self.uvtris, self.table, self.kernel, self.tracer = uvtris, table, kernel, tracer
-        self.pattern, self.s, self.shared = pattern, settings, shared
-        self.plan = SamplingPlan(settings)
-        self.bent = bent
-        self.seeds = allocation_seeds(settings)
-        # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
-        self.located_curved = bool(uvtris is not None and np.any(table.smooth[uvtris.valid]))
-
-    def bake(self, key, tri_ids):
-        """(fragments, estimates, direction sums or None) of the tile ``key``'s texels."""
-        s = self.s
-        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, *s.tile_bounds(key))
-        if len(frag.texels) == 0:
-            return frag, TexelEstimates(0, s.replicates), None
-        units = build_units(frag, self.table, s.width)
-        contact = contact_texels(frag, self.table, s.width, self.tracer, s.samples)
-        est, sums = self.trace(units, frag.texels, contact, frag.texels % s.width, frag.texels // s.width,
-                               tris=tri_ids)
-        return frag, est, sums
-
-    def trace(self, units, texel_ids, contact, x, y, tris=None):
-        """Trace the plan's rounds, in every replicate, for sample units ``units`` of the texels
-        ``texel_ids`` (global ids: they key the texels' random choices); ``contact`` per texel, probe
-        its samples for contact; ``x``, ``y`` where the error model pools each texel's variance
-        (:func:`core.estimators.window_sums`); ``tris`` the units' triangles, ascending (a superset is
-        fine; None: found from the units). Texels need not be texels: mesh vertices are units of
-        their own (:mod:`core.vertices`). Returns (TexelEstimates, direction sums (n, 3) over all
-        replicates, or None)."""
-        s, shared = self.s, self.shared
-        n_tex = len(texel_ids)
-        est = TexelEstimates(n_tex, s.replicates)
-        sums = np.zeros((n_tex, 3)) if self.bent else None
-        if n_tex == 0:
-            return est, sums
-        keys = [self.pattern.keys(texel_ids, r) for r in range(s.replicates)]
-        # Every replicate's keys in one tile: a round's pieces of all replicates go through the
-        # kernel together (each call costs about half a millisecond before its first ray).
-        tile = TileContext(self.table, units, TileContext.stacked_keys(keys), texel_ids, contact, self.tracer.offset,
-                           located_curved=self.located_curved, tris=tris)
-        if y is not None:  # the texels' windows, set up once for every round's pooling
-            x, y = TexelWindows(x, y), None
-        for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
-            self._trace(tile, units, est, sums, list(self.plan.shares(start, count, texels)))
-        # Credit the work the adaptive stop saved, so progress reaches 1.
-        shared.advance(n_tex * s.samples - int(est.n.sum()))
-        return est, sums
-
-    def _trace(self, tile, units, est, sums, shares):
-        """Trace one round: ``shares`` the (replicate, texels, start, count) of each replicate."""
-        s, shared = self.s, self.shared
-        if not shares:
-            return
-        parts = [allocate(units, texels, start, count, self.seeds[r], tile.texel_ids) for r, texels, start, count in shares]
-        unit, first, size = (np.concatenate([p[i] for p in parts]) for i in range(3))
-        rep = np.repeat(np.array([r for r, *_ in shares], np.int64), [len(p[0]) for p in parts])
-        # Equal pieces go through the kernel together, squares before triangles, located texels
-        # apart, in a fixed order (so every texel's sums are added in the same order however the
-        # pieces are chunked); a replicate's pieces keep their order among each other.
-        kind = units.kind[unit].astype(np.int64)
-        located = kind == LOCATED
-        curved = np.where(located, self.located_curved, self.table.smooth[units.tri[unit]])
-        # Located texels go by their number of candidates too (each piece's location is then
-        # the same arithmetic whatever else shares its call).
-        cands = units.cand_first[unit + 1] - units.cand_first[unit]
-        # One integer per piece: (size, curved, located, candidates) says its call, the last bit
-        # puts squares before pieces of triangles; a stable sort keeps each texel's pieces in order.
-        span = int(cands.max()) + 1 if len(cands) else 1
-        key = (((size * 2 + curved) * 2 + located) * span + cands) * 2 + (kind == TRIANGLE)
-        if len(key) and key.max() < 1 << 16:
-            order = np.argsort(key.astype(np.uint16), kind="stable")  # a radix sort
-        else:
-            order = np.argsort(key, kind="stable")
-        unit, first, size, kind, curved, cands, key, rep = (unit[order], first[order], size[order], kind[order],
-                                                            curved[order], cands[order], key[order], rep[order])
-        several = len(shares) > 1
-        bounds = np.flatnonzero(np.diff(key >> 1)) + 1
-        chunks = []
-        for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(size)]])):
-            k = int(size[lo])
-            # A located call holds 3 * candidates edge values per sample: bound it like the rays.
-            step = max(1, s.chunk_rays // (k * max(1, int(cands[lo]) // 2)))
-            chunks += [(int(lo), slice(int(c0), int(min(c0 + step, hi))), k) for c0 in range(lo, hi, step)]
-
-        def compute(chunk):
-            lo, c, k = chunk
-            shared.check()
-            squares = int(np.count_nonzero(kind[c] == SQUARE))
-            vec = None if sums is None else np.empty((c.stop - c.start, 3))
-            s1, s2, rays, sec, cpu = self.kernel.run(tile, bool(curved[lo]), unit[c], first[c], k, squares,
-                                                     located=bool(kind[lo] == LOCATED), vectors=vec,
-                                                     replicates=rep[c])
-            shared.advance(rays, rays, sec, cpu)
-            return s1, s2, vec
-
-        def commit(chunk, result):
-            _, c, k = chunk
-            s1, s2, vec = result
-            texel = units.texel[unit[c]]
-            if several:
-                for r, *_ in shares:
-                    sel = rep[c] == r
-                    if sel.any():
-                        est.add(texel[sel], k, s1[sel], s2[sel], r)
-            else:
-                est.add(texel, k, s1, s2, shares[0][0])
-            if vec is not None:
-                np.add.at(sums, texel, vec)
-
-        # Chunks are committed in this order whichever thread traces them (the same sums, bit for bit).
-        shared.run_chunks(chunks, compute, commit)
 
 
 #: Occluders farther than this many target sizes from the target are refused: float32 rays cannot
@@ -466,11 +153,84 @@ def _normalized_scene(target, occluders):
 
 
 
+class Prologue:
+    """What every bake does before its first ray, whatever its target (texels, UDIM tiles, mesh
+    corners, selected to active): check the meshes and the target-specific settings, move the scene
+    into the target's frame (:func:`_normalized_scene`), check memory and cancellation, and build the
+    occlusion tracer. Raises the errors :func:`bake_ao` lists, before any heavy work.
+
+    Attributes: target, occluders (normalised), unit (world length of one unit of the frame), s2a (the
+    normalised :class:`core.highpoly.SelectedToActive` or None), bent_space (checked).
+    """
+
+    def __init__(self, target, occluders, settings, cancel, *, uvs=True, highpoly=None, extrusion=0.0,
+                 max_ray_distance=0.0, cage=None, bent_normals=False, bent_space=None):
+        if not isinstance(target, Mesh):
+            raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
+        if uvs and target.uvs is None:
+            raise MeshError(f"mesh {target.name!r} has no UVs: the baker needs a UV map to know where each texel lies")
+        occluders = list(occluders or ())
+        for o in occluders:
+            if not isinstance(o, Mesh):
+                raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
+        self.cancel = cancel
+        self.s2a = None
+        if highpoly is not None:  # selected to active: checked here, before any work
+            if bent_normals:
+                raise SettingsError("bent normals are not baked with selected to active (highpoly): bake them "
+                                    "from the high-poly object itself, or bake AO only")
+            s2a = _highpoly.SelectedToActive.check(target, highpoly, extrusion, max_ray_distance, cage)
+            occluders = s2a.occluders_of(occluders)
+            self.s2a = s2a.normalized(*_frame(target), MAX_SCENE_SPAN)
+        self.bent_space = bent_mod.check_space(bent_space, target) if bent_normals else None
+        self.name = target.name
+        self.target, self.occluders, self.unit = _normalized_scene(target, occluders)
+
+    @property
+    def triangle_count(self):
+        """Triangles of every mesh the bake holds (target, occluders, high-poly meshes and cage)."""
+        return (self.target.triangle_count + sum(o.triangle_count for o in self.occluders)
+                + (self.s2a.triangle_count if self.s2a else 0))
+
+    def check_memory(self, s):
+        """Refuse a texel bake that would not fit in the memory available (BakeMemoryError)."""
+        tri_total = self.triangle_count
+        need = estimate_memory(s.width, s.height, tri_total, s.threads, s.chunk_rays, s.samples, s.source,
+                               s.replicates, s.tile_shape[0] * s.tile_shape[1])
+        avail = available_memory()
+        if avail is not None and need > avail:
+            raise BakeMemoryError(f"a {s.width} x {s.height} bake of {tri_total} triangles needs about "
+                                  f"{need / 2**30:.2f} GiB, but only {avail / 2**30:.2f} GiB is available; "
+                                  "lower the resolution")
+
+    def check_cancel(self):
+        if is_cancelled(self.cancel):
+            raise BakeCancelled("the bake was cancelled before it started")
+
+    def tracer(self, s):
+        """The occlusion tracer of the target and its occluders, in the bake's frame."""
+        return Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit)
+
+    def nothing_covered(self, s, uvtris):
+        """The error of a texel bake that covered no texel, saying why (the counts of the UV triangles)."""
+        total = self.target.triangle_count
+        why = []
+        if uvtris.degenerate:
+            why.append(f"{uvtris.degenerate} of its {total} triangles have no area in the UV map")
+        if uvtris.degenerate_space:
+            why.append(f"{uvtris.degenerate_space} have no area in space")
+        if uvtris.outside:
+            why.append(f"{uvtris.outside} reach outside the UV square [0, 1] (UDIM tiles are baked with use_udim)")
+        reason = "; ".join(why) if why else "its UV triangles cover no texel centre's square"
+        return MeshError(f"mesh {self.name!r} covers no texel of the {s.width} x {s.height} image, so nothing was "
+                         f"baked: {reason}. Unwrap it (UV > Unwrap) so that its UVs lie inside [0, 1]")
+
+
 def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
-            extrusion=0.0, max_ray_distance=0.0, cage=None):
+            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
@@ -542,6 +302,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     cage : with ``highpoly``, None or a Mesh of the target's topology (same vertex count and triangles,
         vertices moved): the matching rays go from the cage's points towards the target's (the
         extrusion is then not used).
+    empty_ok : a bake whose UVs cover no texel returns an all-zero result instead of raising
+        MeshError (a UDIM tile listed but not touched, which Cycles clears).
 
     Returns
     -------
@@ -554,48 +316,28 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     to change), before any AO ray is traced.
     """
     t_start = time.perf_counter()
-    if not isinstance(target, Mesh):
-        raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
-    if target.uvs is None:
-        raise MeshError(f"mesh {target.name!r} has no UVs: the baker needs a UV map to know where each texel lies")
-    occluders = list(occluders or ())
-    for o in occluders:
-        if not isinstance(o, Mesh):
-            raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
                                     replicates)
-    s2a = None
-    if highpoly is not None:  # selected to active: checked here, before any work
-        if bent_normals:
-            raise SettingsError("bent normals are not baked with selected to active (highpoly): bake them "
-                                "from the high-poly object itself, or bake AO only")
-        s2a = _highpoly.SelectedToActive.check(target, highpoly, extrusion, max_ray_distance, cage)
-        occluders = s2a.occluders_of(occluders)
-        s2a = s2a.normalized(*_frame(target), MAX_SCENE_SPAN)
-    bent_space = bent_mod.check_space(bent_space, target) if bent_normals else None
-    target, occluders, unit = _normalized_scene(target, occluders)
+    pro = Prologue(target, occluders, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,
+                   max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
+    target, occluders, unit, s2a, bent_space = pro.target, pro.occluders, pro.unit, pro.s2a, pro.bent_space
     w, h = s.width, s.height
-    tri_total = target.triangle_count + sum(o.triangle_count for o in occluders) + (s2a.triangle_count if s2a else 0)
-    need = estimate_memory(w, h, tri_total, s.threads, s.chunk_rays, s.samples, s.source, s.replicates,
-                           s.tile_shape[0] * s.tile_shape[1])
-    avail = available_memory()
-    if avail is not None and need > avail:
-        raise BakeMemoryError(f"a {w} x {h} bake of {tri_total} triangles needs about {need / 2**30:.2f} GiB, "
-                              f"but only {avail / 2**30:.2f} GiB is available; lower the resolution")
-    if _cancelled(cancel):
-        raise BakeCancelled("the bake was cancelled before it started")
+    pro.check_memory(s)
+    pro.check_cancel()
 
     uvtris = prepare(target, w, h)
     s = s.fit_tiles(R.uv_centres(uvtris))  # automatic tiles of dense meshes: fewer triangles each
     table = SurfaceTable.build(target, uvtris)
     bins = bin_triangles(uvtris, w, h, s.tile_shape)
     stage = None if s2a is None else _highpoly.HighPolyStage(s2a, target, occluders, uvtris, table, bins, s, unit,
-                                                              lambda: _cancelled(cancel))
-    tracer = (Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / unit) if stage is None
-              else stage.scene.tracer)
+                                                              lambda: is_cancelled(cancel))
+    tracer = pro.tracer(s) if stage is None else stage.scene.tracer
     pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
     kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
+    # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
+    start = (SurfaceStart(table, tracer, located_curved=bool(np.any(table.smooth[uvtris.valid]))) if stage is None
+             else stage.start())
 
     def rect(key):
         """Rows, columns and texel count of tile ``key``."""
@@ -605,10 +347,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     # Planned work: texel-samples of every tile's bounding rectangle is unknown before rasterising,
     # so count each tile's texels times samples as it is rasterised, against an upper bound.
     planned = sum(rect(key)[2] for key in bins) * s.samples
-    shared = _Shared(planned, progress, cancel)
-    baker = (_TileBaker(uvtris, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals)) if stage is None
-             else stage.baker(pattern, shared, on_rays, allocation_seeds(s)))
-    errors = ErrorModel(s, grouped=stage is not None)
+    shared = Scheduler(planned, progress, cancel)
+    baker = TileBaker(uvtris, table, kernel, tracer, pattern, s, shared, start, bent=bool(bent_normals))
+    errors = ErrorModel(s, grouped=start.grouped)
 
     ao = np.zeros((h, w), np.float32)
     se = np.zeros((h, w), np.float32)
@@ -634,17 +375,18 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                 tri = bent_mod.primary_pieces(frag, w)
                 weights = bent_mod.barycentric(table.corners_xy, tri, cols + 0.5, rows + 0.5)
                 bent[rows, cols] = bent_mod.texel_directions(sums, tri, weights, target.normals, bent_space)
-            if stage is not None:
-                baker.settle(est, rows, cols, mask, se)
+            start.settle(est, rows, cols, mask, se)
             with shared.lock:
                 coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
             if on_tile is not None:
                 with shared.lock:
                     on_tile(r, c, ao[r, c].copy())
 
-    _run_all(work, keys, s.threads, shared, progress)
+    run_all(work, keys, s.threads, shared, progress)
 
-    miss, missed, extra = baker.finish(mask) if stage is not None else (None, 0, {})
+    miss, missed, extra = start.finish(mask)
+    if not mask.any() and stage is None and not empty_ok:
+        raise pro.nothing_covered(s, uvtris)
     if s.margin > 0:
         dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:

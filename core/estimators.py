@@ -51,6 +51,37 @@ POOL_BLOCK = 16
 POOL_RADIUS = 2
 
 
+def falloff_visibility(distance, max_distance, power):
+    """V of a ray that met an occluder at ``distance`` with a distance falloff of ``power`` > 0:
+    1 - (1 - t / max_distance)^power, so a near occluder blocks fully and one at ``max_distance``
+    not at all (a plain occluder, without falloff, gives V = 0)."""
+    return 1.0 - np.clip(1.0 - np.asarray(distance, np.float64) / max_distance, 0.0, 1.0) ** power
+
+
+def sample_terms(visibility, weight=None):
+    """Each sample's AO term, float64: the estimator every path of the baker uses.
+
+    ``visibility`` is V(w) per sample (bool, or in [0, 1] with a falloff); ``weight`` None for
+    cosine-weighted directions (p(w) = cos(theta) / pi: the term is V itself), or per sample the
+    ratio cos(theta) / (pi p(w)) of other directions (uniform: p(w) = 1 / (2 pi), weight 2 cos(theta)).
+    """
+    term = np.asarray(visibility).astype(np.float64)
+    if weight is not None:
+        term *= weight
+    return term
+
+
+def piece_sums(visibility, weight, pieces, k):
+    """Per piece of ``k`` consecutive samples (``pieces`` of them): (sum of the terms, sum of their
+    squares), float64, of :func:`sample_terms`. Binary terms (cosine directions, no falloff) are
+    counted in integers, exactly."""
+    if visibility.dtype == bool and weight is None:
+        s1 = visibility.view(np.uint8).reshape(pieces, k).sum(axis=1, dtype=np.int64).astype(np.float64)
+        return s1, s1
+    term = sample_terms(visibility, weight).reshape(pieces, k)
+    return term.sum(axis=1), (term * term).sum(axis=1)
+
+
 #: :func:`t_quantile` of more than this many values, all whole numbers up to _T_TABLE_MAX, goes
 #: through a table of every whole number up to the largest.
 _T_TABLE_FROM = 256
@@ -436,5 +467,5 @@ class SamplingPlan:
             texels, n = texels[keep], n[keep]
 
 
-__all__ = ["TexelEstimates", "ErrorModel", "SamplingPlan", "pooled_variance", "window_sums", "t_quantile",
+__all__ = ["sample_terms", "piece_sums", "falloff_visibility", "TexelEstimates", "ErrorModel", "SamplingPlan", "pooled_variance", "window_sums", "t_quantile",
            "interval_half_width", "replicate_samples", "POOL_BLOCK", "POOL_RADIUS", "TexelWindows"]

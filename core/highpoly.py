@@ -84,19 +84,19 @@ import numpy as np
 
 from . import warps
 from .errors import MeshError, SettingsError
-from .estimators import SamplingPlan, TexelEstimates, replicate_samples
+from .estimators import TexelEstimates, replicate_samples
+from .kernel import TileContext
 from .mesh import Mesh, corner_positions
 from .raster import rasterize_tile
-from .surface import SurfaceTable, allocate, build_units
-from .tracing import FAR, Clock, RayBatch, Tracer, embree_scene
+from .surface import SurfaceTable, point_table, point_units
+from .tilebaker import ChunkSums
+from .tracing import FAR, Clock, Tracer, embree_scene
 
 #: Directions traced per sample point (the most: fewer when the sample counts are not multiples).
 DIRECTIONS_PER_POINT = 64
 #: Points spread over the low-poly surface (by area) that the check before a bake casts matching rays from.
 PRECHECK_POINTS = 1 << 12
 _TAG_PRECHECK = 31
-_TWO_M32 = 2.0 ** -32
-_POSITION_COLUMNS = np.array([[2, 3]])  # u2, u3 of a pattern point: its position in the texel
 
 
 def directions_per_point(samples, min_samples, adaptive, replicates=1):
@@ -399,25 +399,22 @@ def towards(origin, p):
     return origin, d / np.where(usable, ln, 1.0)[:, None], usable
 
 
-class HighPolyBaker:
-    """Bakes one tile of a selected-to-active bake: the low-poly's sample points, their matching rays,
-    the AO rays at the hits. The counterpart of :class:`core.bake._TileBaker` (same rasteriser, sample
-    units, rounds, sums and progress), with one sample *point* per block of ``g`` consecutive samples:
-    point j of a texel takes position coordinates (u2, u3) of the texel's pattern point j and the
-    directions (u0, u1) of its points j g .. j g + g - 1.
+class HighPolyStart:
+    """The start stage of a selected-to-active bake (see :mod:`core.tilebaker`): each sample point of
+    a texel on the low-poly surface casts its matching ray, and the ``per_point`` samples of a point
+    that found the high-poly surface start there, with the high-poly's normal: the hits are units of
+    constant points (:func:`core.surface.point_table`) that the one kernel traces as it traces mesh
+    vertices. Point j of a texel takes the position of the texel's sample j (u2, u3, through the
+    kernel's own placement, :meth:`core.kernel.Kernel.positions`) and the directions of its samples
+    j g .. j g + g - 1; misses are not traced and not counted.
     """
 
-    def __init__(self, stage, pattern, settings, shared, on_rays=None, seeds=None):
-        self.stage, self.uvtris, self.table = stage, stage.uvtris, stage.table
-        self.points, self.scene = stage.points, stage.scene
-        self.pattern, self.s, self.shared, self.on_rays = pattern, settings, shared, on_rays
-        self.g = stage.g
-        self.plan = SamplingPlan(settings, grouped=True)
-        # Per replicate, the seed that splits texels' points among their units (core.bake.allocation_seeds).
-        self.seeds = [np.uint64(settings.seed)] * settings.replicates if seeds is None else list(seeds)
-        self.uniform = settings.distribution == "uniform"
-        self.features = pattern.features("uniform" if self.uniform else "cosine")
-        self.reach = np.float32(self.scene.tracer.tfar)
+    grouped = True
+    locate = False
+
+    def __init__(self, stage, settings):
+        self.stage, self.points, self.scene = stage, stage.points, stage.scene
+        self.per_point = stage.g
         self.lock = threading.Lock()
         self.matching_rays = 0
         self.missed = 0
@@ -427,97 +424,30 @@ class HighPolyBaker:
         self.match_cpu_seconds = stage.check_cpu_seconds
         self.miss = np.zeros((settings.height, settings.width), bool)
 
-    # -- one tile ------------------------------------------------------------------------------------
+    def estimates(self, count, replicates):
+        est = TexelEstimates(count, replicates)
+        est.points = np.zeros(count, np.int64)   # sample points cast per texel (all replicates)
+        est.missed = np.zeros(count, np.int64)   # of which found no high-poly surface
+        return est
 
-    def bake(self, key, tri_ids):
-        s, shared = self.s, self.shared
-        frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, *s.tile_bounds(key), locate=False)
-        n_tex = len(frag.texels)
-        est = TexelEstimates(n_tex, s.replicates)
-        est.points = np.zeros(n_tex, np.int64)   # sample points cast per texel (all replicates)
-        est.missed = np.zeros(n_tex, np.int64)   # of which found no high-poly surface
-        if n_tex == 0:
-            return frag, est, None
-        units = build_units(frag, self.table, s.width)
-        # Each replicate draws its points (positions and directions) from its own keys: an independent
-        # randomisation of the whole texel, so the error model (core.estimators) sees the spread of
-        # the positions too.
-        tiles = [(units, self.pattern.keys(frag.texels, r), frag.texels) for r in range(s.replicates)]
-        x, y = frag.texels % s.width, frag.texels // s.width
-        done = 0
-        for start, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y):
-            # A texel none of whose points found the high-poly surface takes no further rounds.
-            keep = ~((est.points[texels] > 0) & (est.n[texels] == 0))
-            if np.ndim(start):  # an adaptive round: each texel from its own count to its next
-                start, count = start[keep], count[keep]
-            texels = texels[keep]
-            if not len(texels):
-                continue
-            for r, t, a, c in self.plan.shares(start, count, texels):
-                done += self._trace(tiles[r], est, r, t, a, c)
-        shared.advance(n_tex * s.samples - done)  # what the adaptive stop and the misses saved
-        return frag, est, None
+    def contact(self, frag, width, samples):
+        return np.zeros(len(frag.texels), bool)  # contact is found per matched point (HighPolyScene)
 
-    def _trace(self, tile, est, replicate, texels, start, count):
-        """Samples ``start`` .. ``start + count - 1`` of replicate ``replicate`` of ``texels`` (whole
-        points: ``g`` divides both); returns the samples' work (points times ``g``)."""
-        s, shared, g = self.s, self.shared, self.g
-        done = 0
-        units, _, texel_ids = tile
-        unit, first, size = allocate(units, texels, start // g, count // g, self.seeds[replicate], texel_ids)
-        kind = units.kind[unit].astype(np.int64)
-        group = size * 2 + kind
-        order = np.argsort(group, kind="stable")
-        unit, first, size, group, kind = unit[order], first[order], size[order], group[order], kind[order]
-        bounds = np.flatnonzero(np.diff(group)) + 1
-        for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(group)]])):
-            k = int(size[lo])
-            step = max(1, s.chunk_rays // (k * g))
-            for c0 in range(lo, hi, step):
-                shared.check()
-                c = slice(c0, min(c0 + step, hi))
-                squares = int(np.count_nonzero(kind[c] == 0))
-                rows = units.texel[unit[c]]
-                hits, s1, s2, rays, sec, cpu = self.run(tile, unit[c], first[c], k, squares, replicate)
-                est.add(rows, hits * g, s1, s2, replicate)
-                np.add.at(est.points, rows, k)
-                np.add.at(est.missed, rows, k - hits)
-                work = (c.stop - c.start) * k * g
-                done += work
-                shared.advance(work, rays, sec, cpu)
-        return done
+    def curved(self, units, unit, located):
+        return np.zeros(len(unit), bool)  # the hits take the smooth form, whatever the low-poly's
 
-    def run(self, tile, unit, start, k, squares, replicate=0):
-        """Trace pieces of ``k`` sample points from ``start`` of each piece's unit (the first ``squares``
-        pieces texel squares, the rest pieces of triangles): their matching rays, then ``g`` AO rays
-        for each point that found the high-poly surface.
+    def keep(self, est, texels):
+        """A texel none of whose points found the high-poly surface takes no further rounds."""
+        return ~((est.points[texels] > 0) & (est.n[texels] == 0))
 
-        Returns per piece (points that hit, sum of terms, sum of squared terms; float64 sums), the rays
-        traced (matching and AO) and the time inside Embree (wall, thread CPU).
-        """
-        units, keys, texel_ids = tile
-        pattern, g, scene = self.pattern, self.g, self.scene
+    def run(self, kernel, tile, curved, unit, first, k, squares, located, vectors, replicates):
+        """Pieces of ``k`` sample points from ``first`` of each piece's unit: their matching rays, then
+        ``per_point`` AO rays from each point that found the high-poly surface, through the kernel."""
+        units, scene, g = tile.units, self.scene, self.per_point
         npieces = len(unit)
-        tex = units.texel[unit]
-        e, o = keys.pattern[tex], keys.order[tex]
         inside, stage = Clock(), Clock()
         with stage:
-            # The sample points: position coordinates of pattern points start .. start + k - 1 of
-            # each piece's texel, with the texel's shift, through the unit's map.
-            rows = pattern.rows_of(e, o, start[:, None] + np.arange(k, dtype=np.int64)[None, :])
-            q = pattern.q[rows.reshape(-1, 1), _POSITION_COLUMNS].reshape(npieces, k, 2)
-            pattern.shift_positions(q, keys.shift[tex][:, None, :])
-            uu = q[:, :, 0] * _TWO_M32
-            vv = q[:, :, 1] * _TWO_M32
-            coef = units.coef[unit]
-            a, b = np.empty_like(uu), np.empty_like(vv)
-            a[:squares] = coef[:squares, 0, None] + uu[:squares]
-            b[:squares] = coef[:squares, 3, None] + vv[:squares]
-            if squares < npieces:
-                ct = coef[squares:]
-                w0, w1 = warps.square_to_triangle(uu[squares:], vv[squares:])
-                a[squares:] = ct[:, 0, None] + ct[:, 1, None] * w0 + ct[:, 2, None] * w1
-                b[squares:] = ct[:, 3, None] + ct[:, 4, None] * w0 + ct[:, 5, None] * w1
+            a, b = kernel.positions(tile, unit, first, k, squares, replicates)
             tri = np.repeat(units.tri[unit], k)
             _, origins, directions, usable = self.points.rays(tri, a.reshape(-1), b.reshape(-1))
             cast = np.flatnonzero(usable)
@@ -535,62 +465,30 @@ class HighPolyBaker:
             self.missed += npieces * k - nh
             self.match_seconds += stage.wall
             self.match_cpu_seconds += stage.cpu
+        work = npieces * k * g
         if nh == 0:
             zero = np.zeros(npieces)
-            return hits, zero, zero, len(cast), inside.wall, inside.cpu
-        # AO at the hits: g directions each, from samples (start + j) g .. + g - 1 of the texel.
-        eps = scene.tracer.point_offset(hq)
-        org = (hq + hgn * eps[:, None]).astype(np.float32)
-        first_sample = (start[piece] + point % k) * g
-        samples = first_sample[:, None] + np.arange(g, dtype=np.int64)[None, :]       # (nh, g)
-        f = self.features[pattern.rows_of(e[piece], o[piece], samples).reshape(-1)].reshape(nh, g, 6)
-        cos_t = keys.cos_turn[tex[piece]][:, None]
-        sin_t = keys.sin_turn[tex[piece]][:, None]
-        f0, f1, f2 = f[:, :, 3], f[:, :, 4], f[:, :, 5]
-        t0 = f0 * cos_t - f1 * sin_t                 # the texel's turn about the normal
-        t1 = f1 * cos_t + f0 * sin_t
-        sx, sy, sz, tx_, ty_, tz = warps.basis_components(hn[:, 0], hn[:, 1], hn[:, 2])
-        frame = np.stack([sx, sy, sz, tx_, ty_, tz, hn[:, 0], hn[:, 1], hn[:, 2]], axis=1).astype(np.float32)
-        n = nh * g
-        dirs = np.empty((nh, g, 3), np.float32)
-        for c in range(3):
-            d = dirs[:, :, c]
-            np.multiply(t0, frame[:, c, None], out=d)
-            d += t1 * frame[:, 3 + c, None]
-            d += f2 * frame[:, 6 + c, None]
-        # Below the high-poly's geometric surface: occluded, not traced.
-        gf = frame.reshape(nh, 3, 3) @ hgn.astype(np.float32)[:, :, None]           # (nh, 3, 1): s.gn, t.gn, n.gn
-        up = t0 * gf[:, 0] + t1 * gf[:, 1] + f2 * gf[:, 2]
-        below = (up <= 0).reshape(n)
-        dirs = dirs.reshape(n, 3)
-        origins_ao = np.repeat(org, g, axis=0)
-        tfar = np.full(n, self.reach, np.float32)
-        tfar[below] = 0.0
-        traced_tfar = tfar.copy() if self.on_rays is not None else None
-        tracer = scene.tracer
-        with inside:
-            if tracer.simple:
-                occluded = tracer.occluded(origins_ao, dirs, tfar)
-                value = ~(occluded | below)
-            else:
-                value = tracer.visibility(origins_ao, dirs, tfar)
-                occluded = value < 1.0
-        if touch is not None and touch.any():
-            value.reshape(nh, g)[touch] = 0
-        if self.on_rays is not None:
-            self.on_rays(RayBatch(origins=origins_ao, directions=dirs, tfar=traced_tfar, occluded=occluded,
-                                  texels=np.repeat(texel_ids[tex[piece]], g), samples=samples.reshape(n),
-                                  seconds=inside.wall, cpu_seconds=inside.cpu, replicate=replicate))
-        if value.dtype == bool and not self.uniform:
-            per_point = value.reshape(nh, g).sum(axis=1, dtype=np.int64).astype(np.float64)
-            s1 = np.bincount(piece, weights=per_point, minlength=npieces)
-            return hits, s1, s1, len(cast) + n, inside.wall, inside.cpu
-        term = value.astype(np.float64).reshape(nh, g)
-        if self.uniform:
-            term *= 2.0 * f2.astype(np.float64)          # 2 cos(theta) for uniform directions
-        s1 = np.bincount(piece, weights=term.sum(axis=1), minlength=npieces)
-        s2 = np.bincount(piece, weights=(term * term).sum(axis=1), minlength=npieces)
-        return hits, s1, s2, len(cast) + n, inside.wall, inside.cpu
+            if vectors is not None:
+                vectors[...] = 0.0
+            return ChunkSums(hits * g, zero, zero, vectors, work, len(cast), inside.wall, inside.cpu, hits)
+        # The hits as units of constant points, in the smooth form (one call for all of them).
+        table = point_table(hq, hn, hgn, scene.corners[htri], smooth=True)
+        ids = np.arange(nh, dtype=np.int64)
+        hit_tile = TileContext(table, point_units(ids, units.texel[unit][piece]), tile.keys, tile.texel_ids,
+                               np.zeros(tile.texels, bool), scene.tracer.offset, tris=ids, blocked=touch)
+        vec = None if vectors is None else np.empty((nh, 3))
+        s1, s2, rays, sec, cpu = kernel.run(hit_tile, True, ids, (first[piece] + point % k) * g, g, nh, vectors=vec,
+                                            replicates=None if replicates is None else replicates[piece])
+        s1 = np.bincount(piece, weights=s1, minlength=npieces)
+        s2 = np.bincount(piece, weights=s2, minlength=npieces)
+        if vectors is not None:
+            for c in range(3):
+                vectors[:, c] = np.bincount(piece, weights=vec[:, c], minlength=npieces)
+        return ChunkSums(hits * g, s1, s2, vectors, work, len(cast) + rays, inside.wall + sec, inside.cpu + cpu, hits)
+
+    def commit(self, est, texel, k, hits, replicate):
+        np.add.at(est.points, texel, k)
+        np.add.at(est.missed, texel, k - hits)
 
     # -- the whole bake --------------------------------------------------------------------------------
 
@@ -611,7 +509,7 @@ class HighPolyBaker:
             raise MeshError(self.stage.nothing_matched())
         report = {"matching_rays": self.matching_rays, "missed_matching_rays": self.missed,
                   "missed_texels": int(self.miss.sum()), "partly_missed_texels": self.partial,
-                  "directions_per_point": self.g, "matching_seconds": self.match_seconds,
+                  "directions_per_point": self.per_point, "matching_seconds": self.match_seconds,
                   "matching_cpu_seconds": self.match_cpu_seconds}
         return self.miss, self.missed, report
 
@@ -649,8 +547,9 @@ class HighPolyStage:
         if not found:
             raise MeshError(self.nothing_matched())
 
-    def baker(self, pattern, shared, on_rays=None, seeds=None):
-        return HighPolyBaker(self, pattern, self.s, shared, on_rays, seeds)
+    def start(self):
+        """The start stage the tile baker traces this bake's tiles with."""
+        return HighPolyStart(self, self.s)
 
     # -- the check before baking -----------------------------------------------------------------------
 
@@ -756,5 +655,5 @@ class HighPolyStage:
         return out["tfar"][out["primID"] >= 0].astype(np.float64)
 
 
-__all__ = ["SelectedToActive", "HighPolyStage", "HighPolyBaker", "HighPolyScene", "DIRECTIONS_PER_POINT",
+__all__ = ["SelectedToActive", "HighPolyStage", "HighPolyStart", "HighPolyScene", "DIRECTIONS_PER_POINT",
            "directions_per_point"]

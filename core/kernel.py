@@ -42,6 +42,7 @@ import threading
 import numpy as np
 
 from . import warps
+from .estimators import piece_sums, sample_terms
 from .mesh import norms
 from .patterns import TexelKeys
 from .surface import aligned_pieces
@@ -163,8 +164,11 @@ class TileContext:
     flat form otherwise.
     """
 
-    def __init__(self, table, units, keys, texel_ids, contact, offset, located_curved=True, tris=None):
+    def __init__(self, table, units, keys, texel_ids, contact, offset, located_curved=True, tris=None, blocked=None):
         self.units = units
+        # Per unit, True where something lies on its point (every sample occluded), or None: the
+        # contact a stage found itself (:mod:`core.highpoly`), beside the probes of ``contact``.
+        self.blocked = blocked
         self.keys = keys
         self.texel_ids = texel_ids      # global flat texel index of each of the tile's texels
         self.contact = contact          # per tile texel: probe its samples for contact
@@ -278,48 +282,8 @@ class Kernel:
         # whole rows of a (rows / size, size) view of each plane: a call whose pieces all start at
         # the same sample takes its samples as such blocks (a piece of 56 from sample 8: blocks of
         # 8, 16 and 32), others go sample by sample. Plane 2 is the constant 1.
-        feats = self.pattern.feature_planes(self.kinds[curved])
-        xf = ws.x[:6 * n].reshape(6, n)
-        xf[2].fill(1.0)
-        x = xf.reshape(6, g, k)
-        blocks = None
-        if self.pattern.xor:
-            if (k & (k - 1)) == 0 and not np.any(start & (k - 1)):
-                blocks = [(0, k, start)]
-            elif g and np.all(start == start[0]):
-                _, b_start, b_size = aligned_pieces(np.zeros(1, np.int64), start[:1], np.array([k]))
-                blocks = [(int(s0 - start[0]), int(z), int(s0)) for s0, z in zip(b_start, b_size)]
-        if blocks is not None:
-            firsts = []
-            for at, size_b, start_b in blocks:
-                first_b = self.pattern.block_rows(e, o, start_b, size_b)
-                firsts.append(first_b)
-                block = first_b // size_b
-                for j in _VARYING:
-                    rows = feats[j].reshape(-1, size_b)
-                    if size_b == k:
-                        np.take(rows, block, axis=0, out=x[j], mode="clip")
-                    else:
-                        x[j, :, at:at + size_b] = np.take(rows, block, axis=0, mode="clip")
-        else:
-            first = self.pattern.block_rows(e, o, start, k)
-            idx = ws.idx[:n].reshape(g, k)
-            if self.pattern.xor:  # rows in index order
-                np.add(start[:, None], ws.ramp[None, :k], out=idx)
-                idx ^= o[:, None]
-                idx += (e * self.pattern.span)[:, None]
-            else:
-                np.add(first[:, None], ws.ramp[None, :k], out=idx)
-            for j in _VARYING:
-                np.take(feats[j], idx.reshape(n), out=xf[j], mode="clip")
-        xu = xf.view(np.uint32).reshape(6, g, k)
+        xf, x, blocks, firsts, first = self._gather(ws, keys, kt, e, o, curved, start, k, g, n)
         a, b = x[0], x[1]
-        for c, dst in ((0, a), (1, b)):
-            # The texel's shift of the position coordinate, in place, then to [0, 1) in float32.
-            # Gathered column by column: numpy's gather of (2,) rows costs 5 times as much.
-            self.pattern.shift_positions(xu[c], _per_piece(keys.shift[:, c][kt], k))
-            np.copyto(dst, xu[c], casting="unsafe")
-            dst *= np.float32(2.0 ** -32)
         # (u, v) -> the triangle's texel space: a translation for squares, Heitz's map and the
         # piece's corners for pieces of triangles; located samples find their triangle first.
         tri_s = None
@@ -335,16 +299,7 @@ class Kernel:
                 a += tr[:, :, 0]
                 b += tr[:, :, 1]
             squares = g
-        sq = slice(0, squares)
-        if not located:  # the squares' translations, two planes of tile.coef_planes gathered
-            a[sq] += _per_piece(np.take(tile.coef_planes[0], unit[sq]), k)
-            b[sq] += _per_piece(np.take(tile.coef_planes[3], unit[sq]), k)
-        if squares < g:
-            tr = slice(squares, g)
-            u, v = warps.square_to_triangle(a[tr], b[tr])
-            ct = np.take(tile.coef_planes, unit[tr], axis=1)
-            a[tr] = _per_piece(ct[0], k) + _per_piece(ct[1], k) * u + _per_piece(ct[2], k) * v
-            b[tr] = _per_piece(ct[3], k) + _per_piece(ct[4], k) * u + _per_piece(ct[5], k) * v
+        self._texel_space(tile, unit, x, k, squares, located)
         # The texel's turn about the normal: a rotation of the first two direction features.
         cos_t = _per_piece(keys.cos_turn[kt], k)
         sin_t = _per_piece(keys.sin_turn[kt], k)
@@ -439,6 +394,10 @@ class Kernel:
                 touch = self.tracer.contact(offset_points(origins[sel], gn, -eps), gn, eps)
         if touch is not None and touch.any():
             value[sel[touch]] = 0
+        if tile.blocked is not None:
+            stuck = np.take(tile.blocked, unit)
+            if stuck.any():
+                value.reshape(g, k)[stuck] = 0
         if vectors is not None:
             _direction_sums(directions, value, weight, g, k, vectors)
         if self.on_rays is not None:
@@ -457,16 +416,91 @@ class Kernel:
                                       occluded=hit[rows], texels=texels[rows], samples=samples[rows],
                                       seconds=clock.wall * share, cpu_seconds=clock.cpu * share,
                                       replicate=int(r)))
-        if value.dtype == bool and weight is None:
-            s1 = value.view(np.uint8).reshape(g, k).sum(axis=1, dtype=np.int64).astype(np.float64)
-            return s1, s1, n, clock.wall, clock.cpu
-        term = value.astype(np.float64)
-        if weight is not None:
-            term *= weight
-        term = term.reshape(g, k)
-        return term.sum(axis=1), (term * term).sum(axis=1), n, clock.wall, clock.cpu
+        s1, s2 = piece_sums(value, weight, g, k)
+        return s1, s2, n, clock.wall, clock.cpu
 
 
+    def _gather(self, ws, keys, kt, e, o, curved, start, k, g, n):
+        """The feature planes x (6, g, k) of the pieces' samples, in this thread's workspace: the
+        texel-shifted position (u2, u3) in [0, 1) as planes 0, 1, the constant 1, and the lifted
+        direction features of (u0, u1) (``curved``: the sphere form). Returns (xf, x, blocks, firsts,
+        first): the planes flat and by piece, and how the samples were addressed (for ``on_rays``)."""
+        first = firsts = None
+        feats = self.pattern.feature_planes(self.kinds[curved])
+        xf = ws.x[:6 * n].reshape(6, n)
+        xf[2].fill(1.0)
+        x = xf.reshape(6, g, k)
+        blocks = None
+        if self.pattern.xor:
+            if (k & (k - 1)) == 0 and not np.any(start & (k - 1)):
+                blocks = [(0, k, start)]
+            elif g and np.all(start == start[0]):
+                _, b_start, b_size = aligned_pieces(np.zeros(1, np.int64), start[:1], np.array([k]))
+                blocks = [(int(s0 - start[0]), int(z), int(s0)) for s0, z in zip(b_start, b_size)]
+        if blocks is not None:
+            firsts = []
+            for at, size_b, start_b in blocks:
+                first_b = self.pattern.block_rows(e, o, start_b, size_b)
+                firsts.append(first_b)
+                block = first_b // size_b
+                for j in _VARYING:
+                    rows = feats[j].reshape(-1, size_b)
+                    if size_b == k:
+                        np.take(rows, block, axis=0, out=x[j], mode="clip")
+                    else:
+                        x[j, :, at:at + size_b] = np.take(rows, block, axis=0, mode="clip")
+        else:
+            first = self.pattern.block_rows(e, o, start, k)
+            idx = ws.idx[:n].reshape(g, k)
+            if self.pattern.xor:  # rows in index order
+                np.add(start[:, None], ws.ramp[None, :k], out=idx)
+                idx ^= o[:, None]
+                idx += (e * self.pattern.span)[:, None]
+            else:
+                np.add(first[:, None], ws.ramp[None, :k], out=idx)
+            for j in _VARYING:
+                np.take(feats[j], idx.reshape(n), out=xf[j], mode="clip")
+        xu = xf.view(np.uint32).reshape(6, g, k)
+        a, b = x[0], x[1]
+        for c, dst in ((0, a), (1, b)):
+            # The texel's shift of the position coordinate, in place, then to [0, 1) in float32.
+            # Gathered column by column: numpy's gather of (2,) rows costs 5 times as much.
+            self.pattern.shift_positions(xu[c], _per_piece(keys.shift[:, c][kt], k))
+            np.copyto(dst, xu[c], casting="unsafe")
+            dst *= np.float32(2.0 ** -32)
+        return xf, x, blocks, firsts, first
+
+    @staticmethod
+    def _texel_space(tile, unit, x, k, squares, located):
+        """Positions (planes 0, 1 of ``x``) from the unit square to each piece's texel space, in place:
+        a translation for squares, Heitz's map and the piece's corners for pieces of triangles
+        (located samples have moved already)."""
+        a, b = x[0], x[1]
+        g = len(unit)
+        sq = slice(0, squares)
+        if not located:  # the squares' translations, two planes of tile.coef_planes gathered
+            a[sq] += _per_piece(np.take(tile.coef_planes[0], unit[sq]), k)
+            b[sq] += _per_piece(np.take(tile.coef_planes[3], unit[sq]), k)
+        if squares < g:
+            tr = slice(squares, g)
+            u, v = warps.square_to_triangle(a[tr], b[tr])
+            ct = np.take(tile.coef_planes, unit[tr], axis=1)
+            a[tr] = _per_piece(ct[0], k) + _per_piece(ct[1], k) * u + _per_piece(ct[2], k) * v
+            b[tr] = _per_piece(ct[3], k) + _per_piece(ct[4], k) * u + _per_piece(ct[5], k) * v
+
+    def positions(self, tile, unit, start, size, squares, replicates=None):
+        """The texel-space positions (a, b), float64 (pieces, size), of samples ``start`` .. of each
+        piece's unit, as :meth:`run` places them (not located units): what a stage that moves sample
+        points elsewhere (:mod:`core.highpoly`) starts from."""
+        units, keys = tile.units, tile.keys
+        g, k = len(unit), int(size)
+        n = g * k
+        ws = self._workspace(n)
+        tex = units.texel[unit]
+        kt = tex if replicates is None else tex + replicates * tile.texels
+        x = self._gather(ws, keys, kt, keys.pattern[kt], keys.order[kt], False, start, k, g, n)[1]
+        self._texel_space(tile, unit, x, k, squares, False)
+        return x[0].astype(np.float64), x[1].astype(np.float64)
     @staticmethod
     def _linear(entries_of, entries, x, y, tmp):
         """Y = X M as planes: ``y[c]`` (output column c) from the feature planes ``x[j]`` and the
@@ -582,10 +616,7 @@ def _direction_sums(directions, value, weight, g, k, out):
     """Per piece of ``k`` samples, the sum of the unit directions weighted by the samples' terms."""
     d = directions.astype(np.float64)
     d /= np.maximum(np.sqrt(np.einsum("ij,ij->i", d, d)), 1e-300)[:, None]
-    term = value.astype(np.float64)
-    if weight is not None:
-        term = term * weight
-    d *= term[:, None]
+    d *= sample_terms(value, weight)[:, None]
     out[...] = d.reshape(g, k, 3).sum(axis=1)
 
 

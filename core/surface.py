@@ -157,6 +157,37 @@ class Units:
         return len(self.kind)
 
 
+def point_table(p, n, gn, corners, smooth=None):
+    """A :class:`SurfaceTable` of one constant 'triangle' per point (position ``p``, shading normal
+    ``n``, geometric normal ``gn``, (m, 3) each; ``corners`` (m, 3, 3) the triangle each lies on,
+    which sets its ray offset): the units of sample points that are not texels (mesh vertices, the
+    high-poly points a selected-to-active bake matched). ``smooth``: None (a point whose normals
+    differ takes the smooth form), or one bool for all."""
+    m = len(p)
+    zeros = np.zeros((m, 3))
+    if smooth is None:
+        smooth = np.any(np.abs(n - gn) > 1e-7, axis=1)
+    else:
+        smooth = np.full(m, bool(smooth))
+    return SurfaceTable(origin=np.zeros((m, 2)), P0=p, Px=zeros, Py=zeros, N0=n, Nx=zeros, Ny=zeros, FN=gn,
+                        corners=corners, smooth=smooth, corners_xy=np.zeros((m, 3, 2)))
+
+
+def point_units(tri, texel):
+    """The units of points: one square each (a map of nothing), point ``tri`` (a row of its
+    :func:`point_table`) standing for texel ``texel`` (an index into the tile's texel list; one
+    point per texel, or several in texel order)."""
+    m = len(tri)
+    coef = np.zeros((m, 6))
+    coef[:, 1] = coef[:, 5] = 1.0
+    texel = np.asarray(texel, np.int64)
+    first = np.searchsorted(texel, np.arange(int(texel[-1]) + 2 if m else 1))
+    return Units(kind=np.full(m, SQUARE, np.int8), texel=texel, tri=np.asarray(tri, np.int64),
+                 first=first.astype(np.int64), cdf=np.ones(m), coef=coef,
+                 cand_first=np.zeros(m + 1, np.int64), cand_tri=np.zeros(0, np.int64),
+                 cand_edges=np.zeros((0, 3, 3), np.float32), cand_coef=np.zeros((0, 2), np.float32))
+
+
 def build_units(frag, table, width):
     """The units of a tile's fragments, in texel order (a split texel's sub-triangles in theirs)."""
     from .raster import LOCATED as _LOCATED

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .estimators import falloff_visibility
 from .mesh import corner_positions
 
 #: Offsets off the surface: relative to the scene's bounding-box diagonal and to |position|.
@@ -219,10 +220,7 @@ class Tracer:
             front = hit & ~back
             idx = todo[front]
             dist = travelled[idx] + t[front]
-            if self.falloff > 0:
-                vis[idx] = 1.0 - np.clip(1.0 - dist / self.max_distance, 0.0, 1.0) ** self.falloff
-            else:
-                vis[idx] = 0.0
+            vis[idx] = falloff_visibility(dist, self.max_distance, self.falloff) if self.falloff > 0 else 0.0
             # Back-face hits: continue from just past the hit point with the distance left.
             cont = todo[back]
             if len(cont):

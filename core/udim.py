@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bake import bake_ao
+from .bake import BakeResult, bake_ao
 from .errors import MeshError, SettingsError
 from .mesh import Mesh
 from .raster import MIN_FRAGMENT_AREA, _clip, prepare, rasterize_tile
@@ -157,35 +157,8 @@ def _overlap(tri, tu, tv):
     return 0.5 * np.abs(((t[0] + t[1]) + (t[2] + t[3])) + ((t[4] + t[5]) + (t[6] + t[7])))
 
 
-@dataclass
-class UdimResult:
-    """What :func:`bake_udim` returns: one :class:`core.BakeResult` per tile, and the bake's report.
-
-    report : the tiles' reports summed, with ``uv_outside_triangles`` replaced by
-    ``uv_outside_udim_triangles`` (triangles reaching outside the tiles 1001 .. 2000), and
-    ``tiles``, the tiles baked.
-    """
-
-    tiles: dict
-    report: dict = field(default_factory=dict)
-
-    @property
-    def seconds(self):
-        return sum(r.seconds for r in self.tiles.values())
-
-    @property
-    def rays(self):
-        return sum(r.rays for r in self.tiles.values())
-
-    @property
-    def mask(self):
-        """Every tile's covered texels, one after another (flat): with :attr:`samples`, what
-        summaries of a bake read, as of a :class:`core.BakeResult`."""
-        return np.concatenate([r.mask.ravel() for r in self.tiles.values()]) if self.tiles else np.zeros(0, bool)
-
-    @property
-    def samples(self):
-        return np.concatenate([r.samples.ravel() for r in self.tiles.values()]) if self.tiles else np.zeros(0, np.int32)
+#: The result of :func:`bake_udim`: :class:`core.BakeResult` with ``tiles``.
+UdimResult = BakeResult
 
 
 def shifted(mesh, tile):
@@ -210,7 +183,7 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
 
     Returns
     -------
-    UdimResult
+    BakeResult with ``tiles`` (see :class:`core.BakeResult`)
     """
     if not isinstance(target, Mesh):
         raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
@@ -230,7 +203,7 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
 
         results[tile] = bake_ao(shifted(target, tile), occluders, resolution, samples, seed=tile_seed(seed, tile),
                                 progress=tile_progress, cancel=cancel,
-                                on_tile=None if on_tile is None else tile_block, **kwargs)
+                                on_tile=None if on_tile is None else tile_block, empty_ok=True, **kwargs)
     report = {}
     for r in results.values():
         for key, value in r.report.items():
@@ -240,7 +213,21 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
                 report[key] = report.get(key, 0) + value
     report["uv_outside_udim_triangles"] = coverage.outside
     report["tiles"] = list(todo)
-    return UdimResult(tiles=results, report=report)
+    parts = list(results.values())
+    if not any(r.mask.any() for r in parts):
+        raise MeshError(f"mesh {target.name!r} covers no texel of the UDIM tiles {', '.join(map(str, todo))} at "
+                        f"{parts[0].ao.shape[1]} x {parts[0].ao.shape[0]}, so nothing was baked: its UVs have no area "
+                        "there (check its UV map)" if parts else f"mesh {target.name!r}: no UDIM tile to bake")
+
+    def stack(name):
+        return np.stack([getattr(r, name) for r in parts])
+
+    return BakeResult(ao=stack("ao"), mask=stack("mask"), stderr=stack("stderr"), samples=stack("samples"),
+                      rays=sum(r.rays for r in parts), seconds=sum(r.seconds for r in parts),
+                      trace_seconds=sum(r.trace_seconds for r in parts), threads=parts[0].threads,
+                      trace_cpu_seconds=sum(r.trace_cpu_seconds for r in parts), metadata=dict(parts[0].metadata),
+                      report=report, tiles=results,
+                      bent=stack("bent") if parts[0].bent is not None else None)
 
 
 __all__ = ["bake_udim", "covered_tiles", "UdimResult", "TileCoverage", "tile_origin", "tile_of", "tile_seed",

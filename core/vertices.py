@@ -12,26 +12,26 @@ on the corner domain each corner keeps its own (:func:`vertex_means`).
 Here each sample point is a *unit* of the texel baker (:mod:`core.surface`) that is not a texel: a
 degenerate triangle whose position and normal are constant (Px = Py = Nx = Ny = 0), so the kernel,
 the sample patterns, the estimator, adaptive sampling and the error estimates are those of a texel's,
-unchanged (``_TileBaker.trace`` in :mod:`core.bake`); only the rasteriser is not involved. Corners
+unchanged (:meth:`core.tilebaker.TileBaker.trace`); only the rasteriser is not involved. Corners
 that share their vertex and their normal (a smooth vertex's corners) share one unit: Cycles' values
 for them differ only by noise.
 """
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from ._version import __version__
-from .bake import _cancelled, _normalized_scene, _run_all, _Shared, _TileBaker
-from .errors import BakeCancelled, MeshError, SettingsError
+from .bake import BakeResult, Prologue
+from .errors import MeshError
 from .estimators import ErrorModel
 from .kernel import Kernel
-from .mesh import Mesh, corner_positions
+from .mesh import corner_positions
 from .patterns import POOL_POINTS, TexelPattern
+from .scheduler import Scheduler, run_all
 from .settings import BakeSettings, pattern_span
-from .surface import SQUARE, SurfaceTable, Units
-from .tracing import Tracer
+from .surface import point_table, point_units
+from .tilebaker import SurfaceStart, TileBaker
 
 #: Cycles moves a sample that sits exactly on a vertex towards its triangle's centroid by at most
 #: 1e-4 object units ("empirically determined"); here 1e-4 of the mesh's size, the same in any unit.
@@ -40,39 +40,8 @@ NUDGE = 1e-4
 BLOCK = 4096
 
 
-@dataclass
-class VertexBakeResult:
-    """What :func:`bake_vertex_ao` returns; arrays are per corner (in the order given).
-
-    ao : float32 in [0, 1]; stderr : float32, the standard error of each corner's estimate;
-    samples : int32, samples taken; unit : int64, the sample point whose estimate the corner has
-    (corners with one vertex and one normal share one); rays, seconds, trace_seconds, threads,
-    trace_cpu_seconds, metadata : as :class:`core.BakeResult`; report : counts of the input
-    (corners, sample points, corners on triangles with no area).
-    bent : with ``bent_normals``, (C, 3) float32 unit bent normals in world space.
-    """
-
-    ao: np.ndarray
-    stderr: np.ndarray
-    samples: np.ndarray
-    unit: np.ndarray
-    rays: int
-    seconds: float
-    trace_seconds: float
-    threads: int
-    trace_cpu_seconds: float = 0.0
-    metadata: dict = field(default_factory=dict)
-    report: dict = field(default_factory=dict)
-    bent: np.ndarray = None
-
-    @property
-    def mask(self):
-        """All true: every corner is baked (summaries read ``samples[mask]`` as of a texture)."""
-        return np.ones(len(self.ao), bool)
-
-    @property
-    def rays_per_second(self):
-        return self.rays / self.seconds if self.seconds > 0 else float("nan")
+#: The result of :func:`bake_vertex_ao`: :class:`core.BakeResult`, its arrays per corner.
+VertexBakeResult = BakeResult
 
 
 def all_corners(mesh):
@@ -202,27 +171,6 @@ def _block_neighbours(pairs, lo, hi):
     return Neighbours(a[inside] - lo, b[inside] - lo, hi - lo)
 
 
-def _point_table(p, n, gn, corners3):
-    """A :class:`SurfaceTable` with one constant 'triangle' per sample point."""
-    m = len(p)
-    zeros = np.zeros((m, 3))
-    smooth = np.any(np.abs(n - gn) > 1e-7, axis=1)
-    return SurfaceTable(origin=np.zeros((m, 2)), P0=p, Px=zeros, Py=zeros, N0=n, Nx=zeros, Ny=zeros, FN=gn,
-                        corners=corners3, smooth=smooth, corners_xy=np.zeros((m, 3, 2)))
-
-
-def _units(ids):
-    """The units of the points ``ids`` (global numbers): one square each, a translation of nothing."""
-    m = len(ids)
-    coef = np.zeros((m, 6))
-    coef[:, 1] = coef[:, 5] = 1.0
-    local = np.arange(m, dtype=np.int64)
-    return Units(kind=np.full(m, SQUARE, np.int8), texel=local, tri=np.asarray(ids, np.int64),
-                 first=np.arange(m + 1, dtype=np.int64), cdf=np.ones(m), coef=coef,
-                 cand_first=np.zeros(m + 1, np.int64), cand_tri=np.zeros(0, np.int64),
-                 cand_edges=np.zeros((0, 3, 3), np.float32), cand_coef=np.zeros((0, 2), np.float32))
-
-
 def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_samples=16, target_error=0.0,
                    max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
                    ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None,
@@ -247,35 +195,30 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
 
     Returns
     -------
-    VertexBakeResult
+    BakeResult, its arrays per corner
 
     Raises
     ------
     MeshError, MeshTypeError, SettingsError, BakeCancelled.
     """
     t_start = time.perf_counter()
-    if not isinstance(target, Mesh):
-        raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
-    occluders = list(occluders or ())
-    for o in occluders:
-        if not isinstance(o, Mesh):
-            raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
-    corners = all_corners(target) if corners is None else _check_corners(corners, target)
     s = BakeSettings.from_arguments(1, samples, min_samples, target_error, max_distance, distribution, source,
                                     0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates)
-    target, occluders, scale = _normalized_scene(target, occluders)
+    pro = Prologue(target, occluders, s, cancel, uvs=False)
+    corners = all_corners(pro.target) if corners is None else _check_corners(corners, pro.target)
+    target = pro.target
     unit, p, n, gn, corners3, flat = sample_points(target, corners, merge)
     m = len(p)
-    if _cancelled(cancel):
-        raise BakeCancelled("the bake was cancelled before it started")
-    table = _point_table(p, n, gn, corners3)
-    tracer = Tracer([target] + occluders, s.ignore_backfaces, s.falloff, s.max_distance / scale)
+    pro.check_cancel()
+    table = point_table(p, n, gn, corners3)
+    tracer = pro.tracer(s)
     span = pattern_span(s.source, s.replicate_samples)
     pool = max(span * s.replicates, min(POOL_POINTS, (1 << max(0, (m * s.replicates - 1).bit_length())) * span))
     pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=pool)
     kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
-    shared = _Shared(m * s.samples, progress, cancel)
-    baker = _TileBaker(None, table, kernel, tracer, pattern, s, shared, bent=bool(bent_normals))
+    shared = Scheduler(m * s.samples, progress, cancel)
+    baker = TileBaker(None, table, kernel, tracer, pattern, s, shared, SurfaceStart(table, tracer),
+                      bent=bool(bent_normals))
     errors = ErrorModel(s)
     unit_vertex = np.empty(m, np.int64)
     unit_vertex[unit] = target.triangles[corners[:, 0], corners[:, 1]]
@@ -292,7 +235,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         if tracer.contact_scene is not None:
             contact = tracer.contact(p[ids], gn[ids])
         near = None if pairs is None else _block_neighbours(pairs, int(ids[0]), int(ids[-1]) + 1)
-        est, sums = baker.trace(_units(ids), ids, contact, near, None)
+        est, sums = baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None)
         ao[ids] = np.clip(est.mean, 0.0, 1.0)
         se[ids] = errors.stderr(est, near, None)
         count[ids] = est.n
@@ -301,16 +244,16 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
             v = np.where((length > 0)[:, None], sums, n[ids])
             bent[ids] = v / np.linalg.norm(v, axis=1)[:, None]
 
-    _run_all(work, blocks, s.threads, shared, progress)
+    run_all(work, blocks, s.threads, shared, progress)
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=shared.rays)
     for key in ("margin", "resolution"):
         metadata.pop(key, None)
     metadata["sample_points"] = m
     report = {"corners": len(corners), "sample_points": m, "degenerate_corners": flat}
-    return VertexBakeResult(ao=ao[unit], stderr=se[unit], samples=count[unit], unit=unit, rays=shared.rays,
-                            seconds=time.perf_counter() - t_start, trace_seconds=shared.trace_seconds,
-                            threads=s.threads, trace_cpu_seconds=shared.trace_cpu_seconds, metadata=metadata,
-                            report=report, bent=None if bent is None else bent[unit])
+    return BakeResult(ao=ao[unit], mask=np.ones(len(unit), bool), stderr=se[unit], samples=count[unit], unit=unit,
+                      rays=shared.rays, seconds=time.perf_counter() - t_start, trace_seconds=shared.trace_seconds,
+                      threads=s.threads, trace_cpu_seconds=shared.trace_cpu_seconds, metadata=metadata,
+                      report=report, bent=None if bent is None else bent[unit])
 
 
 __all__ = ["VertexBakeResult", "bake_vertex_ao", "all_corners", "vertex_means", "sample_points", "NUDGE",

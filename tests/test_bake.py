@@ -152,7 +152,7 @@ def test_threads_with_no_tile_left_trace_another_tile_chunks_bit_for_bit():
 
 
 def test_chunks_traced_by_another_thread_are_committed_in_their_order():
-    from core.bake import _run_all, _Shared
+    from core.scheduler import Scheduler as _Shared, run_all as _run_all
 
     chunks = list(range(12))
     shared = _Shared(1, None, None)
