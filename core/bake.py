@@ -247,7 +247,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     target_error : adaptive sampling when > 0: a texel stops once the half-width of its 95%
         confidence interval is at most this (in AO units: 0.01 means its AO is known to +-0.01, 95%
         of the time), after ``min_samples`` and rounds that grow its count to what its interval
-        predicts (see :class:`core.estimators.SamplingPlan`). With replicates (the default) the
+        predicts (see :class:`core.adaptive.SamplingPlan`). With replicates (the default) the
         interval comes from the pooled error estimate of :mod:`core.estimators`: texels whose whole
         neighbourhood agrees (open, or fully occluded) stop at ``min_samples``, texels whose samples
         agree beside varying ones go on. Without (``replicates=1``) it is Agresti and Coull's

@@ -84,7 +84,8 @@ import numpy as np
 
 from . import warps
 from .errors import MeshError, SettingsError
-from .estimators import TexelEstimates, replicate_samples
+from .adaptive import replicate_samples
+from .estimators import TexelEstimates
 from .kernel import TileContext
 from .mesh import Mesh, corner_positions
 from .raster import rasterize_tile
@@ -101,10 +102,10 @@ _TAG_PRECHECK = 31
 
 def directions_per_point(samples, min_samples, adaptive, replicates=1):
     """Directions per sample point: the largest power of two up to :data:`DIRECTIONS_PER_POINT` that
-    divides each replicate's share of the sample count (:func:`core.estimators.replicate_samples`)
+    divides each replicate's share of the sample count (:func:`core.adaptive.replicate_samples`)
     and, with adaptive sampling, each replicate's share of the minimum (the first round): every round
     of every replicate is then whole points (the later rounds' counts are powers of two at least
-    twice the first, or the share: :class:`core.estimators.SamplingPlan`)."""
+    twice the first, or the share: :class:`core.adaptive.SamplingPlan`)."""
     g = DIRECTIONS_PER_POINT
     for cap in replicate_samples(samples, replicates):
         g = math.gcd(g, int(cap))

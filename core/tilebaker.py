@@ -3,7 +3,7 @@
 Every bake goes through :class:`TileBaker`: texel images, UDIM tiles (one image each), colour
 attributes (:mod:`core.vertices`, whose points are units of their own) and selected to active. Per
 tile it rasterises the texels (:mod:`core.raster`), builds their sample units (:mod:`core.surface`),
-and traces the rounds of the sampling plan (:class:`core.estimators.SamplingPlan`): each round's
+and traces the rounds of the sampling plan (:class:`core.adaptive.SamplingPlan`): each round's
 pieces of samples, all replicates together, sorted into calls of equal pieces, cut into chunks of
 rays that the scheduler shares out (:mod:`core.scheduler`) and commits in order, each chunk through
 the one kernel (:class:`core.kernel.Kernel`).
@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .estimators import SamplingPlan, TexelEstimates, TexelWindows
+from .adaptive import SamplingPlan
+from .estimators import TexelEstimates, TexelWindows
 from .kernel import TileContext
 from .patterns import hash64
 from .raster import rasterize_tile

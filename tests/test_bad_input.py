@@ -138,9 +138,19 @@ def meshes(draw):
        ignore_backfaces=st.booleans(), seed=st.integers(0, 2 ** 40))
 def test_random_meshes_and_settings(mesh, res, samples, max_distance, distribution, source, margin,
                                     target_error, ignore_backfaces, seed):
-    r = bake_ao(mesh, [mesh], resolution=res, samples=samples, max_distance=max_distance,
-                distribution=distribution, source=source, margin=margin, target_error=target_error,
-                min_samples=min(2, samples), ignore_backfaces=ignore_backfaces, seed=seed, threads=1)
+    kw = dict(resolution=res, samples=samples, max_distance=max_distance, distribution=distribution, source=source,
+              margin=margin, target_error=target_error, min_samples=min(2, samples),
+              ignore_backfaces=ignore_backfaces, seed=seed, threads=1)
+    try:
+        r = bake_ao(mesh, [mesh], **kw)
+    except MeshError as e:
+        # A bake that covers no texel is refused, naming the mesh; the same bake allowed to be empty
+        # covers nothing indeed.
+        assert "covers no texel" in str(e) and repr(mesh.name) in str(e)
+        r = bake_ao(mesh, [mesh], empty_ok=True, **kw)
+        assert not r.mask.any() and not r.ao.any()
+    else:
+        assert r.mask.any()
     for a in (r.ao, r.stderr):
         assert a.shape == (res, res) and a.dtype == np.float32 and np.all(np.isfinite(a))
     assert np.all((r.ao >= 0) & (r.ao <= 1))
@@ -242,3 +252,30 @@ def test_progress_follows_the_bakes_events_not_a_clock():
     assert len(seen) >= 32
     assert seen == sorted(seen) and seen[-1] == 1.0
     assert sum(0.2 < f < 0.8 for f in seen) >= 16
+
+
+# --- a bake that covers nothing is an error, never an empty success ----------------------------------
+
+@pytest.mark.parametrize("case, words", [
+    ("outside", "reach outside the UV square"),
+    ("no_uv_area", "have no area in the UV map"),
+])
+def test_a_bake_that_covers_no_texel_is_refused_naming_the_mesh_and_why(case, words):
+    p = plane()
+    uvs = p.uvs + 3.0 if case == "outside" else np.zeros_like(p.uvs) + 0.5
+    target = Mesh(p.positions, p.triangles, uvs, name="Crate")
+    with pytest.raises(MeshError, match=words) as e:
+        bake_ao(target, resolution=8, samples=4, threads=1)
+    assert "'Crate'" in str(e.value) and "covers no texel" in str(e.value)
+    # Allowed to be empty (a UDIM tile listed but not touched), the same bake is all zero.
+    r = bake_ao(target, resolution=8, samples=4, threads=1, empty_ok=True)
+    assert not r.mask.any() and not r.ao.any() and not r.samples.any()
+
+
+def test_a_udim_bake_that_covers_nothing_is_refused():
+    from core import bake_udim
+
+    p = plane()
+    target = Mesh(p.positions, p.triangles, np.zeros_like(p.uvs) + 0.5, name="Flat")
+    with pytest.raises(MeshError, match="'Flat'.*covers no texel"):
+        bake_udim(target, resolution=8, samples=4, tiles=[1001], threads=1)

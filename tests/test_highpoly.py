@@ -604,3 +604,29 @@ def test_the_result_records_the_settings():
                    replicates=1).report["directions_per_point"] == 64
     plain = bake_ao(plane(name="low"), resolution=8, samples=4)
     assert plain.miss is None and plain.missed == 0 and "selected_to_active" not in plain.metadata
+
+
+def test_the_high_poly_bake_goes_through_the_scheduler_and_the_one_kernel(monkeypatch):
+    """Every chunk of a selected-to-active tile is handed to the scheduler (so idle threads take
+    chunks of the last tiles) and every AO ray is traced by the one kernel."""
+    from core import kernel, scheduler
+
+    shared_out, kernel_rays = [], []
+    run_chunks, run = scheduler.Scheduler.run_chunks, kernel.Kernel.run
+
+    def counting_chunks(self, chunks, compute, commit):
+        shared_out.append(len(chunks))
+        return run_chunks(self, chunks, compute, commit)
+
+    def counting_run(self, *args, **kw):
+        out = run(self, *args, **kw)
+        kernel_rays.append(out[2])
+        return out
+
+    monkeypatch.setattr(scheduler.Scheduler, "run_chunks", counting_chunks)
+    monkeypatch.setattr(kernel.Kernel, "run", counting_run)
+    low, highs, occluders = bumpy_scene()
+    r = bake_ao(low, occluders, resolution=16, samples=64, max_distance=0.6, margin=0, highpoly=highs,
+                extrusion=0.12, threads=2, chunk_rays=512, replicates=1)
+    assert max(shared_out) > 1
+    assert sum(kernel_rays) == r.rays - r.report["matching_rays"] and sum(kernel_rays) > 0

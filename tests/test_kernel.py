@@ -9,7 +9,7 @@ import pytest
 
 from core import Mesh, bake_ao, warps
 from core.patterns import TexelPattern
-from core.estimators import replicate_samples
+from core.adaptive import replicate_samples
 from core.settings import BakeSettings, pattern_span
 from chi2 import SUITE_ALPHA, chi2_test, sidak
 from scenes import plane
