@@ -22,7 +22,9 @@ traced: that is what a ray leaving the true surface would meet first, the surfac
 keeps AO continuous across smooth-shaded terminators.
 """
 
+import dataclasses
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -45,6 +47,7 @@ from .surface import SurfaceTable
 from .tilebaker import SurfaceStart, TileBaker
 from .tracing import Tracer
 from . import highpoly as _highpoly
+from . import workers as _workers
 
 
 @dataclass
@@ -226,11 +229,99 @@ class Prologue:
                          f"baked: {reason}. Unwrap it (UV > Unwrap) so that its UVs lie inside [0, 1]")
 
 
+@dataclass
+class TileOut:
+    """One tile's values, as the baker hands them to whoever assembles the images (this process or,
+    from a worker process, plain arrays). ``texels`` flat ids; ``lost`` the texels none of whose
+    sample points found a surface (selected to active: uncovered); ``sums``, ``tri``, ``weights``:
+    the bent-normal sums and where each texel's normal is interpolated (None without bent normals)."""
+
+    key: tuple
+    texels: np.ndarray
+    ao: np.ndarray
+    stderr: np.ndarray
+    samples: np.ndarray
+    lost: np.ndarray
+    overlapping: int = 0
+    sums: np.ndarray = None
+    tri: np.ndarray = None
+    weights: np.ndarray = None
+    bent: np.ndarray = None
+
+
+class TexelBake:
+    """A texel bake set up after its prologue: the layout (UV triangles, surface table, tiles), and after
+    :meth:`trace_setup` the tracing (scene, pattern, kernel, start stage, tile baker). The same object
+    bakes tiles in this process and in a worker process (:mod:`core.workers`), which builds it again
+    from the same input and settings: the same tiles, the same bits."""
+
+    def __init__(self, pro, s, bent_normals=False):
+        self.pro, self.bent_normals = pro, bool(bent_normals)
+        self.uvtris = prepare(pro.target, s.width, s.height)
+        self.s = s.fit_tiles(R.uv_centres(self.uvtris))  # automatic tiles of dense meshes: fewer triangles each
+        self.table = SurfaceTable.build(pro.target, self.uvtris)
+        self.bins = bin_triangles(self.uvtris, s.width, s.height, self.s.tile_shape)
+        # Planned work: a tile's texels are unknown before rasterising, so count each tile's bounding
+        # rectangle's texels times samples, and credit what it did not cover as it is rasterised.
+        self.planned = sum(self.rect(key)[2] for key in self.bins) * self.s.samples
+
+    def rect(self, key):
+        """Rows, columns and texel count of tile ``key``."""
+        x0, y0, x1, y1 = self.s.tile_bounds(key)
+        return slice(y0, y1), slice(x0, x1), (x1 - x0) * (y1 - y0)
+
+    def trace_setup(self, shared, cancel, on_rays=None):
+        pro, s = self.pro, self.s
+        stage = None if pro.s2a is None else _highpoly.HighPolyStage(
+            pro.s2a, pro.target, pro.occluders, self.uvtris, self.table, self.bins, s, pro.unit,
+            lambda: is_cancelled(cancel))
+        tracer = pro.tracer(s) if stage is None else stage.scene.tracer
+        pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
+        kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
+        # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
+        self.start = (SurfaceStart(self.table, tracer, located_curved=bool(np.any(self.table.smooth[self.uvtris.valid])))
+                      if stage is None else stage.start())
+        self.baker = TileBaker(self.uvtris, self.table, kernel, tracer, pattern, s, shared, self.start,
+                               bent=self.bent_normals)
+        self.errors = ErrorModel(s, grouped=self.start.grouped)
+        self.shared = shared
+
+    def tile(self, key, directions=True):
+        """Bake tile ``key``: its :class:`TileOut`. ``directions``: turn bent-normal sums into unit
+        directions here (False: leave the sums, for the process that assembles the images)."""
+        s, w = self.s, self.s.width
+        frag, est, sums = self.baker.bake(key, self.bins[key])
+        self.shared.advance((self.rect(key)[2] - len(frag.texels)) * s.samples)
+        t = frag.texels
+        if not len(t):
+            e = np.zeros(0, np.float32)
+            return TileOut(key, t, e, e, np.zeros(0, np.int32), np.zeros(0, bool))
+        rows, cols = t // w, t % w
+        lost = self.start.lost(est)
+        se = self.errors.stderr(est, cols, rows).astype(np.float32)
+        se[lost] = 0.0
+        out = TileOut(key, t, np.clip(est.mean, 0.0, 1.0).astype(np.float32), se, est.n.astype(np.int32), lost,
+                      int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum()))
+        if sums is not None:
+            out.sums = sums
+            out.tri = bent_mod.primary_pieces(frag, w)
+            out.weights = bent_mod.barycentric(self.table.corners_xy, out.tri, cols + 0.5, rows + 0.5)
+            if directions:
+                self.directions(out)
+        return out
+
+    def directions(self, out):
+        """The tile's bent normals from its sums, in the bake's space (:func:`core.bent.texel_directions`)."""
+        out.bent = bent_mod.texel_directions(out.sums, out.tri, out.weights, self.pro.target.normals,
+                                             self.pro.bent_space)
+        out.sums = out.tri = out.weights = None
+
+
 def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_samples=16, target_error=0.0,
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
-            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False):
+            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
@@ -321,87 +412,94 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                                     replicates)
     pro = Prologue(target, occluders, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,
                    max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
-    target, occluders, unit, s2a, bent_space = pro.target, pro.occluders, pro.unit, pro.s2a, pro.bent_space
+    target_in, occluders_in, bent_space_in = target, list(occluders or ()), bent_space
+    s2a = pro.s2a
     w, h = s.width, s.height
+    workers = _workers.check_workers(workers)
+    processes, per_worker = 1, s.threads
+    if workers != 1:
+        if workers == "auto":
+            processes, per_worker = _workers.auto_workers(pro.triangle_count)
+            if threads is not None:
+                per_worker = s.threads
+        else:
+            processes, per_worker = workers, 1 if threads is None else s.threads
+        if processes > 1 and tile_size is None:
+            # Tiles for every thread of every worker, two each at least (they are dealt as workers free up).
+            tw, th = auto_tile_shape(w, h, 2 * processes * per_worker, s.samples)
+            s = dataclasses.replace(s, tile_size=tw, tile_height=th, threads=processes * per_worker)
     pro.check_memory(s)
     pro.check_cancel()
 
-    uvtris = prepare(target, w, h)
-    s = s.fit_tiles(R.uv_centres(uvtris))  # automatic tiles of dense meshes: fewer triangles each
-    table = SurfaceTable.build(target, uvtris)
-    bins = bin_triangles(uvtris, w, h, s.tile_shape)
-    stage = None if s2a is None else _highpoly.HighPolyStage(s2a, target, occluders, uvtris, table, bins, s, unit,
-                                                              lambda: is_cancelled(cancel))
-    tracer = pro.tracer(s) if stage is None else stage.scene.tracer
-    pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
-    kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
-    # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
-    start = (SurfaceStart(table, tracer, located_curved=bool(np.any(table.smooth[uvtris.valid]))) if stage is None
-             else stage.start())
-
-    def rect(key):
-        """Rows, columns and texel count of tile ``key``."""
-        x0, y0, x1, y1 = s.tile_bounds(key)
-        return slice(y0, y1), slice(x0, x1), (x1 - x0) * (y1 - y0)
-
-    # Planned work: texel-samples of every tile's bounding rectangle is unknown before rasterising,
-    # so count each tile's texels times samples as it is rasterised, against an upper bound.
-    planned = sum(rect(key)[2] for key in bins) * s.samples
-    shared = Scheduler(planned, progress, cancel)
-    baker = TileBaker(uvtris, table, kernel, tracer, pattern, s, shared, start, bent=bool(bent_normals))
-    errors = ErrorModel(s, grouped=start.grouped)
-
+    bake = TexelBake(pro, s, bent_normals)
+    s, uvtris, keys = bake.s, bake.uvtris, sorted(bake.bins)
     ao = np.zeros((h, w), np.float32)
     se = np.zeros((h, w), np.float32)
     count = np.zeros((h, w), np.int32)
     mask = np.zeros((h, w), bool)
     bent = np.zeros((h, w, 3), np.float32) if bent_normals else None
-    coverage_over = 0
-    keys = sorted(bins)
+    miss = np.zeros((h, w), bool) if s2a is not None else None
+    overlap = 0
+    lock = threading.Lock()
 
-    def work(key):
-        nonlocal coverage_over
-        frag, est, sums = baker.bake(key, bins[key])
-        r, c, area = rect(key)
-        shared.advance(area * s.samples - len(frag.texels) * s.samples)
-        if len(frag.texels):
-            t = frag.texels
-            rows, cols = t // w, t % w
-            ao.reshape(-1)[t] = np.clip(est.mean, 0.0, 1.0)
-            se.reshape(-1)[t] = errors.stderr(est, cols, rows)
-            count.reshape(-1)[t] = est.n
-            mask.reshape(-1)[t] = True
-            if sums is not None:
-                tri = bent_mod.primary_pieces(frag, w)
-                weights = bent_mod.barycentric(table.corners_xy, tri, cols + 0.5, rows + 0.5)
-                bent[rows, cols] = bent_mod.texel_directions(sums, tri, weights, target.normals, bent_space)
-            start.settle(est, rows, cols, mask, se)
-            with shared.lock:
-                coverage_over += int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum())
+    def store(out):
+        """A tile's values into the images (on whichever thread finished it)."""
+        nonlocal overlap
+        if not len(out.texels):
+            return
+        t = out.texels
+        ao.reshape(-1)[t] = out.ao
+        se.reshape(-1)[t] = out.stderr
+        count.reshape(-1)[t] = out.samples
+        mask.reshape(-1)[t] = ~out.lost
+        if out.sums is not None:
+            bake.directions(out)
+        if out.bent is not None:
+            bent.reshape(-1, 3)[t] = out.bent
+        if miss is not None:
+            miss.reshape(-1)[t] = out.lost
+        with lock:
+            overlap += out.overlapping
             if on_tile is not None:
-                with shared.lock:
-                    on_tile(r, c, ao[r, c].copy())
+                r, c, _ = bake.rect(out.key)
+                on_tile(r, c, ao[r, c].copy())
 
-    run_all(work, keys, s.threads, shared, progress)
-
-    miss, missed, extra = start.finish(mask)
-    if not mask.any() and stage is None and not empty_ok:
+    pool = None if processes == 1 else _workers.pool_for(processes, per_worker)
+    if pool is None:
+        shared = Scheduler(bake.planned, progress, cancel)
+        bake.trace_setup(shared, cancel, on_rays)
+        run_all(lambda key: store(bake.tile(key)), keys, s.threads, shared, progress)
+        rays, trace_s, trace_cpu = shared.rays, shared.trace_seconds, shared.trace_cpu_seconds
+        counters = bake.start.counters()
+    else:
+        if on_rays is not None:
+            raise SettingsError("on_rays sees the rays of this process only: bake with workers=1 to record them")
+        job = dict(target=_workers.mesh_data(target_in), occluders=[_workers.mesh_data(o) for o in occluders_in],
+                   settings=dataclasses.asdict(s), bent_normals=bent_normals, bent_space=bent_space_in,
+                   highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
+                   extrusion=extrusion, max_ray_distance=max_ray_distance,
+                   cage=None if cage is None else _workers.mesh_data(cage))
+        rays, trace_s, trace_cpu, counters = pool.run(job, keys, bake.planned, store, progress, cancel)
+    if s2a is not None:
+        extra = _highpoly.finish_report(counters, miss, mask)
+        missed = counters["missed"]
+    elif not mask.any() and not empty_ok:
         raise pro.nothing_covered(s, uvtris)
     if s.margin > 0:
         dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:
         bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, s.threads)
     seconds = time.perf_counter() - t_start
-    metadata = dict(s.metadata(s.max_distance), version=__version__, rays=shared.rays)
+    metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
               "degenerate_triangles": uvtris.degenerate_space,
-              "uv_outside_triangles": uvtris.outside, "overlapping_texels": coverage_over}
-    if stage is not None:
+              "uv_outside_triangles": uvtris.outside, "overlapping_texels": overlap}
+    if s2a is not None:
         metadata.update(s2a.metadata())
         report.update(extra)
-    return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=shared.rays, seconds=seconds,
-                      trace_seconds=shared.trace_seconds, threads=s.threads, metadata=metadata, report=report,
-                      trace_cpu_seconds=shared.trace_cpu_seconds, bent=bent, miss=miss, missed=missed)
+    return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=rays, seconds=seconds,
+                      trace_seconds=trace_s, threads=s.threads, metadata=metadata, report=report,
+                      trace_cpu_seconds=trace_cpu, bent=bent, miss=miss, missed=missed if s2a is not None else 0)
 
 
 __all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "MAX_RESOLUTION", "SAMPLE_PIECE",

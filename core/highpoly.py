@@ -420,10 +420,10 @@ class HighPolyStart:
         self.matching_rays = 0
         self.missed = 0
         self.partial = 0
+        self.found = 0
         # The check before the bake (HighPolyStage) counts as matching too.
         self.match_seconds = stage.check_seconds
         self.match_cpu_seconds = stage.check_cpu_seconds
-        self.miss = np.zeros((settings.height, settings.width), bool)
 
     def estimates(self, count, replicates):
         est = TexelEstimates(count, replicates)
@@ -493,26 +493,32 @@ class HighPolyStart:
 
     # -- the whole bake --------------------------------------------------------------------------------
 
-    def settle(self, est, rows, cols, mask, stderr=None):
-        """After a tile: texels none of whose points matched are uncovered (``mask`` False, ``miss`` True,
-        ``stderr`` 0)."""
+    def lost(self, est):
+        """Per texel of a finished tile: none of its points matched (uncovered, left to the margin)."""
         lost = est.n == 0
-        mask[rows[lost], cols[lost]] = False
-        if stderr is not None:
-            stderr[rows[lost], cols[lost]] = 0.0
-        self.miss[rows[lost], cols[lost]] = True
         with self.lock:
             self.partial += int(np.count_nonzero((est.missed > 0) & ~lost))
+            self.found += int(np.count_nonzero(~lost))
+        return lost
 
-    def finish(self, mask):
-        """The result's miss mask, miss count and report entries; raises when nothing matched at all."""
-        if self.matching_rays and not mask.any():
-            raise MeshError(self.stage.nothing_matched())
-        report = {"matching_rays": self.matching_rays, "missed_matching_rays": self.missed,
-                  "missed_texels": int(self.miss.sum()), "partly_missed_texels": self.partial,
-                  "directions_per_point": self.per_point, "matching_seconds": self.match_seconds,
-                  "matching_cpu_seconds": self.match_cpu_seconds}
-        return self.miss, self.missed, report
+    def counters(self):
+        """What this process counted (summed over worker processes by :func:`finish_report`)."""
+        return {"matching_rays": self.matching_rays, "missed": self.missed, "partial": self.partial,
+                "matching_seconds": self.match_seconds, "matching_cpu_seconds": self.match_cpu_seconds,
+                "directions_per_point": self.per_point,
+                "nothing_matched": self.stage.nothing_matched() if self.matching_rays and not self.found else None}
+
+
+def finish_report(counters, miss, mask):
+    """The report entries of a selected-to-active bake from its counters (one process's, or several
+    added up); raises MeshError when no texel matched at all."""
+    if counters["matching_rays"] and not mask.any():
+        raise MeshError(counters["nothing_matched"] or "no matching ray found the high-poly surface")
+    return {"matching_rays": counters["matching_rays"], "missed_matching_rays": counters["missed"],
+            "missed_texels": int(miss.sum()), "partly_missed_texels": counters["partial"],
+            "directions_per_point": counters["directions_per_point"],
+            "matching_seconds": counters["matching_seconds"],
+            "matching_cpu_seconds": counters["matching_cpu_seconds"]}
 
 
 class HighPolyStage:
@@ -657,4 +663,4 @@ class HighPolyStage:
 
 
 __all__ = ["SelectedToActive", "HighPolyStage", "HighPolyStart", "HighPolyScene", "DIRECTIONS_PER_POINT",
-           "directions_per_point"]
+           "directions_per_point", "finish_report"]

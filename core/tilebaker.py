@@ -100,12 +100,13 @@ class SurfaceStart:
     def commit(self, est, texel, k, extra, replicate):
         pass
 
-    def settle(self, est, rows, cols, mask, stderr):
-        pass
+    def lost(self, est):
+        """Per texel of a finished tile, whether none of its sample points found a surface: none here."""
+        return np.zeros(len(est.rn[0]), bool)
 
-    def finish(self, mask):
-        """(miss mask, missed points, report entries) of the whole bake."""
-        return None, 0, {}
+    def counters(self):
+        """What the stage counted over the bake (added up over worker processes): nothing here."""
+        return {}
 
 
 class TileBaker:

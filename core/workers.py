@@ -1,0 +1,473 @@
+"""Tiles baked in worker processes: every core of the machine, none of them waiting on another's GIL.
+
+A bake with ``workers`` > 1 (:func:`core.bake_ao`) sends its input once to each worker of a
+persistent pool; each builds the same bake (:class:`core.bake.TexelBake`: the same tiles, its own
+Embree scene) and bakes the tiles it is dealt, one at a time as it frees up, ``threads`` threads
+each (they share a tile's chunks of rays, :mod:`core.scheduler`). A tile's values come back as
+plain arrays and the parent assembles the images, the margin and the bent normals. Texels draw their
+samples by (seed, texel, index) alone and a tile's sums are added in one order, so the images, errors
+and sample counts are bit-identical for any workers x threads x tiling on one machine.
+
+How the processes are started and kept (each point is a trap met in Blender):
+
+- Workers are new interpreters (``sys.executable -c``), on every OS: never fork (it would copy
+  Blender's whole process), and not :mod:`multiprocessing` (its spawn re-runs a ``__main__`` that
+  Blender gave a file name, and pickles functions by their module's name, which in the installed
+  extension is ``bl_ext.<repository>.mc_ao.core``, a package Blender makes at run time that a new
+  interpreter cannot import). A worker gets the parent's ``sys.path`` and imports this package as
+  top-level ``core`` from the folder that holds it: numpy, embreex and the core, never bpy.
+- Messages are pickles of plain data (arrays, numbers, strings, dicts) over the worker's stdin and a
+  copy of its stdout (its own fd 1 is pointed at stderr, so that nothing a library prints can break a
+  message); never a pickled core object. A worker's error comes back as its class name and message
+  and is raised here as the core's own class (``except MeshError`` still works).
+- The lifeline: a worker reads its stdin on a thread of its own, and ends itself the moment it reads
+  the end of it, which happens when the parent process is gone, however it ended (killed, crashed, or
+  Blender closed): no worker outlives the process that owns the pool. :func:`shutdown` ends the pool
+  (the add-on calls it when it is disabled; the interpreter's exit calls it too).
+- Threads inside a worker: OpenBLAS, OpenMP and MKL are set to one thread each, so that workers x
+  threads never oversubscribe the cores.
+- Progress counts the tiles' samples as they are traced, a message per 1/512 of a worker's share of
+  the work, never per chunk; cancel reaches a worker between chunks, and a worker still building its
+  scene is ended (the next bake starts a fresh one).
+- A worker that dies (killed, out of memory) fails the bake with :class:`BakeWorkerError`, nothing is
+  written, and the next bake gets a fresh pool.
+"""
+
+import atexit
+import dataclasses
+import json
+import os
+import pickle
+import queue
+import struct
+import subprocess
+import sys
+import threading
+import traceback
+
+import numpy as np
+
+from . import errors as _errors
+from .errors import BakeCancelled, McAoError, SettingsError
+from .scheduler import Scheduler, is_cancelled, run_all
+
+_HEADER = struct.Struct("<Q")
+#: Progress messages per worker and bake, at most (a message per chunk would let a busy parent slow them).
+PROGRESS_STEPS = 512
+#: Bytes a worker holds per triangle of the bake's meshes beyond its Embree scene (the surface table,
+#: UV triangles, tiles), and that scene's own: what :func:`auto_workers` divides the memory by.
+WORKER_BYTES_PER_TRIANGLE = 600
+EMBREE_BYTES_PER_TRIANGLE = 80
+#: A worker's fixed memory: an interpreter with numpy, embreex and the core imported, its sample pool.
+WORKER_BASE_BYTES = 150 << 20
+
+
+class BakeWorkerError(McAoError, RuntimeError):
+    """A worker process ended before its bake did (killed, or out of memory)."""
+
+
+def send(stream, obj):
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_HEADER.pack(len(data)))
+    stream.write(data)
+    stream.flush()
+
+
+def receive(stream):
+    """The next message, or None at the end of the stream."""
+    head = _read(stream, _HEADER.size)
+    if head is None:
+        return None
+    data = _read(stream, _HEADER.unpack(head)[0])
+    return None if data is None else pickle.loads(data)
+
+
+def _read(stream, n):
+    parts, left = [], n
+    while left:
+        b = stream.read(left)
+        if not b:
+            return None
+        parts.append(b)
+        left -= len(b)
+    return b"".join(parts)
+
+
+def mesh_data(mesh):
+    """A :class:`core.Mesh` as plain data for a worker."""
+    return dict(positions=mesh.positions, triangles=mesh.triangles, uvs=mesh.uvs, normals=mesh.normals,
+                name=mesh.name)
+
+
+def _mesh(data):
+    from .mesh import Mesh
+
+    return None if data is None else Mesh(**data)
+
+
+def _error(name, message):
+    """The core's exception class ``name`` (a worker's error) with its message."""
+    cls = getattr(_errors, name, None)
+    if isinstance(cls, type) and issubclass(cls, Exception):
+        return cls(message)
+    builtin = {"MemoryError": MemoryError, "ValueError": ValueError, "TypeError": TypeError}.get(name)
+    if builtin is not None:
+        return builtin(message)
+    return BakeWorkerError(f"a worker process failed: {name}: {message}")
+
+
+# -- the worker process ---------------------------------------------------------------------------------
+
+def main():
+    """A worker: bake what the parent sends until the parent is gone (see the module docstring)."""
+    out = os.fdopen(os.dup(1), "wb", buffering=0)
+    os.dup2(2, 1)  # whatever a library prints goes to stderr, never into a message
+    sys.stdout = sys.stderr
+    inp = sys.stdin.buffer
+    lock = threading.Lock()
+    tasks = queue.Queue()
+    current = {"bake": None, "cancel": threading.Event()}
+
+    def reply(*msg):
+        with lock:
+            send(out, msg)
+
+    def reader():
+        while True:
+            msg = receive(inp)
+            if msg is None:
+                os._exit(0)  # the lifeline: the parent is gone
+            if msg[0] == "cancel":
+                if msg[1] == current["bake"]:
+                    current["cancel"].set()
+                continue
+            if msg[0] == "setup":  # a new bake: cancels of the last one no longer apply
+                current["bake"], current["cancel"] = msg[1], threading.Event()
+            tasks.put(msg)
+
+    threading.Thread(target=reader, name="mc_ao-lifeline", daemon=True).start()
+    bake = shared = None
+    threads = 1
+    while True:
+        msg = tasks.get()
+        kind, bake_id = msg[0], msg[1]
+        try:
+            if kind == "setup":
+                bake, shared, threads = _setup(msg[2], current["cancel"], lambda work: reply("progress", bake_id, work))
+                reply("ready", bake_id)
+            elif kind == "tile":
+                outs = []
+                run_all(lambda key: outs.append(bake.tile(key, directions=False)), [msg[2]], threads, shared, None)
+                reply("tile", bake_id, vars(outs[0]))
+            elif kind == "finish":
+                shared.flush()
+                reply("finish", bake_id, dict(rays=shared.rays, trace_seconds=shared.trace_seconds,
+                                             trace_cpu_seconds=shared.trace_cpu_seconds,
+                                             counters=bake.start.counters()))
+                bake = shared = None
+            elif kind == "exit":
+                return
+        except BakeCancelled:
+            reply("cancelled", bake_id)
+        except BaseException as e:  # every error goes back to the parent, by name
+            reply("error", bake_id, type(e).__name__, str(e), traceback.format_exc())
+
+
+def _setup(job, cancel, progress):
+    from .bake import Prologue, TexelBake
+    from .settings import BakeSettings
+
+    s = BakeSettings(**job["settings"])
+    pro = Prologue(_mesh(job["target"]), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=True,
+                   highpoly=None if job["highpoly"] is None else [_mesh(m) for m in job["highpoly"]],
+                   extrusion=job["extrusion"], max_ray_distance=job["max_ray_distance"], cage=_mesh(job["cage"]),
+                   bent_normals=job["bent_normals"])
+    bake = TexelBake(pro, s, job["bent_normals"])
+    shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
+    bake.trace_setup(shared, cancel)
+    return bake, shared, s.threads
+
+
+class CountingScheduler(Scheduler):
+    """A worker's scheduler: hands the work done to ``report`` as counts, once per ``quantum`` samples."""
+
+    def __init__(self, total, report, cancel, quantum):
+        super().__init__(total, None, cancel)
+        self.report, self.quantum, self.pending_work = report, quantum, 0
+
+    def advance(self, work, rays=0, trace_seconds=0.0, trace_cpu_seconds=0.0):
+        super().advance(work, rays, trace_seconds, trace_cpu_seconds)
+        with self.lock:
+            self.pending_work += work
+            if self.pending_work < self.quantum:
+                return
+            work, self.pending_work = self.pending_work, 0
+        self.report(work)
+
+    def flush(self):
+        with self.lock:
+            work, self.pending_work = self.pending_work, 0
+        if work:
+            self.report(work)
+
+
+# -- the pool ---------------------------------------------------------------------------------------------
+
+def _core_root():
+    """The folder that holds this package (the repository, or the installed extension's folder)."""
+    return os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+_BOOT = ("import sys, json; sys.path[:0] = json.loads(sys.argv[1]); import core.workers as w; "
+         "assert w.__file__.startswith(sys.argv[2]), 'another core was imported'; w.main()")
+
+
+class _Worker:
+    def __init__(self, threads, inbox, index):
+        env = dict(os.environ)
+        for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS"):
+            env[name] = "1"
+        root = _core_root()
+        path = [root] + [p for p in sys.path if p and p != root]
+        self.process = subprocess.Popen([sys.executable, "-c", _BOOT, json.dumps(path), os.path.join(root, "core")],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+        self.index, self.busy, self.ready, self.alive = index, None, False, True
+        self.lock = threading.Lock()
+        threading.Thread(target=self._read, args=(inbox,), name=f"mc_ao-worker-{index}", daemon=True).start()
+
+    def _read(self, inbox):
+        stdout = self.process.stdout
+        while True:
+            try:
+                msg = receive(stdout)
+            except Exception:  # a torn message: the worker died writing it
+                msg = None
+            if msg is None:
+                self.alive = False
+                inbox.put((self, ("died",)))
+                return
+            inbox.put((self, msg))
+
+    def send(self, *msg):
+        with self.lock:
+            send(self.process.stdin, msg)
+
+    def end(self):
+        self.alive = False
+        try:
+            self.process.kill()
+        except OSError:
+            pass
+        self.process.wait()
+
+
+class Pool:
+    """``workers`` worker processes of ``threads`` threads each, kept for later bakes."""
+
+    def __init__(self, workers, threads):
+        self.workers_wanted, self.threads = int(workers), int(threads)
+        self.inbox = queue.Queue()
+        self.workers = [_Worker(self.threads, self.inbox, i) for i in range(self.workers_wanted)]
+        self.broken = False
+        self.bake_id = 0
+        self.lock = threading.Lock()  # one bake at a time
+
+    def close(self):
+        for w in self.workers:
+            if w.alive:
+                try:
+                    w.send("exit", 0)
+                except OSError:
+                    pass
+            w.end()
+        self.workers = []
+
+    def run(self, job, keys, planned, store, progress, cancel):
+        """Bake ``keys`` (tile keys) of the bake ``job`` (plain data) on the workers; ``store(TileOut)``
+        for each tile as it comes back. Returns (rays, trace seconds, trace CPU seconds, the start
+        stage's counters summed)."""
+        from .bake import TileOut
+
+        with self.lock:
+            self.bake_id += 1
+            bake_id = self.bake_id
+            quantum = max(1, planned // (PROGRESS_STEPS * len(self.workers)))
+            job = dict(job, quantum=quantum, settings=dict(job["settings"], threads=self.threads, auto_tiles=False))
+            for w in self.workers:
+                w.send("setup", bake_id, job)
+                w.ready = False
+            todo = list(keys)
+            todo.reverse()
+            out_standing = set()  # workers holding a tile or not yet ready
+            done = 0
+            finished = {}
+            failure = None
+            cancelled = False
+
+            def deal(w):
+                if todo and failure is None and not cancelled:
+                    key = todo.pop()
+                    w.busy = key
+                    w.send("tile", bake_id, key)
+                else:
+                    w.busy = None
+
+            pending = set(self.workers)
+            try:
+                while pending:
+                    try:
+                        w, msg = self.inbox.get(timeout=0.05)
+                    except queue.Empty:
+                        if not cancelled and failure is None and is_cancelled(cancel):
+                            cancelled = True
+                            self._cancel(bake_id, pending)
+                        continue
+                    kind = msg[0]
+                    if kind == "died":
+                        if w in pending:
+                            failure = failure or BakeWorkerError(
+                                f"worker process {w.index} ended before the bake did (exit code "
+                                f"{w.process.poll()}; killed, or out of memory?); nothing was written")
+                            pending.discard(w)
+                            self.broken = True
+                            self._cancel(bake_id, pending)
+                        continue
+                    if msg[1] != bake_id:
+                        continue  # a late message of an earlier bake
+                    if kind == "progress":
+                        done += msg[2]
+                        if progress is not None:
+                            progress(min(done / max(planned, 1), 1.0))
+                    elif kind == "ready":
+                        w.ready = True
+                        deal(w)
+                        if w.busy is None:
+                            w.send("finish", bake_id)
+                    elif kind == "tile":
+                        store(TileOut(**msg[2]))
+                        deal(w)
+                        if w.busy is None:
+                            w.send("finish", bake_id)
+                    elif kind == "finish":
+                        finished[w] = msg[2]
+                        pending.discard(w)
+                    elif kind in ("cancelled", "error"):
+                        if kind == "error" and failure is None and not cancelled:
+                            failure = _error(msg[2], msg[3])
+                            failure.worker_traceback = msg[4]
+                            self._cancel(bake_id, pending - {w})
+                        pending.discard(w)
+                    if not cancelled and failure is None and is_cancelled(cancel):
+                        cancelled = True
+                        self._cancel(bake_id, pending)
+            except BaseException:
+                self.broken = True
+                raise
+            if failure is not None:
+                raise failure
+            if cancelled:
+                raise BakeCancelled("the bake was cancelled; nothing was written")
+            if progress is not None:
+                progress(1.0)
+            parts = list(finished.values())
+            counters = {}
+            for p in parts:
+                for k, v in p["counters"].items():
+                    if isinstance(v, (int, float)) and k != "directions_per_point":
+                        counters[k] = counters.get(k, 0) + v
+                    elif counters.get(k) is None:
+                        counters[k] = v
+            return (sum(p["rays"] for p in parts), sum(p["trace_seconds"] for p in parts),
+                    sum(p["trace_cpu_seconds"] for p in parts), counters)
+
+    def _cancel(self, bake_id, workers):
+        """Stop ``workers`` between chunks; one still building its scene is ended (the pool is then
+        made anew by the next bake)."""
+        for w in list(workers):
+            if not w.ready:
+                w.end()
+                workers.discard(w)
+                self.broken = True
+            else:
+                try:
+                    w.send("cancel", bake_id)
+                except OSError:
+                    workers.discard(w)
+
+
+_POOL = None
+_POOL_LOCK = threading.Lock()
+
+
+def cpu_count():
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def memory_limit():
+    """Bytes of memory this process may still use: the smaller of the machine's available memory and
+    what its container (cgroup v2 or v1) has left; None if neither is known."""
+    from .settings import available_memory
+
+    limits = [available_memory()]
+    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+        try:
+            with open(limit_file) as f:
+                text = f.read().strip()
+            if text == "max":
+                continue
+            with open(usage_file) as f:
+                limits.append(int(text) - int(f.read().strip()))
+        except (OSError, ValueError):
+            continue
+    known = [x for x in limits if x is not None]
+    return min(known) if known else None
+
+
+def auto_workers(triangles, cores=None, memory=None):
+    """(workers, threads each) for a bake of ``triangles`` (every mesh it holds): one worker a core,
+    fewer with more threads each where memory holds fewer copies of the scene (threads share one)."""
+    cores = cpu_count() if cores is None else cores
+    memory = memory_limit() if memory is None else memory
+    per_worker = WORKER_BASE_BYTES + triangles * (WORKER_BYTES_PER_TRIANGLE + EMBREE_BYTES_PER_TRIANGLE)
+    workers = cores if memory is None else max(1, min(cores, int(memory * 0.8 // per_worker)))
+    return workers, max(1, cores // workers)
+
+
+def check_workers(workers):
+    """``workers`` as given to :func:`core.bake_ao`: 1, a count, or 'auto' (refused otherwise)."""
+    if workers == "auto":
+        return workers
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise SettingsError(f"workers must be a positive integer or 'auto', got {workers!r}")
+    return int(workers)
+
+
+def pool_for(workers, threads):
+    """The persistent pool of ``workers`` processes of ``threads`` threads (made anew when the count
+    changed or the last one broke)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is not None and (_POOL.broken or len(_POOL.workers) != workers or _POOL.threads != threads
+                                  or not all(w.alive for w in _POOL.workers)):
+            _POOL.close()
+            _POOL = None
+        if _POOL is None:
+            _POOL = Pool(workers, threads)
+        return _POOL
+
+
+def shutdown():
+    """End the pool's workers (the add-on's unregister, and the interpreter's exit)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is not None:
+            _POOL.close()
+            _POOL = None
+
+
+atexit.register(shutdown)
+
+__all__ = ["BakeWorkerError", "Pool", "pool_for", "shutdown", "auto_workers", "check_workers", "memory_limit",
+           "mesh_data", "main"]

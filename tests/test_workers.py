@@ -1,0 +1,188 @@
+"""Tiles baked in worker processes (core.workers): the same bits as in this process for any workers x
+threads x tiling, errors by the core's own classes, cancel, a worker that dies, and no worker that
+outlives its parent. Driven by the bake's own events (progress), never by the clock."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from core import BakeCancelled, Mesh, MeshError, bake_ao, bake_udim
+from core import workers as W
+from core.bent import TangentFrames  # noqa: F401  (bent_space stays in the parent)
+from scenes import QUAD, box, plane
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def scene():
+    """A bumpy plane (smooth normals: every kernel form) under a lid, with a box resting on it."""
+    n = 12
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    z = 0.05 * np.sin(6 * x) * np.cos(5 * y)
+    P = np.stack([x, y, z], -1).reshape(-1, 3)
+    i = np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]
+    F = np.concatenate([np.stack([i, i + 1, i + n + 2], -1).reshape(-1, 3),
+                        np.stack([i, i + n + 2, i + n + 1], -1).reshape(-1, 3)])
+    UV = P[F][:, :, :2]
+    target = Mesh(P, F, uvs=UV, name="bumps")
+    lid = Mesh(np.array([[0.2, 0.2, 0.4], [0.8, 0.2, 0.4], [0.8, 0.8, 0.4], [0.2, 0.8, 0.4]]), QUAD, name="lid")
+    return target, [lid, box((0.6, 0.1, -0.2), (0.8, 0.3, 0.2), name="block")]
+
+
+FIELDS = ("ao", "stderr", "samples", "mask")
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(distribution="uniform", source="halton", falloff=1.0),
+                                dict(samples=128, min_samples=16, target_error=0.03),
+                                dict(bent_normals=True)])
+def test_workers_give_the_bits_of_one_process_for_any_workers_threads_and_tiles(kw):
+    target, occ = scene()
+    args = dict(resolution=48, samples=32, max_distance=0.7, seed=3, margin=2)
+    args.update(kw)
+    ref = bake_ao(target, occ, threads=1, **args)
+    for extra in (dict(workers=2), dict(workers=3, threads=2, tile_size=16), dict(workers=2, tile_size=(32, 16))):
+        r = bake_ao(target, occ, **extra, **args)
+        for name in FIELDS + (("bent",) if kw.get("bent_normals") else ()):
+            assert np.array_equal(getattr(ref, name), getattr(r, name)), (extra, name)
+        assert r.rays == ref.rays and r.report == ref.report
+
+
+def test_selected_to_active_and_udim_in_workers_are_the_bits_of_one_process():
+    high = plane(-0.5, -0.5, 1.5, 1.5, z=0.05, uv=False, name="high")
+    low = plane(name="low")
+    lid = Mesh(np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]]), QUAD,
+               name="lid")
+    args = dict(resolution=32, samples=64, margin=0, highpoly=[high], extrusion=0.1)
+    a = bake_ao(low, [lid], threads=1, **args)
+    b = bake_ao(low, [lid], workers=2, **args)
+    for name in FIELDS + ("miss",):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.report["matching_rays"] == b.report["matching_rays"] and a.missed == b.missed
+    target, occ = scene()
+    tiled = Mesh(target.positions, target.triangles, target.uvs + [1.0, 0.0], name="tile1002")
+    u1 = bake_udim(tiled, occ, resolution=32, samples=16, threads=1)
+    u2 = bake_udim(tiled, occ, resolution=32, samples=16, workers=2)
+    assert list(u1.tiles) == list(u2.tiles) == [1002]
+    assert np.array_equal(u1.ao, u2.ao) and np.array_equal(u1.stderr, u2.stderr)
+
+
+def test_a_workers_error_is_raised_as_the_cores_own_class():
+    high = plane(-0.5, -0.5, 1.5, 1.5, z=3.0, uv=False, name="far_high")
+    with pytest.raises(MeshError, match="far_high"):
+        bake_ao(plane(name="low"), resolution=16, samples=16, workers=2, highpoly=[high], extrusion=0.1,
+                max_ray_distance=0.5)
+    target, occ = scene()
+    assert bake_ao(target, occ, resolution=16, samples=8, workers=2).mask.any()  # the pool still bakes
+
+
+def test_cancel_from_progress_stops_the_workers_and_the_next_bake_runs():
+    target, occ = scene()
+    stop = threading.Event()
+    seen = []
+
+    def progress(f):
+        seen.append(f)
+        if f > 0.0:
+            stop.set()
+
+    with pytest.raises(BakeCancelled):
+        bake_ao(target, occ, resolution=64, samples=256, workers=2, progress=progress, cancel=stop)
+    assert seen and max(seen) < 1.0
+    ref = bake_ao(target, occ, resolution=32, samples=8, threads=1)
+    r = bake_ao(target, occ, resolution=32, samples=8, workers=2)
+    assert np.array_equal(ref.ao, r.ao)
+
+
+def test_a_worker_that_dies_fails_the_bake_and_the_next_bake_gets_a_fresh_pool():
+    target, occ = scene()
+    killed = []
+
+    def progress(f):
+        if not killed and f > 0.0:
+            pool = W._POOL
+            victim = pool.workers[0].process
+            victim.kill()
+            killed.append(victim.pid)
+
+    with pytest.raises(W.BakeWorkerError, match="ended before the bake did"):
+        bake_ao(target, occ, resolution=64, samples=256, workers=2, progress=progress)
+    assert killed
+    r = bake_ao(target, occ, resolution=32, samples=8, workers=2)
+    assert r.mask.any()
+    assert all(w.process.pid != killed[0] for w in W._POOL.workers)
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:  # a zombie is gone too
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(") ")[1][0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_no_worker_outlives_its_parent_killed():
+    """A parent that bakes with workers is killed; its workers end by themselves (the lifeline)."""
+    code = textwrap.dedent(f"""
+        import sys; sys.path[:0] = [{ROOT!r}, {os.path.join(ROOT, 'tests')!r}]
+        from test_workers import scene
+        from core import bake_ao, workers
+        t, o = scene()
+        bake_ao(t, o, resolution=16, samples=4, workers=2)
+        print(" ".join(str(w.process.pid) for w in workers._POOL.workers), flush=True)
+        sys.stdin.read()
+    """)
+    parent = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    pids = [int(p) for p in parent.stdout.readline().split()]
+    assert len(pids) == 2 and all(_alive(p) for p in pids)
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 60  # a bound for a slow machine, not a measurement
+    while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(_alive(p) for p in pids)
+
+
+def test_shutdown_ends_the_pool():
+    target, occ = scene()
+    bake_ao(target, occ, resolution=16, samples=4, workers=2)
+    procs = [w.process for w in W._POOL.workers]
+    W.shutdown()
+    assert W._POOL is None and all(p.poll() is not None for p in procs)
+
+
+def test_auto_workers_follow_cores_and_memory():
+    assert W.auto_workers(10_000, cores=16, memory=64 << 30) == (16, 1)
+    # 10M triangles: each worker holds about 7 GB; 16 GB holds one copy, whose threads use every core.
+    w, t = W.auto_workers(10_000_000, cores=16, memory=16 << 30)
+    assert w * (W.WORKER_BASE_BYTES + 10_000_000 * (W.WORKER_BYTES_PER_TRIANGLE + W.EMBREE_BYTES_PER_TRIANGLE)) \
+        <= 0.8 * (16 << 30) and w * t <= 16 and t >= 16 // max(w, 1)
+    assert W.auto_workers(10, cores=4, memory=None) == (4, 1)
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5, "two", True])
+def test_bad_worker_counts_are_refused(bad):
+    from core import SettingsError
+
+    target, occ = scene()
+    with pytest.raises(SettingsError, match="workers"):
+        bake_ao(target, occ, resolution=8, samples=4, workers=bad)
+
+
+def test_on_rays_needs_this_process():
+    from core import SettingsError
+
+    target, occ = scene()
+    with pytest.raises(SettingsError, match="on_rays"):
+        bake_ao(target, occ, resolution=8, samples=4, workers=2, on_rays=lambda batch: None)
