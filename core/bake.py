@@ -410,24 +410,17 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
                                     replicates)
-    pro = Prologue(target, occluders, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,
-                   max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
+    workers = _workers.check_workers(workers)
     target_in, occluders_in, bent_space_in = target, list(occluders or ()), bent_space
+    pro = Prologue(target, occluders_in, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,
+                   max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
     s2a = pro.s2a
     w, h = s.width, s.height
-    workers = _workers.check_workers(workers)
-    processes, per_worker = 1, s.threads
-    if workers != 1:
-        if workers == "auto":
-            processes, per_worker = _workers.auto_workers(pro.triangle_count)
-            if threads is not None:
-                per_worker = s.threads
-        else:
-            processes, per_worker = workers, 1 if threads is None else s.threads
-        if processes > 1 and tile_size is None:
-            # Tiles for every thread of every worker, two each at least (they are dealt as workers free up).
-            tw, th = auto_tile_shape(w, h, 2 * processes * per_worker, s.samples)
-            s = dataclasses.replace(s, tile_size=tw, tile_height=th, threads=processes * per_worker)
+    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
+    if processes > 1 and tile_size is None:
+        # Tiles for every thread of every worker, two each at least (they are dealt as workers free up).
+        tw, th = auto_tile_shape(w, h, 2 * processes * per_worker, s.samples)
+        s = dataclasses.replace(s, tile_size=tw, tile_height=th, threads=processes * per_worker)
     pro.check_memory(s)
     pro.check_cancel()
 

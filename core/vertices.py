@@ -17,13 +17,15 @@ that share their vertex and their normal (a smooth vertex's corners) share one u
 for them differ only by noise.
 """
 
+import dataclasses
 import time
 
 import numpy as np
 
 from ._version import __version__
-from .bake import BakeResult, Prologue
-from .errors import MeshError
+from . import workers as _workers
+from .bake import BakeResult, Prologue, TileOut
+from .errors import MeshError, SettingsError
 from .estimators import ErrorModel
 from .kernel import Kernel
 from .mesh import corner_positions
@@ -174,7 +176,7 @@ def _block_neighbours(pairs, lo, hi):
 def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_samples=16, target_error=0.0,
                    max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
                    ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None,
-                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False):
+                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False, workers=1):
     """Bake ambient occlusion at the face corners of ``target`` (Cycles' colour-attribute bake).
 
     Parameters
@@ -204,57 +206,99 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     t_start = time.perf_counter()
     s = BakeSettings.from_arguments(1, samples, min_samples, target_error, max_distance, distribution, source,
                                     0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates)
+    workers = _workers.check_workers(workers)
+    occluders = list(occluders or ())
     pro = Prologue(target, occluders, s, cancel, uvs=False)
     corners = all_corners(pro.target) if corners is None else _check_corners(corners, pro.target)
-    target = pro.target
-    unit, p, n, gn, corners3, flat = sample_points(target, corners, merge)
-    m = len(p)
+    bake = VertexBake(pro, s, corners, merge, bent_normals)
     pro.check_cancel()
-    table = point_table(p, n, gn, corners3)
-    tracer = pro.tracer(s)
-    span = pattern_span(s.source, s.replicate_samples)
-    pool = max(span * s.replicates, min(POOL_POINTS, (1 << max(0, (m * s.replicates - 1).bit_length())) * span))
-    pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=pool)
-    kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
-    shared = Scheduler(m * s.samples, progress, cancel)
-    baker = TileBaker(None, table, kernel, tracer, pattern, s, shared, SurfaceStart(table, tracer),
-                      bent=bool(bent_normals))
-    errors = ErrorModel(s)
-    unit_vertex = np.empty(m, np.int64)
-    unit_vertex[unit] = target.triangles[corners[:, 0], corners[:, 1]]
-    pairs = unit_pairs(target, unit_vertex) if s.replicates > 1 else None
-
+    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
+    m = len(bake.p)
     ao = np.zeros(m, np.float32)
     se = np.zeros(m, np.float32)
     count = np.zeros(m, np.int32)
     bent = np.zeros((m, 3), np.float32) if bent_normals else None
-    blocks = [np.arange(b, min(b + BLOCK, m)) for b in range(0, m, BLOCK)]
 
-    def work(ids):
-        contact = np.zeros(len(ids), bool)
-        if tracer.contact_scene is not None:
-            contact = tracer.contact(p[ids], gn[ids])
-        near = None if pairs is None else _block_neighbours(pairs, int(ids[0]), int(ids[-1]) + 1)
-        est, sums = baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None)
-        ao[ids] = np.clip(est.mean, 0.0, 1.0)
-        se[ids] = errors.stderr(est, near, None)
-        count[ids] = est.n
-        if sums is not None:
-            length = np.linalg.norm(sums, axis=1)
-            v = np.where((length > 0)[:, None], sums, n[ids])
-            bent[ids] = v / np.linalg.norm(v, axis=1)[:, None]
+    def store(out):
+        ids = out.texels
+        ao[ids], se[ids], count[ids] = out.ao, out.stderr, out.samples
+        if bent is not None:
+            bent[ids] = out.bent
 
-    run_all(work, blocks, s.threads, shared, progress)
-    metadata = dict(s.metadata(s.max_distance), version=__version__, rays=shared.rays)
+    keys = list(range(len(bake.blocks)))
+    if processes == 1:
+        shared = Scheduler(bake.planned, progress, cancel)
+        bake.trace_setup(shared, cancel, on_rays)
+        run_all(lambda key: store(bake.tile(key)), keys, s.threads, shared, progress)
+        rays, trace_s, trace_cpu = shared.rays, shared.trace_seconds, shared.trace_cpu_seconds
+    else:
+        if on_rays is not None:
+            raise SettingsError("on_rays sees the rays of this process only: bake with workers=1 to record them")
+        job = dict(kind="vertex", target=_workers.mesh_data(target), occluders=[_workers.mesh_data(o) for o in occluders],
+                   settings=dataclasses.asdict(s), corners=corners, merge=bool(merge), bent_normals=bool(bent_normals),
+                   block=bake.block)
+        rays, trace_s, trace_cpu, _ = _workers.pool_for(processes, per_worker).run(job, keys, bake.planned, store,
+                                                                                   progress, cancel)
+    unit = bake.unit
+    metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
     for key in ("margin", "resolution"):
         metadata.pop(key, None)
     metadata["sample_points"] = m
-    report = {"corners": len(corners), "sample_points": m, "degenerate_corners": flat}
+    report = {"corners": len(corners), "sample_points": m, "degenerate_corners": bake.flat}
     return BakeResult(ao=ao[unit], mask=np.ones(len(unit), bool), stderr=se[unit], samples=count[unit], unit=unit,
-                      rays=shared.rays, seconds=time.perf_counter() - t_start, trace_seconds=shared.trace_seconds,
-                      threads=s.threads, trace_cpu_seconds=shared.trace_cpu_seconds, metadata=metadata,
+                      rays=rays, seconds=time.perf_counter() - t_start, trace_seconds=trace_s,
+                      threads=s.threads, trace_cpu_seconds=trace_cpu, metadata=metadata,
                       report=report, bent=None if bent is None else bent[unit])
 
 
-__all__ = ["VertexBakeResult", "bake_vertex_ao", "all_corners", "vertex_means", "sample_points", "NUDGE",
+class VertexBake:
+    """A corner bake set up after its prologue: its sample points, their units and blocks, and after
+    :meth:`trace_setup` the tracing. The same object bakes blocks in this process and in a worker
+    process (:mod:`core.workers`), as :class:`core.bake.TexelBake` bakes tiles."""
+
+    def __init__(self, pro, s, corners, merge=True, bent_normals=False, block=None):
+        self.pro, self.s, self.bent_normals = pro, s, bool(bent_normals)
+        self.block = block = BLOCK if block is None else int(block)
+        target = pro.target
+        self.unit, self.p, self.n, self.gn, corners3, self.flat = sample_points(target, corners, merge)
+        m = len(self.p)
+        self.table = point_table(self.p, self.n, self.gn, corners3)
+        unit_vertex = np.empty(m, np.int64)
+        unit_vertex[self.unit] = target.triangles[corners[:, 0], corners[:, 1]]
+        self.pairs = unit_pairs(target, unit_vertex) if s.replicates > 1 else None
+        self.blocks = [np.arange(b, min(b + block, m)) for b in range(0, m, block)]
+        self.planned = m * s.samples
+
+    def trace_setup(self, shared, cancel, on_rays=None):
+        s, m = self.s, len(self.p)
+        self.tracer = self.pro.tracer(s)
+        span = pattern_span(s.source, s.replicate_samples)
+        pool = max(span * s.replicates, min(POOL_POINTS, (1 << max(0, (m * s.replicates - 1).bit_length())) * span))
+        pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=pool)
+        kernel = Kernel(pattern, self.tracer, s.distribution, on_rays=on_rays)
+        self.start = SurfaceStart(self.table, self.tracer)
+        self.baker = TileBaker(None, self.table, kernel, self.tracer, pattern, s, shared, self.start,
+                               bent=self.bent_normals)
+        self.errors = ErrorModel(s)
+
+    def tile(self, key, directions=True):
+        """Bake block ``key`` of the sample points: a :class:`core.bake.TileOut` whose ``texels`` are
+        the points' numbers (bent normals are world directions already)."""
+        ids = self.blocks[key]
+        contact = np.zeros(len(ids), bool)
+        if self.tracer.contact_scene is not None:
+            contact = self.tracer.contact(self.p[ids], self.gn[ids])
+        near = None if self.pairs is None else _block_neighbours(self.pairs, int(ids[0]), int(ids[-1]) + 1)
+        est, sums = self.baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None)
+        out = TileOut(key, ids, np.clip(est.mean, 0.0, 1.0).astype(np.float32),
+                      self.errors.stderr(est, near, None).astype(np.float32), est.n.astype(np.int32),
+                      np.zeros(len(ids), bool))
+        if sums is not None:
+            length = np.linalg.norm(sums, axis=1)
+            v = np.where((length > 0)[:, None], sums, self.n[ids])
+            out.bent = (v / np.linalg.norm(v, axis=1)[:, None]).astype(np.float32)
+        return out
+
+
+__all__ = ["VertexBakeResult", "bake_vertex_ao", "VertexBake", "all_corners", "vertex_means", "sample_points", "NUDGE",
            "Neighbours", "unit_pairs"]

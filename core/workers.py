@@ -178,6 +178,14 @@ def _setup(job, cancel, progress):
     from .settings import BakeSettings
 
     s = BakeSettings(**job["settings"])
+    if job.get("kind") == "vertex":
+        from .vertices import VertexBake
+
+        pro = Prologue(_mesh(job["target"]), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=False)
+        bake = VertexBake(pro, s, job["corners"], job["merge"], job["bent_normals"], job["block"])
+        shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
+        bake.trace_setup(shared, cancel)
+        return bake, shared, s.threads
     pro = Prologue(_mesh(job["target"]), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=True,
                    highpoly=None if job["highpoly"] is None else [_mesh(m) for m in job["highpoly"]],
                    extrusion=job["extrusion"], max_ray_distance=job["max_ray_distance"], cage=_mesh(job["cage"]),
@@ -444,6 +452,18 @@ def check_workers(workers):
     return int(workers)
 
 
+def processes_of(workers, threads, settings, triangles):
+    """(processes, threads each) of a bake given ``workers`` (1, N or 'auto', checked) and the
+    ``threads`` argument: with workers, ``threads`` counts each worker's threads (None: one each, or
+    what 'auto' picks); workers=1 is this process with ``settings.threads``."""
+    if workers == 1:
+        return 1, settings.threads
+    if workers == "auto":
+        processes, per_worker = auto_workers(triangles)
+        return processes, (per_worker if threads is None else settings.threads)
+    return workers, 1 if threads is None else settings.threads
+
+
 def pool_for(workers, threads):
     """The persistent pool of ``workers`` processes of ``threads`` threads (made anew when the count
     changed or the last one broke)."""
@@ -469,5 +489,5 @@ def shutdown():
 
 atexit.register(shutdown)
 
-__all__ = ["BakeWorkerError", "Pool", "pool_for", "shutdown", "auto_workers", "check_workers", "memory_limit",
+__all__ = ["BakeWorkerError", "Pool", "pool_for", "processes_of", "shutdown", "auto_workers", "check_workers", "memory_limit",
            "mesh_data", "main"]

@@ -186,3 +186,16 @@ def test_on_rays_needs_this_process():
     target, occ = scene()
     with pytest.raises(SettingsError, match="on_rays"):
         bake_ao(target, occ, resolution=8, samples=4, workers=2, on_rays=lambda batch: None)
+
+
+def test_vertex_bakes_in_workers_are_the_bits_of_one_process(monkeypatch):
+    from core import bake_vertex_ao, vertices
+
+    monkeypatch.setattr(vertices, "BLOCK", 40)  # several blocks for the workers to share
+    target, occ = scene()
+    args = dict(samples=32, max_distance=0.7, seed=5, bent_normals=True)
+    a = bake_vertex_ao(target, occ, threads=1, **args)
+    b = bake_vertex_ao(target, occ, workers=2, **args)
+    for name in ("ao", "stderr", "samples", "unit", "bent"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.rays == b.rays
