@@ -1,7 +1,7 @@
-"""``python -m bench``: see bench/run.py."""
+"""``python -m bench``: the whole benchmark in one run (bench/harness/run.py)."""
 
 import sys
 
-from .run import main
+from .harness.run import main
 
 sys.exit(main())

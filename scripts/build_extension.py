@@ -11,11 +11,18 @@ never committed) when missing. The zips are made by Blender's own extension buil
 executable, else through the builder script that the ``bpy`` module carries
 (``bpy/<version>/scripts/addons_core/bl_pkg/cli/blender_ext.py``, plain Python). Only when neither
 is available does this script write the zips itself, the same way: the manifest at the zip root
-with a ``[build.generated]`` table naming the platform and its wheels, the files that the
-manifest's ``[build] paths_exclude_pattern`` lets through, and the platform's wheels.
+with a ``[build.generated]`` table naming the platform and its wheels, the staged files, and the
+platform's wheels.
 
-The build runs on a staged copy of the extension whose manifest lists only the chosen platforms
-and their wheels, so that building a subset does not need every platform's wheels.
+What a zip holds is an allow-list, SHIP: the manifest, the add-on's entry (``__init__.py``), its two
+packages (``core/``, ``mc_ao/``), the licence and the README, plus the platform's wheels. Nothing
+else in the checkout (the batch, the farm, tests, bench, scripts, sample scenes) is ever staged.
+The build runs on a staged copy holding only those, whose manifest lists only the chosen platforms
+and their wheels (so that building a subset does not need every platform's wheels) and whose
+``[build]`` table only keeps caches and dot-files out (NEVER). The allow-list is applied by staging,
+not by the manifest's ``[build] paths``: Blender's builder (4.2 to 5.0) takes ``paths`` as single
+files, not folders, and with ``paths`` set and ``--split-platforms`` it filters the wrong entries
+as wheels and stops.
 """
 
 import argparse
@@ -34,8 +41,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 MANIFEST = "blender_manifest.toml"
-# Never staged, whatever the manifest says: version control, environments, build outputs.
-STAGE_SKIP = {".git", ".venv", "dist", "wheels", "out", "__pycache__", ".pytest_cache", ".hypothesis"}
+# Everything a zip ships besides the wheels, relative to the extension root: a file, or a folder
+# shipped whole. An allow-list, so that nothing added to the checkout ships by default.
+SHIP = (MANIFEST, "__init__.py", "core/", "mc_ao/", "LICENSE", "README.md")
+# Never shipped from inside those folders (gitignore-style patterns): caches, dot-files, backups.
+NEVER = ("__pycache__/", "*.pyc", ".*", "*.blend[1-9]")
 
 
 class BuildError(Exception):
@@ -121,25 +131,33 @@ def manifest_for(text, platforms, wheels):
     text, n = re.subn(r"(?ms)^wheels\s*=\s*\[.*?\]", lambda m: "wheels = " + toml_list(wheels, True), text)
     if n != 1:
         raise BuildError("the manifest has no wheels = [...] list")
-    return text
+    return with_build_table(text)
+
+
+def with_build_table(text):
+    """The manifest text with its ``[build]`` table (if any) replaced by one excluding NEVER."""
+    text = re.sub(r"(?ms)^\[build\][ \t]*\n.*?(?=^\[[A-Za-z]|\Z)", "", text)
+    return (text.rstrip("\n") + "\n\n[build]\n# Staged by scripts/build_extension.py: only what its allow-list SHIP names.\n"
+            "paths_exclude_pattern = [" + ", ".join(f'"{p}"' for p in NEVER) + "]\n")
 
 
 def stage(source, stage_dir, platforms, wheels, wheel_dir):
-    """Copy the extension to ``stage_dir`` with a manifest for ``platforms`` and their wheels.
-
-    Only what the manifest's exclude patterns let through is copied (the builder applies them
-    again), so virtual environments and other large folders in a checkout cost nothing.
-    """
+    """Copy what SHIP names to ``stage_dir``, with a manifest for ``platforms`` and their wheels."""
     text = (source / MANIFEST).read_text(encoding="utf-8")
-    patterns = tomllib.loads(text).get("build", {}).get("paths_exclude_pattern", [])
+    missing = [p for p in SHIP if not (source / p).exists()]
+    if missing:
+        raise BuildError("the extension has no " + ", ".join(missing))
 
     def ignore(directory, names):
-        rel_dir = os.path.relpath(directory, source).replace(os.sep, "/")
-        rel_dir = "" if rel_dir == "." else rel_dir + "/"
-        return [n for n in names if n in STAGE_SKIP
-                or _excluded(rel_dir + n, os.path.isdir(os.path.join(directory, n)), patterns)]
+        rel_dir = os.path.relpath(directory, source).replace(os.sep, "/") + "/"
+        return [n for n in names if _excluded(rel_dir + n, os.path.isdir(os.path.join(directory, n)), NEVER)]
 
-    shutil.copytree(source, stage_dir, ignore=ignore)
+    stage_dir.mkdir(parents=True)
+    for path in SHIP:
+        if path.endswith("/"):
+            shutil.copytree(source / path, stage_dir / path, ignore=ignore)
+        elif path != MANIFEST:
+            shutil.copy2(source / path, stage_dir / path)
     (stage_dir / MANIFEST).write_text(manifest_for(text, platforms, wheels), encoding="utf-8")
     for wheel in wheels:
         target = stage_dir / wheel
@@ -179,9 +197,10 @@ def build_with_blender(stage_dir, output_dir, blender=None):
 
 
 def _excluded(rel, is_dir, patterns):
-    """Whether the manifest's ``paths_exclude_pattern`` (gitignore style) excludes a path.
+    """Whether gitignore-style ``patterns`` (as NEVER, or a manifest's ``paths_exclude_pattern``)
+    exclude a path.
 
-    Covers the forms the manifest uses: "/name" anchored at the root, "name/" for directories
+    Covers the forms used here: "/name" anchored at the root, "name/" for directories
     only, and globs without a slash matched against every path component.
     """
     parts = rel.split("/")
@@ -204,7 +223,7 @@ def build_zips_here(stage_dir, output_dir):
     """Write one zip per platform the way Blender's builder does (used when it is not available)."""
     with open(stage_dir / MANIFEST, "rb") as fh:
         manifest = tomllib.load(fh)
-    patterns = manifest.get("build", {}).get("paths_exclude_pattern", ["__pycache__/", ".*", "/*.zip"])
+    patterns = manifest["build"]["paths_exclude_pattern"]
     wheels = manifest.get("wheels", [])
     listed = {os.path.normpath(w).replace(os.sep, "/") for w in wheels} | {MANIFEST}
     files = []

@@ -4,8 +4,8 @@ import json
 
 import numpy as np
 
-from bench import device
-from bench.report import table
+from bench.sections import device
+from bench.harness.report import table
 from core import bake_ao
 from core.tracing import Tracer
 from scenes import plane

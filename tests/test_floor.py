@@ -1,10 +1,10 @@
-"""bench.floor's stages (the per-ray floor issue 13's ceiling is read against): every form of a
+"""bench.sections.floor's stages (the per-ray floor the ceiling's target is read against): every form of a
 stage computes the same numbers, so the cheapest form it counts does the work the kernel does."""
 
 import numpy as np
 import pytest
 
-from bench.floor import Chunk, prepare, stage_forms
+from bench.sections.floor import Chunk, prepare, stage_forms
 
 
 @pytest.mark.parametrize("columns", [6, 11])

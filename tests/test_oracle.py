@@ -1,9 +1,9 @@
-"""bench.oracle's allocation (the bound issue 16's adaptive targets are read against): on errors
+"""bench.sections.oracle's allocation (the bound the adaptive targets are read against): on errors
 whose best allocation is known by hand, it finds it."""
 
 import numpy as np
 
-from bench.oracle import allocate, model_errors, replay
+from bench.sections.oracle import allocate, model_errors, replay
 
 COUNTS = (16, 32, 64, 128)
 

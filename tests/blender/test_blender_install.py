@@ -1,6 +1,9 @@
 """The user's path: build the zip, Install from Disk into a user repository, enable, bake, uninstall."""
 
+import shutil
+import subprocess
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -30,6 +33,23 @@ def built_zip(tmp_path):
     return path
 
 
+def _shipped_on_disk():
+    """What the zip must hold besides its wheels: the manifest, the add-on's entry, every file of its
+    two packages (caches aside), the licence and the README; nothing else."""
+    names = {"blender_manifest.toml", "__init__.py", "LICENSE", "README.md"}
+    for package in ("core", "mc_ao"):
+        names |= {p.relative_to(ROOT).as_posix() for p in (ROOT / package).rglob("*")
+                  if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"
+                  and not p.name.startswith(".")}
+    return names
+
+
+def assert_allow_list(names):
+    wheels = [n for n in names if n.startswith("wheels/")]
+    assert set(names) - set(wheels) == _shipped_on_disk()
+    assert len(wheels) == 2 and all(n.endswith(".whl") and n.count("/") == 1 for n in wheels)  # cp311, cp313
+
+
 def test_own_zip_writer_matches_blenders_builder(bpy, tmp_path):
     """The fallback zip writer (for machines without Blender's builder) packs what Blender's does."""
     build_extension = _build_extension()
@@ -40,11 +60,44 @@ def test_own_zip_writer_matches_blenders_builder(bpy, tmp_path):
         assert sorted(a.namelist()) == sorted(b.namelist())
         assert a.read("blender_manifest.toml") == b.read("blender_manifest.toml")
         names = a.namelist()
-    assert "__init__.py" in names and "core/bake.py" in names and "mc_ao/operators.py" in names
-    assert not [n for n in names if n.startswith(("tests/", "scripts/", "bench/", "docs/", "sample_scenes/"))
-                or "__pycache__" in n or n.endswith(".pyc")]
-    wheels = [n for n in names if n.startswith("wheels/")]
-    assert len(wheels) == 2  # cp311 and cp313 for this platform
+    assert "core/bake.py" in names and "mc_ao/operators.py" in names
+    assert_allow_list(names)
+
+
+def test_allow_list_ignores_what_else_is_in_the_checkout(tmp_path, monkeypatch):
+    """A folder or file added to the checkout (as mc_ao_batch/ and farm/ were) does not ship."""
+    build_extension = _build_extension()
+    source = tmp_path / "checkout"
+    source.mkdir()
+    for name in ("blender_manifest.toml", "__init__.py", "LICENSE", "README.md", "core", "mc_ao"):
+        (shutil.copytree if (ROOT / name).is_dir() else shutil.copy2)(ROOT / name, source / name)
+    for extra in ("mc_ao_batch/__init__.py", "farm/go.mod", "notes.txt", "core/__pycache__/x.cpython-311.pyc"):
+        (source / extra).parent.mkdir(parents=True, exist_ok=True)
+        (source / extra).write_text("not shipped")
+    monkeypatch.setattr(build_extension, "ROOT", source)
+    (path,) = build_extension.build(["current"], tmp_path / "dist", wheel_dir=ROOT / "wheels", builder="self")
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+        manifest = zf.read("blender_manifest.toml").decode()
+    assert_allow_list(names)
+    # the shipped manifest's [build] keeps caches out; it is no deny-list of the checkout's folders
+    assert tomllib.loads(manifest)["build"]["paths_exclude_pattern"] == list(build_extension.NEVER)
+
+
+def _validate(cmd, zip_path):
+    proc = subprocess.run([*cmd, "validate", str(zip_path)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and "Success" in proc.stdout, proc.stdout + proc.stderr
+
+
+def test_zip_validates_with_the_bpy_modules_checker(bpy, built_zip):
+    """``extension validate``, as the bpy module carries it (Blender's own checker, plain Python)."""
+    _validate([sys.executable, str(_build_extension().bpy_extension_builder())], built_zip)
+
+
+@pytest.mark.skipif(shutil.which("blender") is None, reason="no Blender executable on PATH")
+def test_zip_validates_with_blender(built_zip):
+    """``blender --command extension validate``: the check Blender runs on a zip it installs."""
+    _validate([shutil.which("blender"), "--factory-startup", "--command", "extension"], built_zip)
 
 
 @pytest.fixture

@@ -217,7 +217,7 @@ def table(data):
 
     ad = r.get("adaptive")
     if ad:
-        L.append("5c. Adaptive sampling against fixed sample counts (issue 16; CPU seconds of one-thread bakes at "
+        L.append("5c. Adaptive sampling against fixed sample counts (CPU seconds of one-thread bakes at "
                  "equal RMSE, adaptive / fixed: below 1 pays)")
         rows = []
         for sc in ad["scenes"]:
@@ -259,8 +259,8 @@ def table(data):
 
     tg = data.get("targets")
     if tg:
-        L.append("Targets (issues 13 and 16; 'before': results/baseline.json, the core before issue 13's kernel (run of "
-                 "2026-11-23), or the issue's own figures where that run did not measure them)")
+        L.append("Targets ('before': results/before-kernel.json, the core before the kernel's rewrite (run of "
+                 "2026-11-23), or the figures stated with the targets where that run did not measure them)")
         L += _grid(["target", "wanted", "before", "now", "met"],
                    [[t["name"], t["target"], t.get("before", "-"), t["value"], "yes" if t["met"] else "NO"] for t in tg])
     return "\n".join(L)

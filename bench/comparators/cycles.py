@@ -9,6 +9,8 @@ import time
 
 import numpy as np
 
+from ..harness.scene import read_ao, select_only
+
 BAKE_IMAGE = "bench_cycles_AO"
 #: Wall and process-CPU seconds of the last bake (CPU time counts every thread of this process and
 #: hardly grows when a neighbour takes a core away, so it is the steadier figure on a shared machine).
@@ -60,19 +62,11 @@ def prepare_target(bpy, obj, width, height):
     return image
 
 
-def read_ao(image):
-    """(H, W) float32 R channel, row 0 = v = 0 (Blender's pixel order)."""
-    w, h = image.size
-    px = np.empty(w * h * image.channels, np.float32)
-    image.pixels.foreach_get(px)
-    return px.reshape(h, w, image.channels)[..., 0].copy()
-
-
 #: Object.shadow_terminator_geometry_offset that the benchmark bakes with. Blender's default, 0.1,
 #: moves the origin of grazing AO rays on smooth-shaded triangles up to the smooth (interpolated-
 #: normal) surface, which brightens AO where shading normals tilt from the face normals; mc_ao
 #: traces from the true surface. 0 makes Cycles compute the AO of the surface itself (measured in
-#: bench/agreement.py), so both bakers estimate the same number.
+#: bench/sections/agreement.py), so both bakers estimate the same number.
 TERMINATOR_OFFSET = 0.0
 
 
@@ -84,7 +78,6 @@ def bake(bpy, obj, width, height, samples, threads, seed=0, margin=0, sentinel=N
     Cycles leaves alone (no triangle at their centre, when margin is 0) keep it.
     ``terminator_offset``: the target's shadow_terminator_geometry_offset (None: leave it).
     """
-    from .scene import select_only
 
     if terminator_offset is not None:
         obj.shadow_terminator_geometry_offset = float(terminator_offset)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
@@ -20,7 +20,7 @@ if str(ROOT) not in sys.path:
 DISTANCE = 1.5
 #: The plane (8 x 8 at z = 0), the two blocks (lo, hi corners), Suzanne's location. The blocks sink
 #: 0.1 into the plane: a block resting exactly on it would put its bottom face in the plane's plane,
-#: where "occluded or not" depends on rounding (see the contact check in bench/agreement.py).
+#: where "occluded or not" depends on rounding (see the contact check in bench/sections/agreement.py).
 PLANE_HALF = 4.0
 SINK = 0.1
 BLOCKS = (((-3.2, -1.0, -SINK), (-2.2, 1.2, 1.6)), ((1.4, -2.6, -SINK), (3.0, -1.2, 0.9)))
@@ -99,6 +99,14 @@ def select_only(bpy, obj):
     for o in bpy.context.view_layer.objects:
         o.select_set(o == obj)
     bpy.context.view_layer.objects.active = obj
+
+
+def read_ao(image):
+    """(H, W) float32 R channel, row 0 = v = 0 (Blender's pixel order)."""
+    w, h = image.size
+    px = np.empty(w * h * image.channels, np.float32)
+    image.pixels.foreach_get(px)
+    return px.reshape(h, w, image.channels)[..., 0].copy()
 
 
 def scene_arrays(bpy, target_name):
@@ -190,3 +198,11 @@ def lid_truth(width, height, order=6, footprint=1.0):
             pts = np.stack([U.ravel(), V.ravel(), np.zeros(U.size)], 1)
             out += wx * wy * (1.0 - polygon_form_factor(pts, lid)).reshape(height, width)
     return out
+
+
+def terrain(n=256):
+    """The dense terrain: a displaced grid of 2 n^2 triangles (131k for n = 256), its own occluder."""
+    from core import Mesh
+
+    P, F, UV = displaced_grid(n)
+    return Mesh(P, F, UV, name=f"terrain{2 * n * n}"), [], 0.5

@@ -16,7 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
@@ -24,10 +24,9 @@ if str(ROOT) not in sys.path:
 _USER_DIR = tempfile.mkdtemp(prefix="mc_ao_bench_blender_")
 os.environ.setdefault("BLENDER_USER_RESOURCES", _USER_DIR)
 
-import numpy as np  # noqa: E402
-
 from . import report  # noqa: E402
-from .common import RESULTS, Clock, git_state, load_average, log, machine, write_json  # noqa: E402
+from .common import RESULTS, git_state, load_average, log, machine, write_json  # noqa: E402
+from .context import Context  # noqa: E402
 
 FULL = dict(
     es_res=(128, 256, 512), es_spp=128, es_repeats={128: 3, 256: 3, 512: 2},
@@ -65,51 +64,12 @@ QUICK = dict(
 SECTIONS = ("equal_samples", "dense", "equal_error", "agreement", "ceiling", "threads", "resolution", "triangles",
             "memory", "statistics", "adaptive")
 DEVICE_RESULTS = RESULTS / "device.json"
-SCENE_COPY = Path(__file__).resolve().parent / "data" / "scene_suzanne.npz"
-
-
-class Context:
-    """What the sections share: bpy, the scene's objects and its arrays, settings, the clock."""
-
-    def __init__(self, cfg, threads):
-        import bpy
-
-        from . import scene
-
-        self.bpy, self.cfg, self.threads = bpy, cfg, threads
-        self.root = ROOT
-        self.clock = Clock()
-        self._scene = scene
-        self._npz = None
-        self.restore_scene()
-        self.scene_npz()  # also what bench/device.py bakes on the device machine
-
-    def restore_scene(self):
-        s = self._scene
-        s.reset_blender(self.bpy)
-        self.objs = s.build_scene(self.bpy)
-        ta, oa = s.scene_arrays(self.bpy, "Suzanne")
-        self.arrays = (ta, oa)
-        self.target, self.occluders = s.core_meshes(ta, oa)
-
-    def scene_npz(self):
-        """The benchmark scene's arrays (target Suzanne and its occluders) as an .npz, for subprocesses."""
-        if self._npz is None:
-            ta, oa = self.arrays
-            data = {"P": ta.positions, "F": ta.triangles, "UV": ta.uvs, "N": ta.normals,
-                    "occluders": len(oa), "distance": self._scene.DISTANCE}
-            for i, o in enumerate(oa):
-                data[f"O{i}P"], data[f"O{i}F"] = o.positions, o.triangles
-            SCENE_COPY.parent.mkdir(exist_ok=True)
-            np.savez_compressed(SCENE_COPY, **data)
-            self._npz = SCENE_COPY
-        return self._npz
 
 
 def _previous(quick):
-    """The 'before' column: results/baseline.json (the core before issue 13's kernel, the committed
-    run of 2026-11-23), else the previous committed run."""
-    for name in (("baseline-quick.json", "latest-quick.json") if quick else ("baseline.json", "latest.json")):
+    """The 'before' column: results/before-kernel.json (the core before the kernel's rewrite, the
+    committed run of 2026-11-23), else the previous committed run."""
+    for name in (("before-kernel-quick.json", "latest-quick.json") if quick else ("before-kernel.json", "latest.json")):
         try:
             return json.loads((RESULTS / name).read_text())
         except (OSError, ValueError):
@@ -117,14 +77,14 @@ def _previous(quick):
     return None
 
 
-#: Figures of the core before the kernel of issue 13 that its benchmark did not measure, as the
-#: issue states them (2 cores, current main then).
-ISSUE_13_BEFORE = {"dense": "1.44x (10.2 s vs 14.6 s)", "terrain_share": "36% (131k-triangle terrain, 1 thread)",
+#: Figures of the core before the kernel's rewrite that its benchmark run did not measure, as they
+#: were stated when the targets were set (2 cores, main then).
+BEFORE_KERNEL_UNMEASURED = {"dense": "1.44x (10.2 s vs 14.6 s)", "terrain_share": "36% (131k-triangle terrain, 1 thread)",
                    "alone": "0.62 us/ray bake vs 0.18 us/ray embreex alone: 3.4x (Suzanne, 256^2 x 64)"}
 
 
 def targets(res, before=None):
-    """The issue's targets against this run's figures: (name, target, before, value, met)."""
+    """The targets against this run's figures: (name, target, before, value, met)."""
     out = []
     old = (before or {}).get("results", {})
 
@@ -137,10 +97,10 @@ def targets(res, before=None):
             add(f"1-thread bake inside embreex, {sc['scene']}, {sc['resolution']}^2 x {sc['samples']}", ">= 80%",
                 f"{100 * sc['share_wall']:.0f}% (CPU time {100 * sc['share_cpu']:.0f}%)", sc["share_wall"] >= 0.8,
                 was=(f"{100 * old['ceiling']['bake']['trace_share']:.0f}% (Suzanne 256^2 x 64)"
-                     if "Suzanne" in sc["scene"] and old.get("ceiling", {}).get("bake") else ISSUE_13_BEFORE["terrain_share"]))
+                     if "Suzanne" in sc["scene"] and old.get("ceiling", {}).get("bake") else BEFORE_KERNEL_UNMEASURED["terrain_share"]))
             add(f"bake time / embreex alone on the same rays, {sc['scene']}", "<= 1.3x",
                 f"{sc['bake_over_alone']:.2f}x (CPU {sc['bake_over_alone_cpu']:.2f}x)", sc["bake_over_alone"] <= 1.3,
-                was=ISSUE_13_BEFORE["alone"] if "Suzanne" in sc["scene"] else "-")
+                was=BEFORE_KERNEL_UNMEASURED["alone"] if "Suzanne" in sc["scene"] else "-")
     es = res.get("equal_samples")
     if es:
         old_rows = {r["resolution"]: r for r in old.get("equal_samples", {}).get("rows", [])}
@@ -152,7 +112,7 @@ def targets(res, before=None):
     dn = res.get("dense")
     if dn:
         add(f"equal samples vs Cycles, dense.blend {dn['resolution']}^2 x {dn['samples']}", ">= 3x",
-            f"{dn['ratio_time']:.2f}x (CPU {dn['ratio_cpu']:.2f}x)", dn["ratio_time"] >= 3, was=ISSUE_13_BEFORE["dense"])
+            f"{dn['ratio_time']:.2f}x (CPU {dn['ratio_cpu']:.2f}x)", dn["ratio_time"] >= 3, was=BEFORE_KERNEL_UNMEASURED["dense"])
     tr = res.get("triangles")
     if tr and len(tr["rows"]) >= 2:
         lo, hi = tr["rows"][0], tr["rows"][-1]
@@ -218,7 +178,7 @@ def targets(res, before=None):
             add(f"equal error vs Cycles' 128 spp, best settings ({best})", "<= 0.2x",
                 f"{fit[best]['ratio']:.2f}x", fit[best]["ratio"] <= 0.2)
     dv = res.get("device")
-    add("device runner (bench/device.py) reports 1..16 threads", "ready",
+    add("device runner (python -m bench.device) reports 1..16 threads", "ready",
         "measured, see section 7" if dv and dv.get("rows") else "ready; no device machine lent to this task",
         bool(dv and dv.get("rows")))
     return out
@@ -236,7 +196,7 @@ def main(argv=None):
     started = time.time()
     load0 = load_average()
     ctx = Context(cfg, threads)
-    from . import adaptive, agreement, ceiling, equal, scaling, statistics
+    from ..sections import adaptive, agreement, ceiling, equal, scaling, statistics
 
     runners = {"equal_samples": equal.equal_samples, "dense": equal.dense_equal_samples,
                "equal_error": equal.equal_error, "agreement": agreement.agreement, "ceiling": ceiling.ceiling,

@@ -16,7 +16,7 @@ The fixed series uses core.bake_ao's defaults, replicates=2 (an error map, as ev
 the add-on's fixed bakes without an error map use replicates=1, which gives 1.16-1.20 times less RMSE
 at equal rays with Sobol' (the section's last line), a gain adaptive sampling does not have.
 
-Scenes (issue 16's list):
+Scenes:
 
 - suzanne: the benchmark's scene (Suzanne over a plane and two blocks, AO distance 1.5), target Suzanne;
 - room: sample_scenes/room.blend, target Room (the walls), AO distance 1: open walls, dark corners;
@@ -29,7 +29,7 @@ Scenes (issue 16's list):
 Also the cost of the error model at equal rays: RMSE of replicates=2 (the default) over replicates=1,
 per source, on the disk scene.
 
-Run alone: ``.venv/bin/python -m bench.adaptive [--quick]`` (bpy needed for suzanne and room).
+Run alone: ``.venv/bin/python -m bench.sections.adaptive [--quick]`` (bpy needed for suzanne and room).
 """
 
 import math
@@ -38,15 +38,15 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from core import Mesh, bake_ao  # noqa: E402
 from core.analytic import polygon_form_factor, regular_polygon, texel_mean  # noqa: E402
 
-from .common import log  # noqa: E402
-from .mcao import core_bake  # noqa: E402
+from ..harness.common import log  # noqa: E402
+from ..harness.mcao import core_bake  # noqa: E402
 
 QUAD = np.array([[0, 1, 2], [0, 2, 3]])
 FULL = dict(res=96, fixed=(16, 32, 64, 128, 256, 512, 1024), targets=(0.04, 0.02, 0.01, 0.005), cap=4096,
@@ -81,7 +81,7 @@ def numpy_scenes(res):
 def room_scene(bpy):
     """The room scene as (name, target, occluders, max_distance, exact or None): sample_scenes/room.blend
     opened in ``bpy`` (the file stays open), read back through the add-on's extraction."""
-    from . import scene
+    from ..harness import scene
 
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "room.blend"), load_ui=False)
     ta, oa = scene.scene_arrays(bpy, "Room")
@@ -91,7 +91,7 @@ def room_scene(bpy):
 
 def blender_scenes(ctx):
     """The benchmark scene and the room, read back through the add-on's extraction."""
-    from . import scene
+    from ..harness import scene
 
     out = [("suzanne", ctx.target, ctx.occluders, scene.DISTANCE, None), room_scene(ctx.bpy)]
     ctx.restore_scene()
@@ -189,7 +189,7 @@ def replicate_cost(cfg, threads, res):
 
 
 def adaptive(ctx):
-    """The section, as bench/run.py calls it."""
+    """The section, as bench/harness/run.py calls it."""
     cfg = ctx.cfg["adaptive"]
     scenes = numpy_scenes(cfg["res"]) + blender_scenes(ctx)
     rows = [adaptive_scene(*s, cfg, ctx.threads, ctx.clock) for s in scenes]
@@ -202,7 +202,7 @@ def adaptive(ctx):
 def main(argv=None):
     import argparse
 
-    from .common import Clock
+    from ..harness.common import Clock
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
@@ -217,7 +217,7 @@ def main(argv=None):
         import tempfile
 
         os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="mc_ao_bench_blender_"))
-        from .run import Context
+        from ..harness.context import Context
 
         ctx = Context({}, a.threads)
         scenes += blender_scenes(ctx)

@@ -14,84 +14,11 @@ import cProfile
 import os
 import pstats
 import time
-from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
-
-from . import mcao
-from .common import log
-from .scene import DISTANCE, displaced_grid
-
-
-def _record_rays(target, occluders, **kw):
-    """One bake through the public on_rays hook: every chunk of rays it hands to Embree."""
-    chunks = []
-
-    def keep(batch):
-        chunks.append((np.array(batch.origins, np.float32), np.array(batch.directions, np.float32),
-                       np.array(batch.tfar, np.float32)))
-
-    r = mcao.core_bake(target, occluders, on_rays=keep, **kw)
-    return chunks, r
-
-
-def embree_scene(meshes):
-    """The committed Embree scene the bake itself traces its occlusion rays in (core.tracing.Tracer:
-    the same robust mode)."""
-    from core.tracing import OCCLUSION_ROBUST, embree_scene as build
-
-    return build(meshes, robust=OCCLUSION_ROBUST)[0]
-
-
-def _replay(scene, chunks, threads):
-    """(wall seconds, process CPU seconds, occluded fraction) of embreex tracing every chunk on
-    ``threads`` threads. The rays are in the bake's own (normalised) frame; so is the scene."""
-    hits = [0] * len(chunks)
-
-    def one(i):
-        o, d, tf = chunks[i]
-        # A fresh tfar array per call, as any caller needs (Embree may write into it).
-        hits[i] = int((scene.run(o, d, query="OCCLUDED", dists=tf.copy()) >= 0).sum())
-
-    c0, t0 = time.process_time(), time.perf_counter()
-    if threads == 1:
-        for i in range(len(chunks)):
-            one(i)
-    else:
-        with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(one, range(len(chunks))))
-    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
-    n = sum(len(o) for o, _, _ in chunks)
-    return seconds, cpu, sum(hits) / max(n, 1)
-
-
-def _synthetic_rays(target, n, chunk, distance=DISTANCE):
-    """Rays like a bake's (area-uniform points on the target, cosine directions), for machines where
-    only embreex's own scaling is wanted (bench/device.py)."""
-    t = target
-    rng = np.random.default_rng(0)
-    p = t.positions[t.triangles]
-    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    tri = rng.choice(len(area), n, p=area / area.sum())
-    a, b = rng.random(n), rng.random(n)
-    flip = a + b > 1
-    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
-    org = p[tri, 0] + a[:, None] * (p[tri, 1] - p[tri, 0]) + b[:, None] * (p[tri, 2] - p[tri, 0])
-    nrm = t.face_normals[tri]
-    v = rng.normal(size=(n, 3))
-    d = nrm + v / np.linalg.norm(v, axis=1, keepdims=True)  # cosine-distributed about nrm
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    org = org + nrm * 1e-5
-    return [(org[i:i + chunk].astype(np.float32), d[i:i + chunk].astype(np.float32),
-             np.full(min(chunk, n - i), distance, np.float32)) for i in range(0, n, chunk)]
-
-
-def _normalized(target, occluders):
-    """The bake's own frame (core.bake._normalized_scene), so that replayed rays hit the same scene."""
-    from core.bake import _normalized_scene
-
-    t, occ, _ = _normalized_scene(target, list(occluders))
-    return [t] + occ
+from ..comparators.embree import normalized, occlusion_scene, record_rays, replay
+from ..harness import mcao
+from ..harness.common import log
+from ..harness.scene import DISTANCE, terrain
 
 
 def _profile(ctx, target, occluders, res, spp, distance):
@@ -123,19 +50,19 @@ def _profile(ctx, target, occluders, res, spp, distance):
 
 
 def _scene_ceiling(ctx, name, target, occluders, distance, res, spp, repeats):
-    meshes = _normalized(target, occluders)
+    meshes = normalized(target, occluders)
     kw = dict(resolution=res, samples=spp, threads=1, max_distance=distance, margin=16)
     mcao.core_bake(target, occluders, **dict(kw, resolution=64))  # warm up (pool, imports)
-    chunks, rec = _record_rays(target, occluders, **kw)
+    chunks, rec = record_rays(target, occluders, **kw)
     n = sum(len(o) for o, _, _ in chunks)
-    scene = embree_scene(meshes)
+    scene = occlusion_scene(meshes)
     bakes, alone1, alone2 = [], [], []
     for _ in range(repeats):
         r = mcao.core_bake(target, occluders, **kw)
         bakes.append(dict(seconds=r.seconds, cpu_seconds=r.cpu_seconds, trace_seconds=r.trace_seconds,
                           trace_cpu_seconds=r.trace_cpu_seconds, rays=r.rays))
-        alone1.append(_replay(scene, chunks, 1))
-        alone2.append(_replay(scene, chunks, 2))
+        alone1.append(replay(scene, chunks, 1))
+        alone2.append(replay(scene, chunks, 2))
     best = min(bakes, key=lambda b: b["seconds"])
     best_cpu = min(bakes, key=lambda b: b["cpu_seconds"])
     a1 = min(alone1, key=lambda x: x[0])
@@ -154,14 +81,6 @@ def _scene_ceiling(ctx, name, target, occluders, distance, res, spp, repeats):
         f"(bake / alone {out['bake_over_alone']:.2f}x, CPU {out['bake_over_alone_cpu']:.2f}x)", ctx.clock)
     del chunks
     return out
-
-
-def terrain(n=256):
-    """The dense terrain: a displaced grid of 2 n^2 triangles (131k for n = 256), its own occluder."""
-    from core import Mesh
-
-    P, F, UV = displaced_grid(n)
-    return Mesh(P, F, UV, name=f"terrain{2 * n * n}"), [], 0.5
 
 
 def ceiling(ctx):

@@ -1,10 +1,10 @@
-"""Figures of a benchmark run: ``python -m bench.plot [bench/results/latest.json]`` -> docs/bench_*.png."""
+"""Figures of a benchmark run: ``python -m bench.harness.plot [bench/results/latest.json]`` -> docs/bench_*.png."""
 
 import json
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 
 
@@ -49,7 +49,7 @@ def equal_error(data, path):
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
-    src = Path(argv[0]) if argv else Path(__file__).resolve().parent / "results" / "latest.json"
+    src = Path(argv[0]) if argv else Path(__file__).resolve().parents[1] / "results" / "latest.json"
     data = json.loads(src.read_text())
     if "equal_error" in data["results"]:
         print(equal_error(data, DOCS / "bench_equal_error.png"))

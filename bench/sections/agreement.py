@@ -13,10 +13,11 @@ Checks, each against its noise (z = mean difference / its standard error over te
 
 import numpy as np
 
-from . import cycles, mcao
-from .common import erode, log, mean_diff, rmse
-from .geometry import normal_tilt_degrees, texel_centres
-from .scene import (DISTANCE, LID_HEIGHT, _mesh_object, build_scene, core_meshes, lid_scene, lid_truth,
+from ..comparators import cycles
+from ..harness import mcao
+from ..harness.common import erode, log, mean_diff, rmse
+from ..harness.geometry import normal_tilt_degrees, texel_centres
+from ..harness.scene import (DISTANCE, LID_HEIGHT, _mesh_object, build_scene, core_meshes, lid_scene, lid_truth,
                     reset_blender, scene_arrays)
 
 TILT_BINS = ((0, 2), (2, 5), (5, 10), (10, 20), (20, 90))
@@ -67,7 +68,7 @@ def _plane(ctx):
     target, occ = core_meshes(*scene_arrays(bpy, "Plane"))
     cyc, _ = cycles.bake(bpy, obj, res, res, spp, threads, seed=21, sentinel=-1.0)
     r = mcao.core_bake(target, occ, resolution=res, samples=spp, threads=threads, max_distance=DISTANCE, seed=22)
-    from .scene import BLOCKS, PLANE_HALF
+    from ..harness.scene import BLOCKS, PLANE_HALF
     x = (np.arange(res) + 0.5) / res * 2 * PLANE_HALF - PLANE_HALF
     X, Y = np.meshgrid(x, x)
     h = 2 * PLANE_HALF / res
@@ -181,7 +182,7 @@ def _sample_placement(ctx):
     links.new(em.outputs[0], out.inputs["Surface"])
     nodes.active = nodes["bench_image"]
     cycles.configure(bpy, ctx.threads, ctx.cfg["placement_spp"], seed=41)
-    from .scene import select_only
+    from ..harness.scene import select_only
     select_only(bpy, plane)
     fracs = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
     beyond, flat_ok = [], True
@@ -219,7 +220,7 @@ def _contact(ctx):
     target, occ = core_meshes(*scene_arrays(bpy, "Plane"))
     cyc, _ = cycles.bake(bpy, objs["Plane"], res, res, spp, threads, seed=51, sentinel=-1.0)
     r = mcao.core_bake(target, occ, resolution=res, samples=spp, threads=threads, max_distance=DISTANCE, seed=52)
-    from .scene import BLOCKS, PLANE_HALF
+    from ..harness.scene import BLOCKS, PLANE_HALF
     x = (np.arange(res) + 0.5) / res * 2 * PLANE_HALF - PLANE_HALF
     X, Y = np.meshgrid(x, x)
     h = 2 * PLANE_HALF / res

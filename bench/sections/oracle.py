@@ -1,6 +1,6 @@
 """The most any allocation of samples could save: an oracle that knows each texel's expected error.
 
-Issue 16 asks adaptive sampling to reach the best fixed sample count's RMSE in at most 0.6 of its
+The target asks adaptive sampling to reach the best fixed sample count's RMSE in at most 0.6 of its
 time on the Suzanne and room scenes. This measures what the best possible allocation of the same
 sampler reaches, so that the adaptive section's ratios can be read against it:
 
@@ -22,7 +22,7 @@ estimates), so in time an adaptive bake does worse still. For independent sample
 closed form, E[sd]^2 / E[var] (n proportional to each texel's sd), printed beside it; the oracle
 measures the same question for the sampler the bakes really use.
 
-Run: ``.venv/bin/python -m bench.oracle [--quick] [--no-blender]`` (the room needs bpy; the Suzanne
+Run: ``.venv/bin/python -m bench.sections.oracle [--quick] [--no-blender]`` (the room needs bpy; the Suzanne
 scene comes from ``bench/data/scene_suzanne.npz``, the benchmark's scene as the add-on extracts it).
 """
 
@@ -33,14 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from core import bake_ao  # noqa: E402
 
 from .adaptive import numpy_scenes, room_scene  # noqa: E402
-from .common import Clock, log  # noqa: E402
+from ..harness.common import Clock, log  # noqa: E402
 
 FULL = dict(res=96, counts=(16, 32, 64, 128, 256, 512, 1024), seeds=8, ref_spp=8192)
 QUICK = dict(res=48, counts=(16, 32, 64, 128, 256), seeds=2, ref_spp=2048)
@@ -140,7 +140,7 @@ def oracle_scene(name, target, occluders, distance, truth, cfg, threads):
 def main(argv=None):
     import argparse
 
-    from .memprobe import load_scene
+    from ..harness.memprobe import load_scene
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")

@@ -7,9 +7,10 @@ repeat is kept in the JSON.
 
 import numpy as np
 
-from . import cycles, mcao
-from .common import ROOT, erode, interp_time_at, log, rmse
-from .scene import DISTANCE
+from ..comparators import cycles
+from ..harness import mcao
+from ..harness.common import ROOT, erode, interp_time_at, log, rmse
+from ..harness.scene import DISTANCE
 
 SOURCES = ("sobol", "stratified", "independent", "halton")
 
@@ -73,7 +74,7 @@ DENSE_DISTANCE = 1.0
 def dense_equal_samples(ctx):
     """sample_scenes/dense.blend (524k triangles, smooth): Cycles' AO bake against mc_ao's operator and
     core.bake_ao at the same resolution, samples and threads. Restores the benchmark scene after."""
-    from .scene import core_meshes, scene_arrays, select_only
+    from ..harness.scene import core_meshes, scene_arrays, select_only
 
     bpy, cfg = ctx.bpy, ctx.cfg
     res, spp, threads = cfg["dense_res"], cfg["dense_spp"], ctx.threads
@@ -193,7 +194,7 @@ def equal_error(ctx):
     for p in cyc_series:
         log(f"  {p['label']:>22}: {p['seconds']:6.2f}s  RMSE {p['rmse']:.5f}", ctx.clock)
 
-    # Cycles converged, for the agreement check (kept for bench/agreement.py).
+    # Cycles converged, for the agreement check (kept for bench/sections/agreement.py).
     ao_hi, t_hi = cycles.bake(bpy, obj, res, res, cfg["cyc_check_spp"], threads, seed=12, margin=0, sentinel=-1.0)
     ctx.cycles_hi = ao_hi
 

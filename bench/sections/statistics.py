@@ -1,6 +1,6 @@
 """Statistics of core.bake_ao on a scene whose AO is known exactly: convergence and bias per sample source.
 
-The analytic scene (bench.scene.lid_scene): the unit plane under a hovering square, exact texel AO
+The analytic scene (bench.harness.scene.lid_scene): the unit plane under a hovering square, exact texel AO
 1 - F (Lambert's polygon form factor, integrated over each texel). For every source, RMSE over all
 texels against the exact values at doubling sample counts, and the slope of log RMSE against log
 samples (independent samples: -1/2; Owen-scrambled Sobol' nets do better on this piecewise-smooth
@@ -9,9 +9,9 @@ integrand); the mean error at the largest count with its standard error (no bias
 
 import numpy as np
 
-from . import mcao
-from .common import log
-from .scene import lid_scene, lid_truth
+from ..harness import mcao
+from ..harness.common import log
+from ..harness.scene import lid_scene, lid_truth
 
 SOURCES = ("sobol", "halton", "stratified", "independent")
 

@@ -1,11 +1,11 @@
 """Selected to Active: what the matching rays cost, in one run, as ratios.
 
-    .venv/bin/python -m bench.highpoly            # 512 x 512 at 64 and 256 spp: about 3 minutes on 2 cores
-    .venv/bin/python -m bench.highpoly --quick    # 256 x 256
+    .venv/bin/python -m bench.sections.highpoly            # 512 x 512 at 64 and 256 spp: about 3 minutes on 2 cores
+    .venv/bin/python -m bench.sections.highpoly --quick    # 256 x 256
 
 Two bakes of a high-poly onto a low-poly (core.bake_ao with ``highpoly=``):
 
-- terrain: ``bench.scene.displaced_grid(256)`` (131072 triangles, 4 x 4, bumps of +-0.25) onto a flat
+- terrain: ``bench.harness.scene.displaced_grid(256)`` (131072 triangles, 4 x 4, bumps of +-0.25) onto a flat
   4 x 4 plane 0.5 below it, extrusion 1, AO distance 0.5;
 - rock: sample_scenes/rock.blend's Rock_high (122880 triangles) onto Rock_low (80 triangles), extrusion
   0.1, every other object occluding, unlimited AO distance, read through the add-on's own extraction
@@ -17,7 +17,7 @@ the check before baking, the sample points' positions, their matching rays throu
 points and normals, contact probes) against the rest of the bake: "adds" is matching / (bake -
 matching), what the stage adds to tracing and shading the AO at those points. In wall time and in
 thread CPU time (the bake's process CPU: one thread), which a busy neighbour on a shared machine
-does not inflate; the target (issue 12), under 10% at 64 samples per texel, is read on the CPU
+does not inflate; the target, under 10% at 64 samples per texel, is read on the CPU
 figure. Also the 2-thread bake, whose result is bit-identical.
 
 Both with one replicate (what the add-on bakes without an error map or adaptive sampling: P = spp / 64
@@ -36,13 +36,13 @@ import time
 
 import numpy as np
 
-from .common import RESULTS, ROOT, git_state, load_average, machine
+from ..harness.common import RESULTS, ROOT, git_state, load_average, machine
 
 
 def terrain():
     from core import Mesh
 
-    from .scene import displaced_grid
+    from ..harness.scene import displaced_grid
 
     P, F, _ = displaced_grid(256, size=4.0, amplitude=0.25)
     high = Mesh(P, F, name="terrain_high")
@@ -144,7 +144,7 @@ def main(argv=None):
               "load_after": load_average(),
               "target": "matching adds < 10% of the bake time at 64 spp (one replicate, the add-on's default)",
               "results": {f"{spp} spp, {R} replicate{'s' if R > 1 else ''}": v for (spp, R), v in results.items()}}
-    lines = [f"bench.highpoly {started}, {res} x {res}, 1 thread (median of {args.repeats}), load "
+    lines = [f"bench.sections.highpoly {started}, {res} x {res}, 1 thread (median of {args.repeats}), load "
              f"{load_before} -> {record['load_after']}",
              f"{'scene':8s} {'spp':>4s} {'R':>2s} {'points':>6s} {'bake s':>7s} {'match s':>7s} {'adds':>6s} "
              f"{'cpu s':>6s} {'match':>6s} {'adds':>6s} {'matching rays':>13s} {'AO rays':>10s} {'missed':>6s} "

@@ -1,7 +1,7 @@
 """Batch throughput: assets per minute with 1 and 2 workers here, and what that means for a farm.
 
-    .venv/bin/python -m bench.batch              # 12 assets, 256 x 256, 64 samples, and one at 1024 x 1024: about 5 minutes on 2 cores
-    .venv/bin/python -m bench.batch --quick      # 6 assets, 128 x 128, 16 samples
+    .venv/bin/python -m bench.sections.batch     # 12 assets, 256 x 256, 64 samples, and one at 1024 x 1024: about 5 minutes on 2 cores
+    .venv/bin/python -m bench.sections.batch --quick # 6 assets, 128 x 128, 16 samples
 
 Builds a library of copies of one asset (tests/batch_assets.py: a ground plane and a block, two
 objects to bake, EXR), then runs ``scripts/bake_batch.py`` on it, as a user would, with
@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from .common import RESULTS, ROOT, git_state, machine
+from ..harness.common import RESULTS, ROOT, git_state, machine
 
 BATCH = ROOT / "scripts" / "bake_batch.py"
 ASSETS = ROOT / "tests" / "batch_assets.py"

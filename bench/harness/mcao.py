@@ -25,8 +25,7 @@ def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=1
 
     Returns (ao (H, W) float32 from the image's R channel, wall seconds of the operator call).
     """
-    from .cycles import read_ao
-    from .scene import select_only
+    from .scene import read_ao, select_only
 
     register(bpy)
     s = bpy.context.scene.mc_ao

@@ -4,9 +4,10 @@ import json
 import subprocess
 import sys
 
-from . import mcao
-from .common import ROOT, log
-from .scene import DISTANCE, displaced_grid
+from ..comparators.embree import normalized, occlusion_scene, record_rays, replay
+from ..harness import mcao
+from ..harness.common import ROOT, log
+from ..harness.scene import DISTANCE, displaced_grid
 
 
 def _bake_row(r, **extra):
@@ -24,20 +25,18 @@ def threads(ctx):
     calibration shows how much of it was at that moment."""
     import time
 
-    from .ceiling import _normalized, _record_rays, _replay, embree_scene
-
     cfg = ctx.cfg
     res, spp = cfg["thr_res"], cfg["thr_spp"]
     kw = dict(resolution=res, samples=spp, max_distance=DISTANCE, margin=16)
-    chunks, _ = _record_rays(ctx.target, ctx.occluders, threads=1, **kw)
-    scene = embree_scene(_normalized(ctx.target, ctx.occluders))
+    chunks, _ = record_rays(ctx.target, ctx.occluders, threads=1, **kw)
+    scene = occlusion_scene(normalized(ctx.target, ctx.occluders))
     times = {1: [], 2: []}
     calib = {1: [], 2: []}
     cpu = {}
     rows = {}
     for _ in range(cfg["thr_repeats"]):
         for n in (1, 2):
-            calib[n].append(_replay(scene, chunks, n)[0])
+            calib[n].append(replay(scene, chunks, n)[0])
             c0 = time.process_time()
             r = mcao.core_bake(ctx.target, ctx.occluders, threads=n, **kw)
             c = time.process_time() - c0
@@ -112,7 +111,7 @@ def memory(ctx):
     if not cfg["mem_res"]:
         return {"skipped": "quick mode"}
     path = ctx.scene_npz()
-    cmd = [sys.executable, "-m", "bench.memprobe", str(path), str(cfg["mem_res"]), str(cfg["mem_spp"]),
+    cmd = [sys.executable, "-m", "bench.harness.memprobe", str(path), str(cfg["mem_res"]), str(cfg["mem_spp"]),
            str(ctx.threads)]
     log(f"memory: {cfg['mem_res']}^2 x {cfg['mem_spp']} in a fresh process", ctx.clock)
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=1800)

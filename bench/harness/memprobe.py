@@ -1,4 +1,4 @@
-"""Peak memory of one core.bake_ao, measured in a fresh process: ``python -m bench.memprobe scene.npz RES SPP THREADS``.
+"""Peak memory of one core.bake_ao, measured in a fresh process: ``python -m bench.harness.memprobe scene.npz RES SPP THREADS``.
 
 Prints one JSON line: RSS before the bake (after imports and the meshes), peak RSS (VmHWM), bake
 seconds, rays and the share inside embreex. No bpy is imported, so the figure is the core's own.
@@ -11,7 +11,7 @@ import threading
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 

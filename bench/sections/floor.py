@@ -1,6 +1,6 @@
 """The least numpy work a ray needs, and the share of a bake inside Embree it leaves.
 
-Issue 13 asks for at least 80% of a one-thread bake's time inside embreex (the whole bake within
+The target asks for at least 80% of a one-thread bake's time inside embreex (the whole bake within
 1.3x of embreex alone on the same rays), on the bench's Suzanne scene and a dense terrain. That is
 a budget: everything else may cost at most a quarter of Embree's time per ray. This measures, on
 the simplest texels there are (a whole texel inside one triangle, its samples one piece), the
@@ -23,7 +23,7 @@ for the next), so the sum is a lower bound for these texels; split and located t
 keys, rasterising, units and margins cost more on top. The share it allows, E / (E + floor) with E
 Embree's time per ray, is then an upper bound on what a numpy kernel of this design can reach.
 
-Run: ``.venv/bin/python -m bench.floor [--quick]`` (no Blender); prints the table and writes
+Run: ``.venv/bin/python -m bench.sections.floor [--quick]`` (no Blender); prints the table and writes
 ``bench/results/floor.txt`` unless ``--no-save``.
 """
 
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
@@ -200,8 +200,8 @@ def embree_per_ray(quick):
     """Embree's CPU per ray in one-thread bakes of the bench's Suzanne scene and the terrain."""
     from core import bake_ao
 
-    from .ceiling import terrain
-    from .memprobe import load_scene
+    from ..harness.memprobe import load_scene
+    from ..harness.scene import terrain
 
     res, spp = (256, 32) if quick else (512, 64)
     out = {}
@@ -220,7 +220,7 @@ def main(argv=None):
     ap.add_argument("--no-save", action="store_true", help="do not write bench/results/floor.txt")
     args = ap.parse_args(argv)
     calls, repeats = (4, 3) if args.quick else (16, 7)
-    lines = [f"numpy per-ray floor of interior texels (bench.floor{' --quick' if args.quick else ''}), "
+    lines = [f"numpy per-ray floor of interior texels (bench.sections.floor{' --quick' if args.quick else ''}), "
              f"{time.strftime('%Y-%m-%dT%H:%M:%S')}; numpy {np.__version__}; chunks of {N_RAYS} rays, pool {POOL} points"]
     floors = {}
     for columns, shading in ((6, "flat"), (11, "smooth")):

@@ -1,17 +1,17 @@
-"""A measured prototype for issue 13's decision: bench.floor's per-ray stages as one compiled loop.
+"""A measured prototype: bench.sections.floor's per-ray stages as one compiled loop (numba).
 
 Not part of mc_ao and not run by the bench or the tests: it needs numba, which is no dependency of
 mc_ao. Run it in an environment of its own:
 
     python3.11 -m venv /tmp/nbve && /tmp/nbve/bin/pip install numpy==1.26.4 numba embreex
-    /tmp/nbve/bin/python -m bench.numba_floor
+    /tmp/nbve/bin/python -m bench.prototypes.numba_floor
 
-For the interior texels of :mod:`bench.floor` (a whole texel inside one triangle, its samples one
+For the interior texels of :mod:`bench.sections.floor` (a whole texel inside one triangle, its samples one
 piece), the same data and the same arithmetic as the floor's numpy stages (gather of the pool's
 features, the texel's shift, offset and turn, the map; for smooth triangles the finish of
 :func:`core.kernel.smooth_cosine_rays`), fused into one loop per ray with numba, compiled
 ``nogil``. It checks its rays against the numpy stages' and prints nanoseconds a ray, to set beside
-bench.floor's numpy floor and Embree's time per ray.
+bench.sections.floor's numpy floor and Embree's time per ray.
 """
 
 import sys
@@ -19,14 +19,14 @@ import threading
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 import numba as nb  # noqa: E402
 import numpy as np  # noqa: E402
 
-from bench.floor import N_RAYS, SPAN, Chunk, prepare  # noqa: E402
+from bench.sections.floor import N_RAYS, SPAN, Chunk, prepare  # noqa: E402
 from core.kernel import FAR  # noqa: E402
 
 
