@@ -212,7 +212,9 @@ class Prologue:
 
     def tracer(self, s):
         """The occlusion tracer of the target and its occluders, in the bake's frame."""
-        return Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit)
+        tracer = Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit)
+        tracer.constant_answer = s.constant_answer
+        return tracer
 
     def nothing_covered(self, s, uvtris):
         """The error of a texel bake that covered no texel, saying why (the counts of the UV triangles)."""
@@ -276,6 +278,7 @@ class TexelBake:
             pro.s2a, pro.target, pro.occluders, self.uvtris, self.table, self.bins, s, pro.unit,
             lambda: is_cancelled(cancel))
         tracer = pro.tracer(s) if stage is None else stage.scene.tracer
+        tracer.constant_answer = s.constant_answer
         pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
         kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
         # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
@@ -321,7 +324,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
-            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1):
+            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, constant_answer=False):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
@@ -395,6 +398,11 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         extrusion is then not used).
     empty_ok : a bake whose UVs cover no texel returns an all-zero result instead of raising
         MeshError (a UDIM tile listed but not touched, which Cycles clears).
+    workers : 1 (this process, ``threads`` threads), N worker processes (``threads`` threads each,
+        None: one) or 'auto' (from the cores and the memory: :func:`core.workers.auto_workers`). The
+        same bits for any workers x threads x tiling on one machine (:mod:`core.workers`).
+    constant_answer : benchmarks only: no occlusion query reaches Embree (every ray unoccluded), so
+        that the bake's own work is measured alone, in every worker too. The result is not AO.
 
     Returns
     -------
@@ -410,6 +418,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
                                     replicates)
+    s = dataclasses.replace(s, constant_answer=bool(constant_answer))
     workers = _workers.check_workers(workers)
     target_in, occluders_in, bent_space_in = target, list(occluders or ()), bent_space
     pro = Prologue(target, occluders_in, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,

@@ -94,6 +94,7 @@ class BakeSettings:
     replicates: int = 2
     tile_height: int = None  # rows of a tile; None: tile_size (square tiles)
     auto_tiles: bool = False  # the tiles were chosen by auto_tile_shape (and may shrink: fit_tiles)
+    constant_answer: bool = False  # benchmarks only: no query reaches Embree (see core.tracing.Tracer)
 
     @property
     def tile_shape(self):

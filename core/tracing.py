@@ -150,6 +150,9 @@ class Tracer:
         self.tfar = np.float32(min(max_distance, FAR))
         #: Only occlusion is asked (not hit distances): one query per ray.
         self.simple = not ignore_backfaces and falloff == 0
+        #: Benchmarks only: every query answers "not occluded" without calling Embree, so that a bake
+        #: measures its own work alone (``bake_ao(..., constant_answer=True)``; the result is not AO).
+        self.constant_answer = False
 
     def offset(self, max_abs):
         """Distance to push ray origins off the surface, given each point's largest |coordinate|."""
@@ -163,6 +166,8 @@ class Tracer:
 
     def occluded(self, origins, directions, tfar):
         """Embree's occlusion answer per ray (n,) bool; ``tfar`` (n,) float32 is overwritten."""
+        if self.constant_answer:
+            return np.zeros(len(tfar), bool)
         return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
 
     def near_occluders(self, lo, hi):
@@ -194,6 +199,8 @@ class Tracer:
     def visibility(self, origins, directions, tfar):
         """Per ray, 1 for unoccluded within its length, 0 for occluded, between with falloff; rays whose
         ``tfar`` is 0 are not traced (they count as occluded). Used when hit distances matter."""
+        if self.constant_answer:
+            return np.where(np.asarray(tfar) > 0, 1.0, 0.0)
         org = np.asarray(origins, dtype=np.float64)
         dirs = np.asarray(directions, dtype=np.float64)
         n = len(org)

@@ -7,19 +7,16 @@ import numpy as np
 from bench.sections import device
 from bench.harness.report import table
 from core import bake_ao
-from core.tracing import Tracer
 from scenes import plane
 
 
-def test_embree_answered_by_a_constant_bakes_everything_unoccluded_and_restores_embree():
+def test_a_constant_answer_bakes_everything_unoccluded_in_this_process_and_in_workers():
     mesh = plane()
-    real = Tracer.occluded
-    with device.embree_answered_by_a_constant():
-        blocked = bake_ao(mesh, [_lid()], resolution=8, samples=4, margin=0)
-    assert Tracer.occluded is real
-    assert np.all(blocked.ao[blocked.mask] == 1.0)
+    for kw in (dict(threads=1), dict(workers=2)):
+        blocked = bake_ao(mesh, [_lid()], resolution=16, samples=4, margin=0, constant_answer=True, **kw)
+        assert np.all(blocked.ao[blocked.mask] == 1.0)
     # With Embree, the lid occludes.
-    assert bake_ao(mesh, [_lid()], resolution=8, samples=4, margin=0).ao[blocked.mask].mean() < 0.9
+    assert bake_ao(mesh, [_lid()], resolution=16, samples=4, margin=0).ao[blocked.mask].mean() < 0.9
 
 
 def _lid():
@@ -39,13 +36,15 @@ def test_serial_share_is_amdahls():
 
 def test_the_runner_writes_every_row_and_the_report_shows_them(tmp_path):
     out = tmp_path / "device.json"
-    device.main(["--res", "32", "--spp", "4", "--threads", "1", "2", "--out", str(out)])
+    device.main(["--res", "32", "--spp", "4", "--threads", "1", "2", "--workers", "1", "2", "--out", str(out)])
     data = json.loads(out.read_text())
     assert [r["threads"] for r in data["rows"]] == [1, 2]
-    for r in data["rows"]:
+    assert [r["workers"] for r in data["worker_rows"]] == [1, 2]
+    for r in data["rows"] + data["worker_rows"]:
         assert r["seconds"] > 0 and r["outside_embree_seconds"] > 0 and r["outside_embree_speedup"] > 0
     assert data["rows"][0]["outside_embree_serial_share"] is None
     assert data["rows"][1]["outside_embree_serial_share"] is not None
+    assert data["worker_rows"][1]["outside_embree_serial_share"] is not None
     latest = json.loads((device.ROOT / "bench" / "results" / "latest.json").read_text())
     latest["results"]["device"] = data
     text = table(latest)
