@@ -54,11 +54,18 @@ def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=1
     return read_ao(bpy.data.images[f"{obj.name}_AO"]), seconds
 
 
+#: With ``python -m bench --workers``: core bakes on that many worker processes of one thread each
+#: instead of ``threads`` threads of this process (the same bits; see core.workers).
+WORKERS = 1
+
+
 def core_bake(target, occluders, **kw):
     """core.bake_ao with the benchmark's defaults (cosine directions, no margin unless asked)."""
     from core import bake_ao
 
     kw.setdefault("margin", 0)
+    if WORKERS > 1 and "workers" not in kw:
+        kw.update(workers=WORKERS, threads=1)
     c0 = time.process_time()
     r = bake_ao(target, occluders, **kw)
     r.cpu_seconds = time.process_time() - c0  # process CPU seconds, all threads

@@ -190,7 +190,12 @@ def main(argv=None):
     ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS))
     ap.add_argument("--threads", type=int, default=None, help="threads for both bakers (default: all cores)")
     ap.add_argument("--no-save", action="store_true", help="print the table, write no JSON")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="core bakes on this many worker processes, one thread each (default 1: threads)")
     args = ap.parse_args(argv)
+    from . import mcao
+
+    mcao.WORKERS = args.workers
     cfg = QUICK if args.quick else FULL
     threads = args.threads or len(os.sched_getaffinity(0))
     started = time.time()
