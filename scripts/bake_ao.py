@@ -51,6 +51,11 @@ atomically, a JSON record of it:
                   "rays": int, "samples_per_texel": mean over covered texels, "files": [absolute
                   paths written], "error": str or null}, ...]}
 
+The summary's path may not be the .blend file, one of the run's files or an existing file that is
+not an earlier summary (exit 2, nothing baked, that file untouched); --save's may not be the input
+(unless --overwrite-input) or an existing file that is not a .blend file, and the saved file is
+read back to its end marker before it replaces anything.
+
 "error" is null after a run in which everything succeeded. Unlimited max_distance is written as
 Infinity, as Python's json module writes and reads it (and as the files' metadata records it).
 
@@ -289,6 +294,20 @@ class Summary:
         self.settings = {}
         self.objects = []
         self.error = None
+        self.outputs = []  # (path, what): the run's other files, which the summary may not be
+
+    def problem(self):
+        """Why the summary may not be written at its path (None when it may): it is the input .blend
+        file, one of the run's files, or an existing file that is not an earlier summary."""
+        from mc_ao import filecheck
+
+        if self.path is None:
+            return None
+        if os.path.isdir(self.path):
+            return "it is a folder"
+        return filecheck.output_problem(self.path, "the summary",
+                                        inputs=[(self.blend, "the .blend file being baked")],
+                                        outputs=self.outputs, replaces=("an mc_ao summary",))
 
     def add(self, name, status, seconds=0.0, rays=0, samples_per_texel=0.0, files=(), error=None, **extra):
         self.objects.append({
@@ -310,15 +329,24 @@ class Summary:
             "settings": self.settings, "objects": self.objects,
         }
         text = json.dumps(record, indent=2) + "\n"
+        problem = self.problem()
+        if problem is not None:
+            print(f"bake_ao: error: the summary {str(self.path)!r} was not written: {problem}", file=sys.stderr)
+            return False
 
         def write(temp):
             with open(temp, "w", encoding="utf-8") as f:
                 f.write(text)
 
+        def verify(temp):
+            with open(temp, encoding="utf-8") as f:
+                if f.read() != text:
+                    raise ValueError("it reads back different")
+
         try:
             folder = os.path.dirname(os.path.abspath(self.path))
             os.makedirs(folder, exist_ok=True)
-            atomicfile.write_file(self.path, write)
+            atomicfile.write_file(self.path, write, verify=verify)
         except OSError as exc:
             print(f"bake_ao: error: the summary {str(self.path)!r} was not written: {exc}", file=sys.stderr)
             return False
@@ -544,6 +572,14 @@ def check_save(args, input_blend):
                          "--overwrite-input to replace it")
     if save.is_dir():
         raise UsageError(f"--save {str(save)!r} is a folder; give a .blend file path")
+    from mc_ao import filecheck
+
+    inputs = [] if args.overwrite_input else [(input_blend, "the .blend file being baked")]
+    problem = filecheck.output_problem(save, "--save", inputs=inputs,
+                                       outputs=[(args.summary_json, "the --summary-json file")],
+                                       replaces=("a .blend file",))
+    if problem is not None:
+        raise UsageError(f"--save {str(save)!r}: {problem}; nothing was baked")
     problem = jobs.folder_problem(save.parent if str(save.parent) else ".")
     if problem is not None:
         raise UsageError(f"cannot save {str(save)!r}: {problem}; nothing was baked")
@@ -563,14 +599,11 @@ def save_blend(bpy, path):
         if result != {"FINISHED"}:
             raise RuntimeError(f"Blender did not save it ({result})")
 
-    def verify(temp):
-        with open(temp, "rb") as f:
-            head = f.read(7)
-        if head != b"BLENDER" and not head.startswith(b"\x28\xb5\x2f\xfd") and not head.startswith(b"\x1f\x8b"):
-            raise ValueError("it is not a .blend file")
+    from mc_ao import filecheck
 
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    atomicfile.write_file(path, write, verify=verify, ext=".blend")
+    # Blender reports a compressed save cut short by a full disk as done: read it to its end marker.
+    atomicfile.write_file(path, write, verify=filecheck.check_blend_complete, ext=".blend")
 
 
 def selected_to_active_problems(args):
@@ -615,7 +648,7 @@ def check_paths(args, summary):
         raise UsageError(f"cannot write to the output folder '{args.output}': {problem}; nothing was baked")
     if args.summary_json is not None:
         path = args.summary_json
-        problem = "it is a folder" if path.is_dir() else jobs.folder_problem(path.parent)
+        problem = summary.problem() or jobs.folder_problem(path.parent)
         if problem is None and atomicfile.read_only(path):
             problem = "it is read-only"
         if problem is not None:
@@ -717,10 +750,19 @@ def run(argv, in_blender, summary):
         files = targets.output_files(settings, str(args.output), plan, formats, stderr=args.stderr)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
+    summary.outputs = [(f, "one of this run's files") for f in planned_paths(files)]
+    if getattr(args, "save", None) is not None:
+        summary.outputs.append((args.save, "the --save file"))
+    check_paths(args, summary)  # again, now that the run's own files are known
     summary.settings = record = jobs.settings_record(settings)
     if args.match_suffix:  # the summary's record only: file metadata holds plain values
         summary.settings = dict(record, match_suffix=list(args.match_suffix))
     return bake(plan, files, settings, record, args, summary)
+
+
+def planned_paths(files):
+    """Every path of a run's planned files (``{image name: [OutputFile]}``): images, standard errors, PLY."""
+    return [os.fspath(p) for entry in files.values() for f in entry for p in (f.path, f.stderr_path) if p]
 
 
 def s2a_record(job, result=None):
