@@ -914,4 +914,7 @@ def attribute_errors(job, result, settings):
 
 
 if __name__ == "__main__":
+    from mc_ao_batch import lifeline
+
+    lifeline.from_environment()  # a batch task's bake ends with its guard process, however that ends
     sys.exit(main())
