@@ -176,8 +176,8 @@ def make_parser(with_blend):
     parser.add_argument("--image-name", default="",
                         help='image and file name, "{object}" replaced by the object name (default: '
                              '{object}_AO); made a safe file name')
-    parser.add_argument("--seed", type=int, default=0, help="0 or more (default: 0)")
-    parser.add_argument("--threads", type=int, default=0, help="worker threads; 0 = all cores")
+    parser.add_argument("--seed", type=int, default=0, help="0 to 2**64 - 1 (default: 0)")
+    parser.add_argument("--threads", type=int, default=0, help="worker threads, at most 1024; 0 = all cores")
     parser.add_argument("--ignore-backfaces", action="store_true")
     # Issue 14: UDIM tiles, colour attributes, bent normals.
     parser.add_argument("--udim", action="store_true",
@@ -506,7 +506,7 @@ def settings_from(args):
     problems = selected_to_active_problems(args)
     for field, message in jobs.check_settings(settings):
         if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
-            message = f"--resolution must be at most {corelink.load('bake').MAX_RESOLUTION} a side, not {width}x{height}"
+            message = f"--resolution must be at most {corelink.load('settings').MAX_RESOLUTION} a side, not {width}x{height}"
             if message not in problems:
                 problems.append(message)
             continue
