@@ -1,9 +1,15 @@
-"""What a batch shows and keeps: a progress bar (or a line per task in a log), the table, the JSON summary."""
+"""What a batch shows and keeps: a progress bar (or a line per task in a log), the table, the JSON summary.
+
+Names and errors (which carry object names and manifest paths) are escaped before they are shown
+(mc_ao.terminal): nothing a .blend file or a manifest holds can write escape sequences or fake lines.
+"""
 
 import json
 import os
 import sys
 import time
+
+from mc_ao.terminal import escape
 
 STATUS_WORDS = {"ok": "ok", "skipped": "skipped (done)", "failed": "FAILED"}
 
@@ -67,11 +73,11 @@ class Progress:
         self.failed += record["status"] == "failed"
         self.skipped += record["status"] == "skipped"
         if not self.quiet or record["status"] == "failed":
-            text = f"[{self.done}/{self.total}] {record['task']}: {STATUS_WORDS[record['status']]}"
+            text = f"[{self.done}/{self.total}] {escape(record['task'])}: {STATUS_WORDS[record['status']]}"
             if record["status"] != "skipped":
                 text += f", {len(record['objects'])} objects, {record['seconds']:.1f} s"
             if record["error"]:
-                text += ": " + record["error"].splitlines()[0]
+                text += ": " + escape(record["error"].splitlines()[0])
             self.line(text)
         else:
             self._draw()
@@ -90,7 +96,7 @@ def table(records):
     header = ("#", "asset", "status", "objects", "seconds", "Mrays/s", "files")
     rows = []
     for r in sorted(records, key=lambda r: r["index"]):
-        rows.append((str(r["index"]), r["task"], STATUS_WORDS[r["status"]], str(len(r["objects"])),
+        rows.append((str(r["index"]), escape(r["task"]), STATUS_WORDS[r["status"]], str(len(r["objects"])),
                      f"{r['seconds']:.1f}", f"{_mrays(r):.2f}" if r["status"] == "ok" else "-",
                      str(len(r["files"]))))
     widths = [max(len(row[i]) for row in rows + [header]) for i in range(len(header))]
@@ -99,8 +105,9 @@ def table(records):
     if failed:
         lines.append("")
         for r in failed:
-            lines.append(f"{r['task']} ({r['blend']}) failed: {r['error']}")
-            lines.append(f"  log: {r['log']}")
+            error = "\n".join(escape(line) for line in str(r["error"]).splitlines())
+            lines.append(f"{escape(r['task'])} ({escape(r['blend'])}) failed: {error}")
+            lines.append(f"  log: {escape(r['log'])}")
     return "\n".join(lines)
 
 

@@ -32,6 +32,7 @@ import time
 from importlib.util import find_spec
 
 from core._version import __version__
+from mc_ao.terminal import escape
 
 from . import BAKE_SCRIPT
 from .manifest import Task
@@ -188,12 +189,13 @@ def _signal_name(code):
 
 def _failure_text(code, summary, log):
     if summary is not None:
+        # escaped: the errors carry object names, which may hold newlines and escape sequences
         errors = []
         if summary.get("error"):
-            errors.append(str(summary["error"]).strip())
+            errors.append(escape(str(summary["error"]).strip(), keep="\n"))
         for o in summary.get("objects") or []:
             if o.get("status") != "ok":
-                errors.append(f"{o.get('object')}: {str(o.get('error') or 'failed').strip()}")
+                errors.append(f"{escape(o.get('object'))}: {escape(str(o.get('error') or 'failed').strip())}")
         if errors:
             return "; ".join(errors)
         if code != 0:
@@ -254,7 +256,7 @@ def run_task(task, *, force=False, blender=None, on_start=None, on_process=None,
     command = bake_command(task, baker)
     with log:
         try:
-            log.write(("$ " + subprocess.list2cmdline(command) + "\n").encode())
+            log.write(("$ " + escape(subprocess.list2cmdline(command)) + "\n").encode())
             log.flush()
         except OSError as exc:  # a full disk: the task's failure, with the reason
             return _record(task, "failed", error=f"cannot write the task's log {task.log}: "

@@ -76,6 +76,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from mc_ao.terminal import EscapingStream, escape  # noqa: E402
+
 # --format choice -> Blender's file format name (mc_ao.settings.FILE_FORMATS)
 FORMATS = {"png": "PNG", "exr": "OPEN_EXR", "tif": "TIFF", "ply": "PLY"}
 # Issue 14: --target choice -> BakeSettings.target
@@ -94,10 +96,15 @@ OPTIONS = {
 
 
 class UsageError(Exception):
-    """Bad arguments or input: exit status 2. ``usage``: the usage text to show after the message."""
+    """Bad arguments or input: exit status 2. ``usage``: the usage text to show after the message.
+
+    ``message``: one problem (text), or a list of them, one line each; names in them are escaped
+    (mc_ao.terminal.escape), so a name's newline cannot start a line of its own.
+    """
 
     def __init__(self, message, usage=""):
-        super().__init__(message)
+        problems = message if isinstance(message, list) else [message]
+        super().__init__("\n".join(escape(str(p)) for p in problems))
         self.usage = usage
 
 
@@ -379,7 +386,7 @@ def pick_objects(bpy, names, baking, needs_uvs=True):
     if objects:
         for obj in selected:
             if obj not in objects:
-                print(f"bake_ao: {obj.name}: skipped, it {baking.skip_reason(obj, needs_uvs)}", file=sys.stderr)
+                print(f"bake_ao: {escape(obj.name)}: skipped, it {baking.skip_reason(obj, needs_uvs)}", file=sys.stderr)
         return objects
     objects = baking.targets_of(layer_objects, needs_uvs)
     what = "mesh with a UV map" if needs_uvs else "mesh"
@@ -387,7 +394,7 @@ def pick_objects(bpy, names, baking, needs_uvs=True):
         raise UsageError(f"the file has no {what} to bake")
     print(
         f"bake_ao: {f'no {what} is selected' if selected else 'nothing is selected'}; "
-        f"baking every {what}: {', '.join(o.name for o in objects)}",
+        f"baking every {what}: {', '.join(escape(o.name) for o in objects)}",
         file=sys.stderr,
     )
     return objects
@@ -426,7 +433,7 @@ def selected_to_active_pairs(bpy, args):
             if high is None:
                 if args.objects:
                     raise UsageError(f"{low.name} has no high-poly {name!r} in the view layer")
-                print(f"bake_ao: {low.name}: skipped, there is no {name}", file=sys.stderr)
+                print(f"bake_ao: {escape(low.name)}: skipped, there is no {escape(name)}", file=sys.stderr)
                 continue
             pairs.append((low, [high]))
         if not pairs:
@@ -444,7 +451,7 @@ def selected_to_active_pairs(bpy, args):
     else:
         highs = [o for o in layer if o.select_get() and o is not low and o is not cage]
         if highs:
-            print(f"bake_ao: baking the selected {', '.join(o.name for o in highs)} onto {low.name}",
+            print(f"bake_ao: baking the selected {', '.join(escape(o.name) for o in highs)} onto {escape(low.name)}",
                   file=sys.stderr)
     if not highs:
         raise UsageError(f"no high-poly objects to bake onto {low.name}: name them with --objects, or select "
@@ -477,7 +484,7 @@ def plan_selected_to_active(bpy, args, settings):
             raise UsageError(f"several low-poly objects would bake into image {name!r}; put {{object}} into --image-name")
     for job in plan:
         for note in job.notes:
-            print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
+            print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
     return plan
 
 
@@ -526,7 +533,7 @@ def settings_from(args):
     if any(sep in args.image_name for sep in "/\\") or args.image_name in (".", ".."):
         problems.append(f"--image-name {args.image_name!r} is a path: give a name; files go into --output")
     if problems:
-        raise UsageError("\n".join(problems))
+        raise UsageError(problems)
     return settings
 
 
@@ -657,6 +664,17 @@ def check_paths(args, summary):
 
 
 def main(argv=None):
+    """Run the script (see the module's docstring); the exit status. Everything it prints goes through
+    mc_ao.terminal.EscapingStream: a name cannot write escape sequences to the terminal or a log."""
+    out, err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = EscapingStream(out), EscapingStream(err)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = out, err
+
+
+def _main(argv=None):
     in_blender = run_by_blender()
     argv = script_argv(argv)
     summary = Summary(*early_summary_args(argv, in_blender))
@@ -794,8 +812,8 @@ def bake(plan, files, settings, record, args, summary):
     width, height = settings.size
 
     def begin(i):
-        print(f"bake_ao: [{i + 1}/{len(plan)}] baking {plan[i].object_name}", flush=True)
-        progress.begin(f"[{i + 1}/{len(plan)}] {plan[i].object_name}")
+        print(f"bake_ao: [{i + 1}/{len(plan)}] baking {escape(plan[i].object_name)}", flush=True)
+        progress.begin(f"[{i + 1}/{len(plan)}] {escape(plan[i].object_name)}")
 
     def failed(i, errors, seconds=None, files=(), rays=0, per_texel=0.0, result=None):
         nonlocal failures
@@ -803,7 +821,7 @@ def bake(plan, files, settings, record, args, summary):
         failures += 1
         done.add(i)
         for error in errors:
-            print(f"bake_ao: {plan[i].object_name}: {error}", file=sys.stderr)
+            print(f"bake_ao: {escape(plan[i].object_name)}: {escape(error)}", file=sys.stderr)
         if seconds is None:
             seconds = time.monotonic() - run.started.get(i, time.monotonic())
         summary.add(plan[i].object_name, "failed", seconds, rays, per_texel, files, "; ".join(map(str, errors)),
@@ -832,9 +850,9 @@ def bake(plan, files, settings, record, args, summary):
                 if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
                     errors = attribute_errors(job, result, settings)
                 for note in baking.input_notes(result):
-                    print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
+                    print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
                 if job.selected_to_active:
-                    print(f"bake_ao: {job.object_name}: from {', '.join(h.name for h in job.highpoly)}"
+                    print(f"bake_ao: {escape(job.object_name)}: from {', '.join(escape(h.name) for h in job.highpoly)}"
                           f"{selected_to_active.miss_summary(result)}", file=sys.stderr)
                 per_texel, rate = baking.throughput(result)
                 if errors:
@@ -844,8 +862,8 @@ def bake(plan, files, settings, record, args, summary):
                     done.add(i)
                     summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
                                 **s2a_record(job, result))
-                    rows.append((job.object_name, size_text(result, settings), f"{result.seconds:.2f}",
-                                 f"{per_texel:.0f}", f"{rate:.2f}", ", ".join(written)))
+                    rows.append((escape(job.object_name), size_text(result, settings), f"{result.seconds:.2f}",
+                                 f"{per_texel:.0f}", f"{rate:.2f}", escape(", ".join(written))))
             elif kind == "error":
                 failed(i, [rest[1]])
             elif kind == "crash":
