@@ -117,7 +117,34 @@ class BakeRun:
             except Exception as exc:  # a bug, or the machine out of memory: report it, keep the trace
                 put(("crash", i, exc, traceback.format_exc()))
                 continue
+            problem = empty_bake_problem(result)
+            if problem is not None:  # never a success that baked nothing (nor its all-zero files)
+                put(("error", i, self.core.MeshError(problem)))
+                continue
             put(("done", i, result))
+
+
+def empty_bake_problem(result):
+    """Why a finished bake baked nothing (no covered texel, no tile, no corner), or None when it baked.
+
+    The core's report says why: triangles without area, UV triangles without area, UVs outside the
+    image (or outside the UDIM tiles). The core may raise core.MeshError for this itself; either way
+    the object fails with a message, and no file is written.
+    """
+    mask = getattr(result, "mask", None)
+    if mask is None or np.any(mask):
+        return None
+    report = getattr(result, "report", None) or {}
+    reasons = []
+    for key, text in (("degenerate_triangles", "of its triangles have no area"),
+                      ("degenerate_uv_triangles", "of its UV triangles have no area in the UV map"),
+                      ("uv_outside_triangles", "of its UV triangles lie outside the image's UV square [0, 1]"),
+                      ("uv_outside_udim_triangles", "of its UV triangles lie outside the UDIM tiles 1001 to 2000")):
+        n = int(report.get(key, 0) or 0)
+        if n:
+            reasons.append(f"{n} {text}")
+    why = "; ".join(reasons) or "its UV triangles are too small to cover a texel centre at this resolution"
+    return f"the bake covered no texel ({why}): nothing was written"
 
 
 # -- settings --------------------------------------------------------------------------------------
