@@ -689,8 +689,7 @@ def _main(argv=None):
         summary.settings, summary.objects = {}, []
         code = 2
     except KeyboardInterrupt:
-        print("\nbake_ao: cancelled; the files of finished objects are written, nothing of the "
-              "cancelled one was", file=sys.stderr)
+        print(f"\nbake_ao: {cancel_note(summary)}", file=sys.stderr)
         summary.error = "cancelled (Ctrl-C)"
         code = 130
     except Exception as exc:
@@ -702,6 +701,19 @@ def _main(argv=None):
     if not summary.write(code) and code == 0:
         code = 1
     return code
+
+
+def cancel_note(summary):
+    """What a cancel left: which objects have all their files written, and of which nothing was
+    written (an object's files are written with Ctrl-C held off: all of them or none)."""
+    done = [escape(o["object"]) for o in summary.objects if o["status"] == "ok"]
+    kept = [escape(o["object"]) for o in summary.objects if o["status"] != "ok"]
+    parts = []
+    if done:
+        parts.append(f"every file of {', '.join(done)} is written")
+    if kept:
+        parts.append(f"nothing of {', '.join(kept)} was written (any file there is as it was)")
+    return "cancelled; " + ("; ".join(parts) or "nothing was written")
 
 
 def early_summary_args(argv, in_blender):
@@ -804,7 +816,7 @@ def s2a_metadata(job):
 
 def bake(plan, files, settings, record, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
-    from mc_ao import baking, jobs, selected_to_active, targets
+    from mc_ao import baking, interrupts, jobs, selected_to_active, targets
 
     progress = Progress(enabled=not args.quiet)
     run = jobs.BakeRun(plan, settings, args.threads or None, live=False)
@@ -839,31 +851,32 @@ def bake(plan, files, settings, record, args, summary):
                 progress.update(rest[1])
             elif kind == "done":
                 result = rest[1]
-                progress.end()
-                job = plan[i]
-                if targets.custom(settings) or settings.bent_normals:  # issue 14: tiles, PLY, bent normals
-                    written, errors = targets.write_files(job, result, files, dict(record, object=job.object_name),
-                                                          settings)
-                else:
-                    written, errors = jobs.write_outputs(result, files[job.image_name],
-                                                         dict(record, object=job.object_name, **s2a_metadata(job)))
-                if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
-                    errors = attribute_errors(job, result, settings)
-                for note in baking.input_notes(result):
-                    print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
-                if job.selected_to_active:
-                    print(f"bake_ao: {escape(job.object_name)}: from {', '.join(escape(h.name) for h in job.highpoly)}"
-                          f"{selected_to_active.miss_summary(result)}", file=sys.stderr)
-                per_texel, rate = baking.throughput(result)
-                if errors:
-                    failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
-                           result=result)
-                else:
-                    done.add(i)
-                    summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
-                                **s2a_record(job, result))
-                    rows.append((escape(job.object_name), size_text(result, settings), f"{result.seconds:.2f}",
-                                 f"{per_texel:.0f}", f"{rate:.2f}", escape(", ".join(written))))
+                with interrupts.held_off():  # a Ctrl-C now: this object's files all written, then the cancel
+                    progress.end()
+                    job = plan[i]
+                    if targets.custom(settings) or settings.bent_normals:  # issue 14: tiles, PLY, bent normals
+                        written, errors = targets.write_files(job, result, files, dict(record, object=job.object_name),
+                                                              settings)
+                    else:
+                        written, errors = jobs.write_outputs(result, files[job.image_name],
+                                                             dict(record, object=job.object_name, **s2a_metadata(job)))
+                    if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
+                        errors = attribute_errors(job, result, settings)
+                    for note in baking.input_notes(result):
+                        print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
+                    if job.selected_to_active:
+                        print(f"bake_ao: {escape(job.object_name)}: from {', '.join(escape(h.name) for h in job.highpoly)}"
+                              f"{selected_to_active.miss_summary(result)}", file=sys.stderr)
+                    per_texel, rate = baking.throughput(result)
+                    if errors:
+                        failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
+                               result=result)
+                    else:
+                        done.add(i)
+                        summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
+                                    **s2a_record(job, result))
+                        rows.append((escape(job.object_name), size_text(result, settings), f"{result.seconds:.2f}",
+                                     f"{per_texel:.0f}", f"{rate:.2f}", escape(", ".join(written))))
             elif kind == "error":
                 failed(i, [rest[1]])
             elif kind == "crash":
