@@ -6,8 +6,9 @@ by a full disk as written. So no writer here ever writes its target directly:
 
 1. :class:`PendingFile` checks the target (its folder exists, it is not a folder, it is not a file
    the user made read-only) and reserves a temporary file beside it under a short name of fixed
-   length (``.mc_ao-XXXXXXXX.tmp<ext>``; a name built from the target's would turn a legal 250-byte
-   file name into one the filesystem refuses).
+   length (``.mc_ao-HHHHHHHH-PPPPPPPP-XXXXXXXX.tmp<ext>``: this host's tag, this process's id and a
+   random part; a name built from the target's would turn a legal 250-byte file name into one the
+   filesystem refuses).
 2. The writer writes the temporary file; :meth:`PendingFile.finish` checks it: the file is not
    empty, and ``verify(temp)`` (for images: the file decodes completely to the pixels written)
    passes. It then gets the permission bits of the file it replaces (new files get the umask's,
@@ -15,20 +16,26 @@ by a full disk as written. So no writer here ever writes its target directly:
 3. :meth:`PendingFile.commit` renames it over the target (``os.replace``: atomic, a reader sees
    the old file or the new one, never a mix) and fsyncs the folder.
 
-On any failure the temporary file is removed and the target keeps its old bytes.
+On any failure the temporary file is removed and the target keeps its old bytes. A process that is
+killed cannot remove its temporary files: the first write of a later process into the same folder
+removes them (:func:`remove_stale`), those of this host whose process is gone, never a live one's.
 """
 
 from __future__ import annotations
 
 import errno as _errno
+import hashlib
 import os
 import pathlib
+import re
 import secrets
+import socket
 import stat
+import time
 
 from .errors import FileWriteError
 
-__all__ = ["PendingFile", "TEMP_PREFIX", "write_file", "io_error", "fsync_dir"]
+__all__ = ["PendingFile", "TEMP_PREFIX", "write_file", "io_error", "fsync_dir", "remove_stale"]
 
 #: Every temporary (and backup) file a writer here makes starts with this.
 TEMP_PREFIX = ".mc_ao-"
@@ -78,9 +85,93 @@ def remove_quietly(path):
         pass
 
 
+def _host_tag():
+    """8 hex digits naming this machine: a temporary file's process id means something only here."""
+    return hashlib.sha256(socket.gethostname().encode("utf-8", "replace")).hexdigest()[:8]
+
+
+_HOST = _host_tag()
+_STALE = re.compile(r"^\.mc_ao-(?P<host>[0-9a-f]{8})-(?P<pid>[0-9a-f]{8})-[0-9a-f]{8}\.(?:tmp|bak)")
+# The names before host and process ids were in them: removed once a day old (no way to tell a live one).
+_OLD_STALE = re.compile(r"^\.mc_ao-[0-9a-f]{8}\.(?:tmp|bak)")
+_OLD_AGE = 24 * 3600
+_CLEANED = set()  # folders this process has cleaned already
+
+
 def short_name(kind, ext=""):
-    """A hidden name of fixed length for a temporary or backup file: ``.mc_ao-1a2b3c4d.<kind><ext>``."""
-    return f"{TEMP_PREFIX}{secrets.token_hex(4)}.{kind}{ext}"
+    """A hidden name of fixed length for a temporary or backup file:
+    ``.mc_ao-<host>-<pid>-<random>.<kind><ext>``, each part 8 hex digits."""
+    return f"{TEMP_PREFIX}{_HOST}-{os.getpid() & 0xFFFFFFFF:08x}-{secrets.token_hex(4)}.{kind}{ext}"
+
+
+def _pid_alive(pid):
+    """Whether process ``pid`` runs on this machine (True when unsure: a live file is never removed)."""
+    if pid == os.getpid():
+        return True
+    if os.name == "nt":  # os.kill(pid, 0) would end the process on Windows
+        try:
+            import ctypes
+
+            kernel32 = ctypes.windll.kernel32
+            handle = kernel32.OpenProcess(0x1000, False, pid)  # PROCESS_QUERY_LIMITED_INFORMATION
+            if not handle:
+                return ctypes.GetLastError() != 87  # ERROR_INVALID_PARAMETER: no such process
+            try:
+                code = ctypes.c_ulong()
+                kernel32.GetExitCodeProcess(handle, ctypes.byref(code))
+                return code.value == 259  # STILL_ACTIVE
+            finally:
+                kernel32.CloseHandle(handle)
+        except Exception:
+            return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True  # another user's process
+    return True
+
+
+def remove_stale(directory):
+    """Remove the temporary and backup files that killed processes of this host left in ``directory``.
+
+    A name carries its process's id and host (:func:`short_name`): a file is removed only when it is
+    this host's and its process is gone. Files of the older naming (no process id) are removed once
+    a day old. Done once per folder per process; best effort (a file that cannot be removed stays).
+    Returns the names removed.
+    """
+    key = os.path.normcase(os.path.abspath(directory))
+    if key in _CLEANED:
+        return []
+    _CLEANED.add(key)
+    removed = []
+    try:
+        names = [n for n in os.listdir(directory) if n.startswith(TEMP_PREFIX)]
+    except OSError:
+        return removed
+    now = time.time()
+    for name in names:
+        path = os.path.join(directory, name)
+        m = _STALE.match(name)
+        if m is not None:
+            if m["host"] != _HOST or _pid_alive(int(m["pid"], 16)):
+                continue
+        elif _OLD_STALE.match(name):
+            try:
+                if now - os.lstat(path).st_mtime < _OLD_AGE:
+                    continue
+            except OSError:
+                continue
+        else:
+            continue
+        try:
+            if stat.S_ISREG(os.lstat(path).st_mode):
+                os.unlink(path)
+                removed.append(name)
+        except OSError:
+            pass
+    return removed
 
 
 def read_only(path):
@@ -142,6 +233,7 @@ class PendingFile:
                 _errno.EACCES,
             )
         ext = self.target.suffix if ext is None else ext
+        remove_stale(directory)
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | _O_BINARY
         try:
             for _ in range(100):

@@ -33,6 +33,10 @@ from .settings import BENT_SPACES, DISTRIBUTIONS, DOMAINS, FILE_FORMATS, OCCLUDE
 # The image file formats of the Format setting (PLY is a colour-attribute bake's own, chosen by its target).
 IMAGE_FORMATS = tuple(f for f in FILE_FORMATS if f != "PLY")
 
+# The most threads a bake may ask for: far above any machine's cores, far below what would exhaust
+# the process starting them.
+MAX_THREADS = 1024
+
 # Bakes in flight (operators.is_running() and unregister() read it).
 RUNS = set()
 
@@ -113,7 +117,34 @@ class BakeRun:
             except Exception as exc:  # a bug, or the machine out of memory: report it, keep the trace
                 put(("crash", i, exc, traceback.format_exc()))
                 continue
+            problem = empty_bake_problem(result)
+            if problem is not None:  # never a success that baked nothing (nor its all-zero files)
+                put(("error", i, self.core.MeshError(problem)))
+                continue
             put(("done", i, result))
+
+
+def empty_bake_problem(result):
+    """Why a finished bake baked nothing (no covered texel, no tile, no corner), or None when it baked.
+
+    The core's report says why: triangles without area, UV triangles without area, UVs outside the
+    image (or outside the UDIM tiles). The core may raise core.MeshError for this itself; either way
+    the object fails with a message, and no file is written.
+    """
+    mask = getattr(result, "mask", None)
+    if mask is None or np.any(mask):
+        return None
+    report = getattr(result, "report", None) or {}
+    reasons = []
+    for key, text in (("degenerate_triangles", "of its triangles have no area"),
+                      ("degenerate_uv_triangles", "of its UV triangles have no area in the UV map"),
+                      ("uv_outside_triangles", "of its UV triangles lie outside the image's UV square [0, 1]"),
+                      ("uv_outside_udim_triangles", "of its UV triangles lie outside the UDIM tiles 1001 to 2000")):
+        n = int(report.get(key, 0) or 0)
+        if n:
+            reasons.append(f"{n} {text}")
+    why = "; ".join(reasons) or "its UV triangles are too small to cover a texel centre at this resolution"
+    return f"the bake covered no texel ({why}): nothing was written"
 
 
 # -- settings --------------------------------------------------------------------------------------
@@ -121,11 +152,12 @@ class BakeRun:
 def check_settings(settings):
     """Problems with ``settings`` (a BakeSettings) as ``[(field, message), ...]``; empty when it can bake.
 
-    The limits are the core's (core.bake.MAX_SAMPLES, MAX_RESOLUTION), checked before anything is
-    baked so that a bad value costs nothing. Messages say what is allowed, not the field's name:
+    The limits are the core's (core.settings.MAX_SAMPLES, MAX_RESOLUTION; the seed's is the largest
+    the core's random streams take, MAX_SEED), checked before anything is baked so that a bad value
+    costs nothing. Messages say what is allowed, not the field's name:
     the caller names the field its own way (``--samples``, the Samples property).
     """
-    bake = corelink.load("bake")
+    bake = corelink.load("settings")
     problems = []
 
     def integer(field, lo, hi=None, what=""):
@@ -141,8 +173,8 @@ def check_settings(settings):
     integer("resolution", 1, bake.MAX_RESOLUTION)
     integer("height", 0, bake.MAX_RESOLUTION, " (0 = as wide as high)")
     integer("margin", 0, bake.MAX_RESOLUTION)
-    integer("seed", 0)
-    integer("threads", 0, what=" (0 = every core)")
+    integer("seed", 0, max_seed())
+    integer("threads", 0, MAX_THREADS, " (0 = every core)")
     target_error = _number(settings.target_error)
     if not (target_error is not None and math.isfinite(target_error) and target_error >= 0):
         problems.append(("target_error", f"must be a finite number >= 0 (0 = adaptive sampling off), "
@@ -171,6 +203,12 @@ def check_settings(settings):
         problems.append(("error_map", "is for image textures: a color-attribute bake has no image to hold the "
                                       "standard error; turn it off (adaptive sampling still uses the error)"))
     return problems
+
+
+def max_seed():
+    """The largest seed: the core's MAX_SEED where it has one, else 2**64 - 1 (its random streams
+    take the seed as one uint64 word; a larger one raised OverflowError deep in the bake)."""
+    return getattr(corelink.load("settings"), "MAX_SEED", (1 << 64) - 1)
 
 
 def _number(value):

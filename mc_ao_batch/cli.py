@@ -13,7 +13,7 @@ from pathlib import Path
 from core._version import __version__
 
 from .manifest import BATCH_SUMMARY, ManifestError, plan
-from .report import Progress, counts, table, write_json_atomic
+from .report import Progress, counts, output_problem, table, write_json_atomic
 
 EPILOG = """\
 engines:
@@ -92,10 +92,20 @@ def main(argv=None):
             return _fail(f"--entry {args.entry}: the manifest has entries 1 to {len(tasks)}")
         tasks = [tasks[args.entry - 1]]
 
+    summary_path = args.summary
+    if summary_path is None and args.entry is None:
+        summary_path = args.output / BATCH_SUMMARY
+    inputs = [(args.manifest, "the manifest")] + [(t.blend, f"the .blend file of entry {t.index}") for t in tasks]
+    inputs += [(p, f"a file of task {t.index}") for t in tasks for p in (t.summary, t.log)]
+    if summary_path is not None and args.runner in ("local", "dask"):
+        problem = output_problem(summary_path, inputs, replaces=("an mc_ao batch summary",))
+        if problem is not None:
+            return _fail(f"cannot write the batch summary {str(summary_path)!r}: {problem}; nothing was baked")
+
     if args.runner == "flamenco":
-        return _flamenco(args, tasks)
+        return _flamenco(args, tasks, inputs)
     if args.runner == "openjd":
-        return _openjd(args, tasks)
+        return _openjd(args, tasks, inputs)
 
     blender = _blender_option(args.blender)
     if args.runner == "local" or not args.scheduler:
@@ -127,7 +137,8 @@ def main(argv=None):
             except (RuntimeError, OSError) as exc:
                 progress.close()
                 return _fail(str(exc))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        records = getattr(exc, "records", records)  # mc_ao_batch.runners.Interrupted: the finished tasks
         code = 130
     finally:
         progress.close()
@@ -135,15 +146,17 @@ def main(argv=None):
         code = 1 if any(r["status"] == "failed" for r in records) else 0
     seconds = time.monotonic() - start
 
-    summary_path = args.summary
-    if summary_path is None and args.entry is None:
-        summary_path = args.output / BATCH_SUMMARY
     if summary_path is not None:
-        write_json_atomic(summary_path, {
-            "mc_ao": __version__, "manifest": str(args.manifest.resolve()), "output": str(args.output.resolve()),
-            "runner": args.runner, "workers": workers, "exit_code": code, "seconds": seconds,
-            "counts": counts(records), "tasks": sorted(records, key=lambda r: r["index"]),
-        })
+        try:
+            write_json_atomic(summary_path, {
+                "mc_ao": __version__, "manifest": str(args.manifest.resolve()), "output": str(args.output.resolve()),
+                "runner": args.runner, "workers": workers, "exit_code": code, "seconds": seconds,
+                "counts": counts(records), "tasks": sorted(records, key=lambda r: r["index"]),
+            }, inputs, replaces=("an mc_ao batch summary",))
+        except OSError as exc:
+            print(f"bake_batch: error: the batch summary was not written: {exc}", file=sys.stderr)
+            summary_path = None
+            code = code or 1
     if records:
         print(table(records))
     c = counts(records)
@@ -156,7 +169,17 @@ def main(argv=None):
     return code
 
 
-def _flamenco(args, tasks):
+def _write_json(path, data, inputs, what):
+    """A farm's JSON file (a job, job parameters); a message and False when it may not or cannot be written."""
+    try:
+        write_json_atomic(path, data, inputs)
+    except OSError as exc:
+        print(f"bake_batch: error: {what} was not written: {exc}", file=sys.stderr)
+        return False
+    return True
+
+
+def _flamenco(args, tasks, inputs):
     from .farm import flamenco_job, submit_flamenco
 
     if not args.manager and not args.job_file:
@@ -167,7 +190,8 @@ def _flamenco(args, tasks):
     todo = len(tasks) - len(skipped)
     print(f"bake_batch: {todo} tasks to bake, {len(skipped)} already done")
     if args.job_file:
-        write_json_atomic(args.job_file, job)
+        if not _write_json(args.job_file, job, inputs, "the Flamenco job"):
+            return 1
         print(f"bake_batch: Flamenco job written to {args.job_file}")
     if args.manager:
         if not todo:
@@ -181,7 +205,7 @@ def _flamenco(args, tasks):
     return 0
 
 
-def _openjd(args, tasks):
+def _openjd(args, tasks, inputs):
     from .farm import OPENJD_TEMPLATE, openjd_parameters
 
     if not args.job_params:
@@ -190,7 +214,8 @@ def _openjd(args, tasks):
         return _fail("--entry is what each Open Job Description task runs; leave it out here")
     params = openjd_parameters(args.manifest, args.output, len(tasks), blender=args.blender,
                                mc_ao_root=args.farm_root)
-    write_json_atomic(args.job_params, params)
+    if not _write_json(args.job_params, params, inputs, "the job parameters"):
+        return 1
     print(f"bake_batch: job parameters written to {args.job_params}; run the {len(tasks)} tasks with\n"
           f"  openjd run {OPENJD_TEMPLATE} -p file://{args.job_params.resolve()}")
     return 0

@@ -6,9 +6,10 @@ A runner starts this with a pipe on its standard input and keeps the pipe's othe
 waits. When the runner's process dies (a Dask worker killed, a runner interrupted), the operating
 system closes that end; this process reads end-of-file and kills the bake at once, so no orphaned
 bake keeps running beside the retried one. A runner that wants to stop a task closes the pipe. Also
-SIGTERM, SIGINT and SIGHUP end the bake before this process exits. The exit status is the bake's,
-or 128 + N when signal N ended it (as a shell reports it). Standard library only: it runs wherever
-the batch does.
+SIGTERM, SIGINT and SIGHUP end the bake before this process exits, and when this process itself is
+killed (SIGKILL, which nothing can catch) the bake ends too (mc_ao_batch.lifeline). The exit status
+is the bake's, or 128 + N when signal N ended it (as a shell reports it). Standard library only: it
+runs wherever the batch does.
 """
 
 import os
@@ -16,6 +17,11 @@ import signal
 import subprocess
 import sys
 import threading
+
+if __package__:
+    from . import lifeline
+else:  # run as a script: this folder is on sys.path
+    import lifeline
 
 
 def main(argv):
@@ -25,7 +31,9 @@ def main(argv):
         print("guard.py: usage: guard.py -- COMMAND [ARGS...]", file=sys.stderr)
         return 2
     try:
-        child = subprocess.Popen(argv, stdin=subprocess.DEVNULL)
+        # The bake ends with this process however it ends (also SIGKILL): the parent-death signal on
+        # Linux, elsewhere the bake watches this process (mc_ao_batch.lifeline).
+        child = subprocess.Popen(argv, stdin=subprocess.DEVNULL, **lifeline.child_options())
     except OSError as exc:
         print(f"bake_batch: cannot start {argv[0]!r}: {exc.strerror or exc}", file=sys.stderr)
         return 127

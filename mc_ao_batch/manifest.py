@@ -172,7 +172,17 @@ def _value_args(where, key, value, action):
     for v in values:
         if isinstance(v, (dict, list)) or isinstance(v, bool):
             raise ManifestError(f"{where}: {key}: {v!r} is not a plain value")
-    return [flag] + [_word(v) for v in values]
+    words = [_word(v) for v in values]
+    if len(words) == 1 and action.nargs is None:
+        # "--uv-map=-x": a value that starts with '-' stays this option's value
+        return [f"{flag}={words[0]}"] if words[0].startswith("-") else [flag, words[0]]
+    for word in words:
+        if word.startswith("-"):
+            # a list's items follow the option word by word: one that starts with '-' would be read
+            # as an option of its own ("--overwrite-input")
+            raise ManifestError(f"{where}: {key}: {word!r} starts with '-': a manifest's values are values, "
+                                "never an option; rename it")
+    return [flag] + words
 
 
 def _word(value):

@@ -1,10 +1,15 @@
-"""What a batch shows and keeps: a progress bar (or a line per task in a log), the table, the JSON summary."""
+"""What a batch shows and keeps: a progress bar (or a line per task in a log), the table, the JSON summary.
+
+Names and errors (which carry object names and manifest paths) are escaped before they are shown
+(mc_ao.terminal): nothing a .blend file or a manifest holds can write escape sequences or fake lines.
+"""
 
 import json
 import os
 import sys
-import tempfile
 import time
+
+from mc_ao.terminal import escape
 
 STATUS_WORDS = {"ok": "ok", "skipped": "skipped (done)", "failed": "FAILED"}
 
@@ -68,11 +73,11 @@ class Progress:
         self.failed += record["status"] == "failed"
         self.skipped += record["status"] == "skipped"
         if not self.quiet or record["status"] == "failed":
-            text = f"[{self.done}/{self.total}] {record['task']}: {STATUS_WORDS[record['status']]}"
+            text = f"[{self.done}/{self.total}] {escape(record['task'])}: {STATUS_WORDS[record['status']]}"
             if record["status"] != "skipped":
                 text += f", {len(record['objects'])} objects, {record['seconds']:.1f} s"
             if record["error"]:
-                text += ": " + record["error"].splitlines()[0]
+                text += ": " + escape(record["error"].splitlines()[0])
             self.line(text)
         else:
             self._draw()
@@ -91,7 +96,7 @@ def table(records):
     header = ("#", "asset", "status", "objects", "seconds", "Mrays/s", "files")
     rows = []
     for r in sorted(records, key=lambda r: r["index"]):
-        rows.append((str(r["index"]), r["task"], STATUS_WORDS[r["status"]], str(len(r["objects"])),
+        rows.append((str(r["index"]), escape(r["task"]), STATUS_WORDS[r["status"]], str(len(r["objects"])),
                      f"{r['seconds']:.1f}", f"{_mrays(r):.2f}" if r["status"] == "ok" else "-",
                      str(len(r["files"]))))
     widths = [max(len(row[i]) for row in rows + [header]) for i in range(len(header))]
@@ -100,8 +105,9 @@ def table(records):
     if failed:
         lines.append("")
         for r in failed:
-            lines.append(f"{r['task']} ({r['blend']}) failed: {r['error']}")
-            lines.append(f"  log: {r['log']}")
+            error = "\n".join(escape(line) for line in str(r["error"]).splitlines())
+            lines.append(f"{escape(r['task'])} ({escape(r['blend'])}) failed: {error}")
+            lines.append(f"  log: {escape(r['log'])}")
     return "\n".join(lines)
 
 
@@ -112,22 +118,55 @@ def counts(records):
     return out
 
 
-def write_json_atomic(path, data):
-    """Write JSON to ``path`` through a temporary file in the same folder and a rename."""
+def write_json_atomic(path, data, inputs=(), replaces=None):
+    """Write JSON to ``path`` through core.atomicfile (a temporary file read back, then a rename): a new
+    file gets the umask's permissions, a replaced one keeps its own.
+
+    ``inputs``: ``(path, what)`` pairs the file may never be; ``replaces``: the mc_ao.filecheck kinds of
+    an existing file it may replace (None: any but a .blend file or an image). Raises OSError (a
+    core.FileWriteError naming the path) when it may not or cannot be written; the old file is then as
+    it was.
+    """
+    from core import atomicfile
+    from core.errors import FileWriteError
+
+    problem = output_problem(path, inputs, replaces)
+    if problem is not None:
+        raise FileWriteError(f"{os.fspath(path)!r}: {problem}")
+    text = json.dumps(data, indent=1, sort_keys=False) + "\n"
+
+    def write(temp):
+        with open(temp, "w", encoding="utf-8") as f:
+            f.write(text)
+
+    def verify(temp):
+        with open(temp, encoding="utf-8") as f:
+            if f.read() != text:
+                raise ValueError("it reads back different")
+
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    atomicfile.write_file(path, write, verify=verify)
+
+
+def output_problem(path, inputs=(), replaces=None):
+    """Why a JSON file of the batch may not be written at ``path`` (None when it may): a folder, an input,
+    an unwritable folder, a read-only file, or an existing file of another kind."""
+    from core import atomicfile
+    from mc_ao import filecheck
+
     path = os.path.abspath(path)
-    folder = os.path.dirname(path)
-    os.makedirs(folder, exist_ok=True)
-    fd, temp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1, sort_keys=False)
-            f.write("\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(temp, path)
-    except BaseException:
-        try:
-            os.remove(temp)
-        except OSError:
-            pass
-        raise
+    if os.path.isdir(path):
+        return "it is a folder"
+    existing = os.path.dirname(path)
+    while not os.path.exists(existing) and os.path.dirname(existing) != existing:
+        existing = os.path.dirname(existing)
+    if not os.path.isdir(existing):
+        return f"{existing!r} is a file, not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"the folder {existing!r} is not writable"
+    if atomicfile.read_only(path):
+        return "it is read-only"
+    if replaces is None:
+        kind = filecheck.file_kind(path)
+        replaces = () if kind is None or kind == "a .blend file" or "image" in kind or "mesh" in kind else (kind,)
+    return filecheck.output_problem(path, "", inputs=inputs, replaces=replaces)

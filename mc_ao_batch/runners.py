@@ -24,6 +24,22 @@ ALLOWED_FAILURES = 3
 TOPIC = "mc_ao-batch"
 
 
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C reached a runner: ``records`` holds every task's record, the finished ones as they
+    finished and the others failed as interrupted, for the batch summary."""
+
+    def __init__(self, records):
+        super().__init__()
+        self.records = records
+
+
+def _interrupted_records(tasks, records):
+    """``records`` (finished tasks) and an "interrupted" failure for each task without one."""
+    done = {r["index"] for r in records}
+    return list(records) + [_record(t, "failed", error="interrupted: the batch stopped before it finished")
+                            for t in tasks if t.index not in done]
+
+
 def _bug_record(task, exc):
     text = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__)).rstrip()
     return _record(task, "failed", error=f"internal error in the batch runner:\n{text}")
@@ -52,6 +68,8 @@ def run_local(tasks, *, workers, progress, force=False, blender=None):
                               on_start=lambda info: events.put(("started", info)))
         except BaseException as exc:  # a bug here must not hang the batch
             record = _bug_record(task, exc)
+        if stopping.is_set() and record["status"] == "failed":
+            record["error"] = "interrupted: its bake was stopped"  # not the bake's own failure
         with lock:
             running.pop(task.index, None)
         events.put(("done", record))
@@ -77,7 +95,11 @@ def run_local(tasks, *, workers, progress, force=False, blender=None):
                 except OSError:
                     pass
         pool.shutdown(wait=True, cancel_futures=True)
-        raise
+        while not events.empty():  # the tasks that ended while the pool stopped
+            kind, payload = events.get()
+            if kind == "done":
+                records.append(payload)
+        raise Interrupted(_interrupted_records(tasks, records)) from None
     pool.shutdown(wait=True)
     return records
 
@@ -158,7 +180,10 @@ def run_dask(tasks, *, workers, progress, scheduler=None, force=False, blender=N
 
         records, starts = {}, {}
         while len(records) < len(tasks):
-            kind, payload = events.get()
+            try:
+                kind, payload = events.get()
+            except KeyboardInterrupt:
+                raise Interrupted(_interrupted_records(tasks, records.values())) from None
             if kind == "started":
                 starts[payload.get("index")] = starts.get(payload.get("index"), 0) + 1
                 progress.started(payload)

@@ -7,7 +7,8 @@ later run reads back to decide whether the task is done:
 
 - the summary's run ended with exit status 0 and every object in it has status "ok";
 - it was made by this version of mc_ao;
-- every file it lists exists and carries, in its metadata, the settings the summary records.
+- every file it lists exists and carries, in its metadata, the settings the summary records (all but
+  the choice of objects, such as match_suffix, which no file carries).
 
 The fingerprint covers the .blend file (path, size, modification time), every setting that changes
 the output and the mc_ao version, so a changed asset or setting bakes again and everything else is
@@ -31,10 +32,14 @@ import time
 from importlib.util import find_spec
 
 from core._version import __version__
+from mc_ao.terminal import escape
 
 from . import BAKE_SCRIPT
 from .manifest import Task
 
+# Entries of a summary's "settings" that choose which objects a run bakes: no file's metadata
+# carries them (each file records its own object and high-poly objects), so they are not compared.
+_RUN_ONLY_SETTINGS = {"match_suffix"}
 GUARD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "guard.py")
 _TAIL_LINES = 12
 
@@ -135,6 +140,8 @@ def why_not_done(task):
             if metadata.get("object", obj.get("object")) != obj.get("object"):
                 return f"{path} holds the bake of {metadata['object']!r}, not of {obj.get('object')!r}"
             for key, value in settings.items():
+                if key in _RUN_ONLY_SETTINGS:
+                    continue
                 if key not in metadata or not _same(metadata[key], value):
                     return f"{path}: {key} is {metadata.get(key)!r}, the bake recorded {value!r}"
     return None
@@ -182,12 +189,13 @@ def _signal_name(code):
 
 def _failure_text(code, summary, log):
     if summary is not None:
+        # escaped: the errors carry object names, which may hold newlines and escape sequences
         errors = []
         if summary.get("error"):
-            errors.append(str(summary["error"]).strip())
+            errors.append(escape(str(summary["error"]).strip(), keep="\n"))
         for o in summary.get("objects") or []:
             if o.get("status") != "ok":
-                errors.append(f"{o.get('object')}: {str(o.get('error') or 'failed').strip()}")
+                errors.append(f"{escape(o.get('object'))}: {escape(str(o.get('error') or 'failed').strip())}")
         if errors:
             return "; ".join(errors)
         if code != 0:
@@ -241,14 +249,19 @@ def run_task(task, *, force=False, blender=None, on_start=None, on_process=None,
         os.makedirs(task.output, exist_ok=True)
         if os.path.lexists(task.summary):
             os.remove(task.summary)  # a crash must not leave the previous run's summary in its place
-        log = open(task.log, "wb")
+        log = open(task.log, "wb", buffering=0)  # a failed write raises here, not again at close
     except OSError as exc:
         return _record(task, "failed", error=f"cannot write to {task.output}: {exc.strerror or exc}",
                        seconds=time.perf_counter() - t0)
     command = bake_command(task, baker)
     with log:
-        log.write(("$ " + subprocess.list2cmdline(command) + "\n").encode())
-        log.flush()
+        try:
+            log.write(("$ " + escape(subprocess.list2cmdline(command)) + "\n").encode())
+            log.flush()
+        except OSError as exc:  # a full disk: the task's failure, with the reason
+            return _record(task, "failed", error=f"cannot write the task's log {task.log}: "
+                                                 f"{os.strerror(exc.errno) if exc.errno else exc}",
+                           seconds=time.perf_counter() - t0)
         try:
             proc = subprocess.Popen([sys.executable, GUARD, "--"] + command, stdin=subprocess.PIPE,
                                     stdout=log, stderr=subprocess.STDOUT, start_new_session=True, env=env)

@@ -51,6 +51,11 @@ atomically, a JSON record of it:
                   "rays": int, "samples_per_texel": mean over covered texels, "files": [absolute
                   paths written], "error": str or null}, ...]}
 
+The summary's path may not be the .blend file, one of the run's files or an existing file that is
+not an earlier summary (exit 2, nothing baked, that file untouched); --save's may not be the input
+(unless --overwrite-input) or an existing file that is not a .blend file, and the saved file is
+read back to its end marker before it replaces anything.
+
 "error" is null after a run in which everything succeeded. Unlimited max_distance is written as
 Infinity, as Python's json module writes and reads it (and as the files' metadata records it).
 
@@ -71,6 +76,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from mc_ao.terminal import EscapingStream, escape  # noqa: E402
+
 # --format choice -> Blender's file format name (mc_ao.settings.FILE_FORMATS)
 FORMATS = {"png": "PNG", "exr": "OPEN_EXR", "tif": "TIFF", "ply": "PLY"}
 # Issue 14: --target choice -> BakeSettings.target
@@ -89,10 +96,15 @@ OPTIONS = {
 
 
 class UsageError(Exception):
-    """Bad arguments or input: exit status 2. ``usage``: the usage text to show after the message."""
+    """Bad arguments or input: exit status 2. ``usage``: the usage text to show after the message.
+
+    ``message``: one problem (text), or a list of them, one line each; names in them are escaped
+    (mc_ao.terminal.escape), so a name's newline cannot start a line of its own.
+    """
 
     def __init__(self, message, usage=""):
-        super().__init__(message)
+        problems = message if isinstance(message, list) else [message]
+        super().__init__("\n".join(escape(str(p)) for p in problems))
         self.usage = usage
 
 
@@ -171,8 +183,8 @@ def make_parser(with_blend):
     parser.add_argument("--image-name", default="",
                         help='image and file name, "{object}" replaced by the object name (default: '
                              '{object}_AO); made a safe file name')
-    parser.add_argument("--seed", type=int, default=0, help="0 or more (default: 0)")
-    parser.add_argument("--threads", type=int, default=0, help="worker threads; 0 = all cores")
+    parser.add_argument("--seed", type=int, default=0, help="0 to 2**64 - 1 (default: 0)")
+    parser.add_argument("--threads", type=int, default=0, help="worker threads, at most 1024; 0 = all cores")
     parser.add_argument("--ignore-backfaces", action="store_true")
     # Issue 14: UDIM tiles, colour attributes, bent normals.
     parser.add_argument("--udim", action="store_true",
@@ -289,6 +301,20 @@ class Summary:
         self.settings = {}
         self.objects = []
         self.error = None
+        self.outputs = []  # (path, what): the run's other files, which the summary may not be
+
+    def problem(self):
+        """Why the summary may not be written at its path (None when it may): it is the input .blend
+        file, one of the run's files, or an existing file that is not an earlier summary."""
+        from mc_ao import filecheck
+
+        if self.path is None:
+            return None
+        if os.path.isdir(self.path):
+            return "it is a folder"
+        return filecheck.output_problem(self.path, "the summary",
+                                        inputs=[(self.blend, "the .blend file being baked")],
+                                        outputs=self.outputs, replaces=("an mc_ao summary",))
 
     def add(self, name, status, seconds=0.0, rays=0, samples_per_texel=0.0, files=(), error=None, **extra):
         self.objects.append({
@@ -310,15 +336,24 @@ class Summary:
             "settings": self.settings, "objects": self.objects,
         }
         text = json.dumps(record, indent=2) + "\n"
+        problem = self.problem()
+        if problem is not None:
+            print(f"bake_ao: error: the summary {str(self.path)!r} was not written: {problem}", file=sys.stderr)
+            return False
 
         def write(temp):
             with open(temp, "w", encoding="utf-8") as f:
                 f.write(text)
 
+        def verify(temp):
+            with open(temp, encoding="utf-8") as f:
+                if f.read() != text:
+                    raise ValueError("it reads back different")
+
         try:
             folder = os.path.dirname(os.path.abspath(self.path))
             os.makedirs(folder, exist_ok=True)
-            atomicfile.write_file(self.path, write)
+            atomicfile.write_file(self.path, write, verify=verify)
         except OSError as exc:
             print(f"bake_ao: error: the summary {str(self.path)!r} was not written: {exc}", file=sys.stderr)
             return False
@@ -351,7 +386,7 @@ def pick_objects(bpy, names, baking, needs_uvs=True):
     if objects:
         for obj in selected:
             if obj not in objects:
-                print(f"bake_ao: {obj.name}: skipped, it {baking.skip_reason(obj, needs_uvs)}", file=sys.stderr)
+                print(f"bake_ao: {escape(obj.name)}: skipped, it {baking.skip_reason(obj, needs_uvs)}", file=sys.stderr)
         return objects
     objects = baking.targets_of(layer_objects, needs_uvs)
     what = "mesh with a UV map" if needs_uvs else "mesh"
@@ -359,7 +394,7 @@ def pick_objects(bpy, names, baking, needs_uvs=True):
         raise UsageError(f"the file has no {what} to bake")
     print(
         f"bake_ao: {f'no {what} is selected' if selected else 'nothing is selected'}; "
-        f"baking every {what}: {', '.join(o.name for o in objects)}",
+        f"baking every {what}: {', '.join(escape(o.name) for o in objects)}",
         file=sys.stderr,
     )
     return objects
@@ -398,7 +433,7 @@ def selected_to_active_pairs(bpy, args):
             if high is None:
                 if args.objects:
                     raise UsageError(f"{low.name} has no high-poly {name!r} in the view layer")
-                print(f"bake_ao: {low.name}: skipped, there is no {name}", file=sys.stderr)
+                print(f"bake_ao: {escape(low.name)}: skipped, there is no {escape(name)}", file=sys.stderr)
                 continue
             pairs.append((low, [high]))
         if not pairs:
@@ -416,7 +451,7 @@ def selected_to_active_pairs(bpy, args):
     else:
         highs = [o for o in layer if o.select_get() and o is not low and o is not cage]
         if highs:
-            print(f"bake_ao: baking the selected {', '.join(o.name for o in highs)} onto {low.name}",
+            print(f"bake_ao: baking the selected {', '.join(escape(o.name) for o in highs)} onto {escape(low.name)}",
                   file=sys.stderr)
     if not highs:
         raise UsageError(f"no high-poly objects to bake onto {low.name}: name them with --objects, or select "
@@ -449,7 +484,7 @@ def plan_selected_to_active(bpy, args, settings):
             raise UsageError(f"several low-poly objects would bake into image {name!r}; put {{object}} into --image-name")
     for job in plan:
         for note in job.notes:
-            print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
+            print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
     return plan
 
 
@@ -478,7 +513,7 @@ def settings_from(args):
     problems = selected_to_active_problems(args)
     for field, message in jobs.check_settings(settings):
         if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
-            message = f"--resolution must be at most {corelink.load('bake').MAX_RESOLUTION} a side, not {width}x{height}"
+            message = f"--resolution must be at most {corelink.load('settings').MAX_RESOLUTION} a side, not {width}x{height}"
             if message not in problems:
                 problems.append(message)
             continue
@@ -498,7 +533,7 @@ def settings_from(args):
     if any(sep in args.image_name for sep in "/\\") or args.image_name in (".", ".."):
         problems.append(f"--image-name {args.image_name!r} is a path: give a name; files go into --output")
     if problems:
-        raise UsageError("\n".join(problems))
+        raise UsageError(problems)
     return settings
 
 
@@ -544,6 +579,14 @@ def check_save(args, input_blend):
                          "--overwrite-input to replace it")
     if save.is_dir():
         raise UsageError(f"--save {str(save)!r} is a folder; give a .blend file path")
+    from mc_ao import filecheck
+
+    inputs = [] if args.overwrite_input else [(input_blend, "the .blend file being baked")]
+    problem = filecheck.output_problem(save, "--save", inputs=inputs,
+                                       outputs=[(args.summary_json, "the --summary-json file")],
+                                       replaces=("a .blend file",))
+    if problem is not None:
+        raise UsageError(f"--save {str(save)!r}: {problem}; nothing was baked")
     problem = jobs.folder_problem(save.parent if str(save.parent) else ".")
     if problem is not None:
         raise UsageError(f"cannot save {str(save)!r}: {problem}; nothing was baked")
@@ -563,14 +606,11 @@ def save_blend(bpy, path):
         if result != {"FINISHED"}:
             raise RuntimeError(f"Blender did not save it ({result})")
 
-    def verify(temp):
-        with open(temp, "rb") as f:
-            head = f.read(7)
-        if head != b"BLENDER" and not head.startswith(b"\x28\xb5\x2f\xfd") and not head.startswith(b"\x1f\x8b"):
-            raise ValueError("it is not a .blend file")
+    from mc_ao import filecheck
 
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    atomicfile.write_file(path, write, verify=verify, ext=".blend")
+    # Blender reports a compressed save cut short by a full disk as done: read it to its end marker.
+    atomicfile.write_file(path, write, verify=filecheck.check_blend_complete, ext=".blend")
 
 
 def selected_to_active_problems(args):
@@ -615,7 +655,7 @@ def check_paths(args, summary):
         raise UsageError(f"cannot write to the output folder '{args.output}': {problem}; nothing was baked")
     if args.summary_json is not None:
         path = args.summary_json
-        problem = "it is a folder" if path.is_dir() else jobs.folder_problem(path.parent)
+        problem = summary.problem() or jobs.folder_problem(path.parent)
         if problem is None and atomicfile.read_only(path):
             problem = "it is read-only"
         if problem is not None:
@@ -624,6 +664,17 @@ def check_paths(args, summary):
 
 
 def main(argv=None):
+    """Run the script (see the module's docstring); the exit status. Everything it prints goes through
+    mc_ao.terminal.EscapingStream: a name cannot write escape sequences to the terminal or a log."""
+    out, err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = EscapingStream(out), EscapingStream(err)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = out, err
+
+
+def _main(argv=None):
     in_blender = run_by_blender()
     argv = script_argv(argv)
     summary = Summary(*early_summary_args(argv, in_blender))
@@ -638,8 +689,7 @@ def main(argv=None):
         summary.settings, summary.objects = {}, []
         code = 2
     except KeyboardInterrupt:
-        print("\nbake_ao: cancelled; the files of finished objects are written, nothing of the "
-              "cancelled one was", file=sys.stderr)
+        print(f"\nbake_ao: {cancel_note(summary)}", file=sys.stderr)
         summary.error = "cancelled (Ctrl-C)"
         code = 130
     except Exception as exc:
@@ -651,6 +701,19 @@ def main(argv=None):
     if not summary.write(code) and code == 0:
         code = 1
     return code
+
+
+def cancel_note(summary):
+    """What a cancel left: which objects have all their files written, and of which nothing was
+    written (an object's files are written with Ctrl-C held off: all of them or none)."""
+    done = [escape(o["object"]) for o in summary.objects if o["status"] == "ok"]
+    kept = [escape(o["object"]) for o in summary.objects if o["status"] != "ok"]
+    parts = []
+    if done:
+        parts.append(f"every file of {', '.join(done)} is written")
+    if kept:
+        parts.append(f"nothing of {', '.join(kept)} was written (any file there is as it was)")
+    return "cancelled; " + ("; ".join(parts) or "nothing was written")
 
 
 def early_summary_args(argv, in_blender):
@@ -717,10 +780,19 @@ def run(argv, in_blender, summary):
         files = targets.output_files(settings, str(args.output), plan, formats, stderr=args.stderr)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
+    summary.outputs = [(f, "one of this run's files") for f in planned_paths(files)]
+    if getattr(args, "save", None) is not None:
+        summary.outputs.append((args.save, "the --save file"))
+    check_paths(args, summary)  # again, now that the run's own files are known
     summary.settings = record = jobs.settings_record(settings)
     if args.match_suffix:  # the summary's record only: file metadata holds plain values
         summary.settings = dict(record, match_suffix=list(args.match_suffix))
     return bake(plan, files, settings, record, args, summary)
+
+
+def planned_paths(files):
+    """Every path of a run's planned files (``{image name: [OutputFile]}``): images, standard errors, PLY."""
+    return [os.fspath(p) for entry in files.values() for f in entry for p in (f.path, f.stderr_path) if p]
 
 
 def s2a_record(job, result=None):
@@ -744,7 +816,7 @@ def s2a_metadata(job):
 
 def bake(plan, files, settings, record, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
-    from mc_ao import baking, jobs, selected_to_active, targets
+    from mc_ao import baking, interrupts, jobs, selected_to_active, targets
 
     progress = Progress(enabled=not args.quiet)
     run = jobs.BakeRun(plan, settings, args.threads or None, live=False)
@@ -752,8 +824,8 @@ def bake(plan, files, settings, record, args, summary):
     width, height = settings.size
 
     def begin(i):
-        print(f"bake_ao: [{i + 1}/{len(plan)}] baking {plan[i].object_name}", flush=True)
-        progress.begin(f"[{i + 1}/{len(plan)}] {plan[i].object_name}")
+        print(f"bake_ao: [{i + 1}/{len(plan)}] baking {escape(plan[i].object_name)}", flush=True)
+        progress.begin(f"[{i + 1}/{len(plan)}] {escape(plan[i].object_name)}")
 
     def failed(i, errors, seconds=None, files=(), rays=0, per_texel=0.0, result=None):
         nonlocal failures
@@ -761,7 +833,7 @@ def bake(plan, files, settings, record, args, summary):
         failures += 1
         done.add(i)
         for error in errors:
-            print(f"bake_ao: {plan[i].object_name}: {error}", file=sys.stderr)
+            print(f"bake_ao: {escape(plan[i].object_name)}: {escape(error)}", file=sys.stderr)
         if seconds is None:
             seconds = time.monotonic() - run.started.get(i, time.monotonic())
         summary.add(plan[i].object_name, "failed", seconds, rays, per_texel, files, "; ".join(map(str, errors)),
@@ -779,31 +851,32 @@ def bake(plan, files, settings, record, args, summary):
                 progress.update(rest[1])
             elif kind == "done":
                 result = rest[1]
-                progress.end()
-                job = plan[i]
-                if targets.custom(settings) or settings.bent_normals:  # issue 14: tiles, PLY, bent normals
-                    written, errors = targets.write_files(job, result, files, dict(record, object=job.object_name),
-                                                          settings)
-                else:
-                    written, errors = jobs.write_outputs(result, files[job.image_name],
-                                                         dict(record, object=job.object_name, **s2a_metadata(job)))
-                if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
-                    errors = attribute_errors(job, result, settings)
-                for note in baking.input_notes(result):
-                    print(f"bake_ao: {job.object_name}: warning: {note}", file=sys.stderr)
-                if job.selected_to_active:
-                    print(f"bake_ao: {job.object_name}: from {', '.join(h.name for h in job.highpoly)}"
-                          f"{selected_to_active.miss_summary(result)}", file=sys.stderr)
-                per_texel, rate = baking.throughput(result)
-                if errors:
-                    failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
-                           result=result)
-                else:
-                    done.add(i)
-                    summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
-                                **s2a_record(job, result))
-                    rows.append((job.object_name, size_text(result, settings), f"{result.seconds:.2f}",
-                                 f"{per_texel:.0f}", f"{rate:.2f}", ", ".join(written)))
+                with interrupts.held_off():  # a Ctrl-C now: this object's files all written, then the cancel
+                    progress.end()
+                    job = plan[i]
+                    if targets.custom(settings) or settings.bent_normals:  # issue 14: tiles, PLY, bent normals
+                        written, errors = targets.write_files(job, result, files, dict(record, object=job.object_name),
+                                                              settings)
+                    else:
+                        written, errors = jobs.write_outputs(result, files[job.image_name],
+                                                             dict(record, object=job.object_name, **s2a_metadata(job)))
+                    if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
+                        errors = attribute_errors(job, result, settings)
+                    for note in baking.input_notes(result):
+                        print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
+                    if job.selected_to_active:
+                        print(f"bake_ao: {escape(job.object_name)}: from {', '.join(escape(h.name) for h in job.highpoly)}"
+                              f"{selected_to_active.miss_summary(result)}", file=sys.stderr)
+                    per_texel, rate = baking.throughput(result)
+                    if errors:
+                        failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
+                               result=result)
+                    else:
+                        done.add(i)
+                        summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
+                                    **s2a_record(job, result))
+                        rows.append((escape(job.object_name), size_text(result, settings), f"{result.seconds:.2f}",
+                                     f"{per_texel:.0f}", f"{rate:.2f}", escape(", ".join(written))))
             elif kind == "error":
                 failed(i, [rest[1]])
             elif kind == "crash":
@@ -872,4 +945,7 @@ def attribute_errors(job, result, settings):
 
 
 if __name__ == "__main__":
+    from mc_ao_batch import lifeline
+
+    lifeline.from_environment()  # a batch task's bake ends with its guard process, however that ends
     sys.exit(main())

@@ -190,4 +190,35 @@ def test_temporary_names_are_short(tmp_path):
 
     seen = []
     atomicfile.write_file(tmp_path / ("x" * 250), lambda temp: (seen.append(temp.name), temp.write_bytes(b"1")))
-    assert len(seen[0]) == len(".mc_ao-12345678.tmp")
+    assert len(seen[0]) == len(".mc_ao-12345678-12345678-12345678.tmp")
+
+
+def test_the_next_write_into_a_folder_removes_what_killed_writers_left(tmp_path):
+    """A killed process's temporary and backup files go with the next write into that folder; a live
+    process's, another host's and the user's own files stay."""
+    import subprocess
+    import sys
+    import time
+
+    from core import atomicfile
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    host = atomicfile._HOST
+    other_host = "0" * 8 if host != "0" * 8 else "1" * 8
+    names = {
+        f".mc_ao-{host}-{dead.pid:08x}-0badc0de.tmp.png": False,  # killed: removed
+        f".mc_ao-{host}-{dead.pid:08x}-0badc0de.bak.exr": False,
+        f".mc_ao-{host}-{dead.pid:08x}-0badc0de.tmp.blend1": False,  # Blender's backup of a temporary file
+        f".mc_ao-{host}-{os.getppid():08x}-0badc0de.tmp.png": True,  # a live process's (pytest's parent)
+        f".mc_ao-{other_host}-{dead.pid:08x}-0badc0de.tmp.png": True,  # another machine's, on a shared disk
+        ".mc_ao-0badc0de.tmp.png": True,  # the older naming, recent: maybe a live writer's
+        ".mc_ao-deadbeef.tmp.png": False,  # the older naming, two days old
+        ".mc_ao-notes.txt": True, "ao.tmp.png": True,
+    }
+    for name in names:
+        (tmp_path / name).write_bytes(b"x")
+    old = time.time() - 2 * 24 * 3600
+    os.utime(tmp_path / ".mc_ao-deadbeef.tmp.png", (old, old))
+    atomicfile.write_file(tmp_path / "summary.json", lambda temp: temp.write_text("{}"))
+    assert sorted(listing(tmp_path)) == sorted([n for n, kept in names.items() if kept] + ["summary.json"])

@@ -146,15 +146,82 @@ def test_ctrl_c_during_a_bake_exits_130_and_writes_nothing(blends, tmp_path):
     finally:
         proc.kill()
     assert proc.returncode == 130
-    assert err.endswith(
-        "bake_ao: cancelled; the files of finished objects are written, nothing of the cancelled one was\n"
-    )
+    assert err.endswith("bake_ao: cancelled; nothing of Ground was written (any file there is as it was)\n")
     assert (out / "Ground_AO.png").read_bytes() == b"the previous bake"
     assert sorted(p.name for p in out.iterdir()) == ["Ground_AO.png"]
     record = json.loads(summary.read_text())
     assert record["exit_code"] == 130 and record["error"] == "cancelled (Ctrl-C)"
     assert record["objects"] == [{"object": "Ground", "status": "failed", "seconds": 0.0, "rays": 0,
                                   "samples_per_texel": 0.0, "files": [], "error": "not baked: cancelled (Ctrl-C)"}]
+
+
+# Runs the script with SIGINT sent to itself right after its first image file is written: a Ctrl-C
+# that lands between two files of one object.
+CTRL_C_AFTER_FIRST_FILE = """
+import os, runpy, signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)
+sys.path.insert(0, sys.argv[1])
+import core.imageio as imageio
+real = imageio.write_ao
+def write_ao(*args, **kwargs):
+    written = real(*args, **kwargs)
+    if not getattr(write_ao, "sent", False):
+        write_ao.sent = True
+        os.kill(os.getpid(), signal.SIGINT)
+    return written
+imageio.write_ao = write_ao
+sys.argv = sys.argv[2:]
+runpy.run_path(sys.argv[0], run_name="__main__")
+"""
+
+
+def test_ctrl_c_between_an_objects_files_writes_all_of_them_and_says_so(blends, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    names = ["Ground_AO.png", "Ground_AO.exr", "Ground_AO.tif", "Block_AO.png"]
+    for name in names:
+        (out / name).write_bytes(b"the previous bake")
+    proc = subprocess.run(
+        [sys.executable, "-c", CTRL_C_AFTER_FIRST_FILE, str(ROOT), SCRIPT, str(blends["mixed"]), "--objects", "Ground",
+         "Block", "--output", str(out), "--format", "png", "exr", "tif", *FAST],
+        capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.endswith("bake_ao: cancelled; every file of Ground is written; nothing of Block was written "
+                                "(any file there is as it was)\n"), proc.stderr
+    assert all((out / n).read_bytes() != b"the previous bake" for n in names[:3])  # all of Ground's
+    assert (out / "Block_AO.png").read_bytes() == b"the previous bake"
+    assert sorted(p.name for p in out.iterdir()) == sorted(names)
+
+
+# Runs the script and kills it (SIGKILL: nothing of it runs after) once its first temporary file is
+# written, before that file is checked and renamed.
+KILLED_MID_WRITE = """
+import os, runpy, signal, sys
+sys.path.insert(0, sys.argv[1])
+from core import atomicfile
+def finish(self, verify=None):
+    os.kill(os.getpid(), signal.SIGKILL)
+atomicfile.PendingFile.finish = finish
+sys.argv = sys.argv[2:]
+runpy.run_path(sys.argv[0], run_name="__main__")
+"""
+
+
+def test_a_killed_run_keeps_the_old_files_and_the_next_run_removes_its_temporary_files(blends, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "Ground_AO.png").write_bytes(b"the previous bake")
+    args = [str(blends["mixed"]), "--objects", "Ground", "--output", str(out), *FAST]
+    proc = subprocess.run([sys.executable, "-c", KILLED_MID_WRITE, str(ROOT), SCRIPT, *args],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    assert (out / "Ground_AO.png").read_bytes() == b"the previous bake"
+    left = [p.name for p in out.iterdir() if p.name.startswith(".mc_ao-")]
+    assert left, "the killed run left no temporary file: the test did not kill it mid-write"
+    proc = subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["Ground_AO.png"]
+    assert (out / "Ground_AO.png").read_bytes() != b"the previous bake"
 
 
 # -- every setting is checked before anything is baked: exit 2, once ------------------------------
@@ -173,8 +240,9 @@ INFINITY_MESSAGE = "must be a distance >= 0 (0 or inf = unlimited)"
     (["--resolution", "65537"], "--resolution must be at most 65536 a side, not 65537x65537"),
     (["--resolution", "16x70000"], "--resolution must be at most 65536 a side, not 16x70000"),
     (["--margin", "-1"], "--margin must be from 0 to 65536, not -1"),
-    (["--seed", "-1"], "--seed must be at least 0, not -1"),
-    (["--threads", "-1"], "--threads must be at least 0 (0 = every core), not -1"),
+    (["--seed", "-1"], f"--seed must be from 0 to {2**64 - 1}, not -1"),
+    (["--seed", str(10**30)], f"--seed must be from 0 to {2**64 - 1}, not {10**30}"),
+    (["--threads", "-1"], "--threads must be from 0 to 1024 (0 = every core), not -1"),
     (["--target-error", "nan"], "--target-error must be a finite number >= 0 (0 = adaptive sampling off), not nan"),
     (["--target-error", "-0.1"], "--target-error must be a finite number >= 0 (0 = adaptive sampling off), not -0.1"),
     (["--target-error", "inf"], "--target-error must be a finite number >= 0 (0 = adaptive sampling off), not inf"),

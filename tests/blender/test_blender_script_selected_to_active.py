@@ -220,3 +220,18 @@ def test_the_batch_passes_the_options_on_from_a_manifest(blends, tmp_path):
         manifest.write_text(f"[[bake]]\nblend = \"{blends.as_posix()}\"\n{entry}\n")
         with pytest.raises(ManifestError, match=message):
             plan(manifest, tmp_path / "bad")
+
+
+def test_a_batch_rerun_skips_the_pairs_it_baked(blends, tmp_path):
+    """Bake, rerun: nothing is baked again (the summary's match_suffix is the run's choice of objects,
+    which no file's metadata carries)."""
+    manifest = tmp_path / "manifest.toml"
+    manifest.write_text("[defaults]\nresolution = 16\nsamples = 8\nmargin = 0\n\n"
+                        f"[[bake]]\nblend = \"{blends.as_posix()}\"\nmatch_suffix = [\"_high\", \"_low\"]\n")
+    out = tmp_path / "out"
+    first = batch(manifest, out)
+    assert first.returncode == 0 and "1 baked, 0 already done" in first.stdout, first.stdout + first.stderr
+    files = {p: p.read_bytes() for p in out.rglob("*_AO.png")}
+    again = batch(manifest, out)
+    assert again.returncode == 0 and "0 baked, 1 already done" in again.stdout, again.stdout + again.stderr
+    assert {p: p.read_bytes() for p in out.rglob("*_AO.png")} == files

@@ -139,3 +139,34 @@ def test_an_object_name_too_long_for_its_image_name_bakes_into_its_own_image(bpy
     for image in bpy.data.images:
         ao, _ = image_ao(image)
         assert np.all(ao > 0.99)  # an open plane: baked white, not left blank (0)
+
+
+MISSING = "Missing\x1b[31m"
+TERMINAL_TRICKS = "Evil\x1b[2J\x1b]0;title\x07\rbake_ao: baked 99 of 99 objects\n\u202eelif"
+
+
+def test_names_reach_the_terminal_and_the_batch_log_escaped(bpy, tmp_path):
+    """A name with escape sequences, a carriage return, a newline and a bidirectional override: the
+    script's and the batch's output (and the task's log) hold it escaped, never raw, and no fake line."""
+    objects = make_objects(bpy, [TERMINAL_TRICKS, "Plain"])
+    assert objects[0].name == TERMINAL_TRICKS  # Blender keeps every character
+    for obj in objects:
+        obj.select_set(False)  # nothing selected: the script bakes every mesh
+    blend = tmp_path / "tricks.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), copy=True)
+    clean_scene(bpy)
+    proc = subprocess.run([sys.executable, SCRIPT, str(blend), "--output", str(tmp_path / "out"), *FAST],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    manifest = tmp_path / "m.toml"
+    manifest.write_text(f"[[bake]]\nblend = 'tricks.blend'\nsamples = 2\nresolution = 8\nmargin = 0\n"
+                        f"objects = ['Plain', {json.dumps(TERMINAL_TRICKS)}, {json.dumps(MISSING)}]\n")
+    batch = subprocess.run([sys.executable, str(ROOT / "scripts" / "bake_batch.py"), str(manifest), "--output",
+                            str(tmp_path / "batch"), "--blender", "bpy"], capture_output=True, text=True, timeout=300)
+    assert batch.returncode == 1  # the missing object fails the task
+    logs = "".join(p.read_text() for p in (tmp_path / "batch").rglob("*.log"))
+    for text in (proc.stdout, proc.stderr, batch.stdout, batch.stderr, logs):
+        assert not re.search("[\x00-\x08\x0b-\x1f\x7f\u202e]", text), text
+        assert not any(line.startswith("bake_ao: baked 99") for line in text.splitlines()), text
+    assert "Evil\\x1b[2J" in proc.stdout and "\\u202eelif" in proc.stdout
+    assert "Missing\\x1b[31m" in batch.stdout
