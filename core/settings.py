@@ -22,6 +22,10 @@ MAX_RESOLUTION = 65536
 #: pieces), but the sample pool grows with it: 2^20 keeps it to tens of MiB, and a reference bake
 #: rarely needs a tenth of it.
 MAX_SAMPLES = 1 << 20
+#: The largest seed: seeds are hashed as unsigned 64-bit integers.
+MAX_SEED = (1 << 64) - 1
+#: Most threads a bake (or one worker process) takes.
+MAX_THREADS = 1024
 #: Samples of one texel traced in one piece; more are traced in pieces of this many.
 SAMPLE_PIECE = 1 << 16
 #: Most independent randomisations (replicates) a texel's samples may be split into.
@@ -137,7 +141,11 @@ class BakeSettings:
             raise SettingsError(f"unknown sample source {source!r}; choose one of {', '.join(SOURCE_NAMES)}")
         margin = _positive_int(margin, "margin", lo=0)
         seed = _positive_int(seed, "seed", lo=0)
+        if seed > MAX_SEED:
+            raise SettingsError(f"seed must be at most 2**64 - 1 ({MAX_SEED}), got {seed}")
         threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
+        if threads > MAX_THREADS:
+            raise SettingsError(f"threads must be at most {MAX_THREADS}, got {threads}")
         chunk_rays = _positive_int(chunk_rays, "chunk_rays")
         auto_tiles = tile_size is None
         if auto_tiles:

@@ -279,3 +279,13 @@ def test_a_udim_bake_that_covers_nothing_is_refused():
     target = Mesh(p.positions, p.triangles, np.zeros_like(p.uvs) + 0.5, name="Flat")
     with pytest.raises(MeshError, match="'Flat'.*covers no texel"):
         bake_udim(target, resolution=8, samples=4, tiles=[1001], threads=1)
+
+
+@pytest.mark.parametrize("kw, words", [(dict(seed=1 << 64), "seed must be at most"),
+                                       (dict(threads=10 ** 6), "threads must be at most")])
+def test_huge_seeds_and_thread_counts_are_refused_by_name(kw, words):
+    with pytest.raises(SettingsError, match=words):
+        bake_ao(plane(), resolution=8, samples=4, **kw)
+    from core.settings import MAX_SEED
+
+    assert bake_ao(plane(), resolution=8, samples=4, seed=MAX_SEED, threads=1).mask.any()
