@@ -441,8 +441,8 @@ class _Features:
         self.island = pad(np.where(mask, guide.island, -1).astype(np.int32), -1)
         self.p = [pad(guide.position[..., c].astype(np.float32)) for c in range(3)]
         self.n = [pad(guide.normal[..., c].astype(np.float32)) for c in range(3)]
-        s = guide.scale.astype(np.float32)
-        self.inv_s2 = pad(np.where(s > 0, 1.0 / np.maximum(s, 1e-30) ** 2, 0.0).astype(np.float32))
+        s64 = guide.scale.astype(np.float64)
+        self.inv_s2 = pad(np.where(s64 > 0, 1.0 / np.maximum(s64, 1e-150) ** 2, 0.0).astype(np.float32))
         if image:  # the broken filter of the tests: image positions, one island, flat normals
             H, W = self.island.shape
             self.island = np.where(self.island >= 0, 0, -1).astype(np.int32)
