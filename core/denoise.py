@@ -41,6 +41,7 @@ offsets of the window, as whole-image numpy operations on bands of rows; no loop
 """
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,7 +51,7 @@ from .raster import prepare
 #: Window radius in texels: (2 r + 1)^2 image offsets.
 RADIUS = 4
 #: Candidate bandwidths, in texels of the centre texel's world size (0: the raw value).
-BANDWIDTHS = (1.0, 1.8, 3.0)
+BANDWIDTHS = (1.25, 1.25 * math.sqrt(2), 2.5)
 #: Normal similarity: weight exp(-NORMAL_SHARPNESS (1 - n_i . n_j)).
 NORMAL_SHARPNESS = 40.0
 #: The AO term's scale kappa, in standard deviations of the pilot's difference, and how far (in units
@@ -61,6 +62,8 @@ RANGE_SIGMAS = 2.0
 RANGE_FLAT = 3.0
 #: Bandwidth (texels) of the pilot whose differences the AO term compares: narrow, so steps stay steep.
 PILOT_BANDWIDTH = 1.0
+#: Its window radius (its weight at 3 texels would be exp(-4.5) = 0.011).
+PILOT_RADIUS = 2
 #: Factor on the double-smoothing bias estimate. S (S y) - S y is exact for a Gaussian kernel on a
 #: locally quadratic AO; at contact shadows and island borders, where the edge-stopping weights and
 #: the window cut the kernel, it falls short (measured on the exact scenes at 64^2, 16 samples, six
@@ -473,15 +476,16 @@ class _Features:
     def pairs(self, rec, src):
         """The same for halo pairs (flat indices of the unpadded image): squared distance, cosine."""
         w, r = self.w, self.r
-        ry, rx = np.divmod(rec, w)
-        sy, sx = np.divmod(src, w)
-        c, o = (ry + r, rx + r), (sy + r, sx + r)
+        wp = w + 2 * r
+        ci = (rec // w + r) * wp + rec % w + r
+        oi = (src // w + r) * wp + src % w + r
         d2 = np.zeros(len(rec), np.float32)
         for k in range(3):
-            t = self.p[k][o] - self.p[k][c]
+            a = self.p[k].reshape(-1)
+            t = np.take(a, oi) - np.take(a, ci)
             d2 += t * t
-        d2 *= self.inv_s2[c]
-        dot = self.n[0][o] * self.n[0][c] + self.n[1][o] * self.n[1][c] + self.n[2][o] * self.n[2][c]
+        d2 *= np.take(self.inv_s2.reshape(-1), ci)
+        dot = sum(np.take(self.n[k].reshape(-1), oi) * np.take(self.n[k].reshape(-1), ci) for k in range(3))
         return d2, dot
 
 
@@ -489,9 +493,10 @@ def _offsets(r):
     return [(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1)]
 
 
-def _halo_pairs(guide, mask, r):
-    """Per window offset: (receiver flat index, source flat index) of the halo entries that stand in
-    for the receiver's neighbour at that offset (the receiver on the halo's island, both covered)."""
+def _halo_pairs(guide, mask, r, F):
+    """Per window offset: (receiver flat index, source flat index, squared distance, cosine) of the
+    halo entries that stand in for the receiver's neighbour at that offset (the receiver on the
+    halo's island, both covered)."""
     h, w = guide.height, guide.width
     isl = np.where(mask, guide.island, -1).reshape(-1)
     keep = mask.reshape(-1)[guide.halo_source]
@@ -504,36 +509,63 @@ def _halo_pairs(guide, mask, r):
         rec = np.where(ok, ry * w + rx, 0)
         ok &= isl[rec] == hisl
         if ok.any():
-            out.append((rec[ok], hsrc[ok]))
+            rec_, src_ = rec[ok], hsrc[ok]
+            out.append(((dy, dx), rec_, src_) + F.pairs(rec_, src_))
     return out
 
 
-def _filter(F, halo, weights, gathers, band_rows=BAND_ROWS):
+def _filter(F, halo, weights, gathers, radius=None, threads=2):
     """sum_j w_ij x_j for every texel i, every candidate weight and every value x.
 
     ``weights(valid, d2, dot, c, o)`` gives the list of candidate weight arrays for neighbours in the
     image (``c``, ``o`` index padded images; for halo pairs ``valid`` is None and ``c``, ``o`` are
     flat indices of the unpadded image); ``gathers`` is a list of (candidate, padded array, power):
-    each accumulates sum_j w_ij^power x_j (x None: the weights alone). Bands of rows are the outer
-    loop and offsets the inner, so a band's accumulators stay in cache; each texel adds its
-    neighbours in the same order whatever the bands.
+    each accumulates sum_j w_ij^power x_j (x None: the weights alone) over the offsets within
+    ``radius`` (default: the features' radius). Bands of rows are the outer loop and offsets the
+    inner, so a band's accumulators stay in cache; bands go to ``threads`` threads (numpy releases
+    the GIL in its loops); each texel adds its neighbours in the same order whatever the bands.
     """
     h, w, r = F.h, F.w, F.r
+    rad = r if radius is None else radius
     out = [np.zeros((h, w), np.float32) for _ in gathers]
     flat = [None if x is None else x[r:r + h, r:r + w].reshape(-1) for _, x, _ in gathers]
-    for y0 in range(0, h, band_rows):
-        rows = slice(y0, min(h, y0 + band_rows))
-        for dy, dx in _offsets(r):
+    rows_covered = np.flatnonzero((F.island[r:r + h, r:r + w] >= 0).any(axis=1))
+    offsets = _offsets(rad)
+
+    def band(y0):
+        rows = slice(y0, min(h, y0 + BAND_ROWS))
+        if not np.any((rows_covered >= rows.start) & (rows_covered < rows.stop)):
+            return
+        for dy, dx in offsets:
             c, o = F.band(rows, dy, dx)
             ws = weights(*F.direct(c, o), c, o)
+            sq = {}
             for acc, (k, x, power) in zip(out, gathers):
-                g = ws[k] if power == 1 else ws[k] * ws[k]
-                acc[rows] += g if x is None else g * x[o]
-    for rec, src in halo:
-        ws = weights(None, *F.pairs(rec, src), rec, src)
+                if power == 1:
+                    g = ws[k]
+                else:
+                    if k not in sq:
+                        sq[k] = ws[k] * ws[k]
+                    g = sq[k]
+                if x is None:
+                    acc[rows] += g
+                else:
+                    acc[rows] += g * x[o]
+
+    starts = range(0, h, BAND_ROWS)
+    if threads > 1 and len(starts) > 1:
+        with ThreadPoolExecutor(threads) as pool:
+            list(pool.map(band, starts))
+    else:
+        for y0 in starts:
+            band(y0)
+    for (dy, dx), rec, src, d2, dot in halo:
+        if max(abs(dy), abs(dx)) > rad:
+            continue
+        ws = weights(None, d2, dot, rec, src)
         for acc, fx, (k, x, power) in zip(out, flat, gathers):
             g = ws[k] if power == 1 else ws[k] * ws[k]
-            acc.reshape(-1)[rec] += g if fx is None else g * fx[src]
+            acc.reshape(-1)[rec] += g if fx is None else g * np.take(fx, src)
     return out
 
 
@@ -602,7 +634,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         raise ValueError(f"the window radius {r} exceeds the guide's halo radius {guide.halo_radius}")
     mask = np.asarray(mask, bool) & guide.covered
     F = _Features(guide, mask, r, image=not use_halo)
-    halo = _halo_pairs(guide, mask, r) if use_halo else []
+    halo = _halo_pairs(guide, mask, r, F) if use_halo else []
     y = np.where(mask, ao, 0).astype(np.float32)
     var = np.where(mask, np.asarray(stderr, np.float32) ** 2, 0).astype(np.float32)
     exact = var == 0
@@ -611,6 +643,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     bws = [float(b) for b in bandwidths]
     K = len(bws)
     inv2h2 = [np.float32(0.5 / (b * b)) for b in bws]
+    halving = all(abs(bws[k + 1] / bws[k] - math.sqrt(2)) < 1e-3 for k in range(K - 1))
     pilot = np.float32(0.5 / float(pilot_bandwidth) ** 2)
     beta = np.float32(normal_sharpness)
     zero = np.float32(0)
@@ -622,7 +655,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         return [g if valid is None else np.where(valid, g, zero)]
 
     # The pilot (geometry only, narrow): what the AO term compares, and its variance.
-    Wg, Yg, Vg = _filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)])
+    Wg, Yg, Vg = _filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=min(r, PILOT_RADIUS))
     with np.errstate(invalid="ignore", divide="ignore"):
         G = P(np.where(Wg > 0, Yg / Wg, 0).astype(np.float32))
         vG = P(np.where(Wg > 0, Vg / (Wg * Wg), 0).astype(np.float32))
@@ -636,11 +669,21 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         else:
             gi, gj, vi, vj = G[c], G[o], vG[c], vG[o]
         base = beta * (1.0 - dot) + np.maximum((gi - gj) ** 2 / (k2 * (vi + vj) + eps) - flat, zero)
-        out = []
-        for inv in inv2h2:
-            g = np.exp(-(d2 * inv + base))
-            out.append(g if valid is None else np.where(valid, g, zero))
-        return out
+        if valid is not None:
+            base = np.where(valid, base, np.float32(np.inf))  # exp(-inf) = 0: not a neighbour
+        if not halving:
+            return [np.exp(-(d2 * inv + base)) for inv in inv2h2]
+        # Bandwidths a factor sqrt(2) apart: exp(-d2 inv_k) is the widest's factor E raised to
+        # 1, 2, 4, ...: two exponentials for every candidate.
+        E = np.exp(-(d2 * inv2h2[-1]))
+        g = np.exp(-base)
+        g *= E
+        out = [g]
+        for _ in range(K - 1):
+            g = g * E
+            out.append(g)
+            E = E * E
+        return out[::-1]
 
     # The candidates F_k = S_k y, their variance, then their bias S_k F_k - F_k (same weights).
     sums = _filter(F, halo, candidates, [(k, x, p) for k in range(K) for x, p in ((None, 1), (yp, 1), (vp, 2))])
