@@ -514,7 +514,7 @@ def _halo_pairs(guide, mask, r, F):
     return out
 
 
-def _filter(F, halo, weights, gathers, radius=None, threads=2):
+def _filter(F, halo, weights, gathers, radius=None, threads=1):
     """sum_j w_ij x_j for every texel i, every candidate weight and every value x.
 
     ``weights(valid, d2, dot, c, o)`` gives the list of candidate weight arrays for neighbours in the
@@ -591,7 +591,7 @@ def _trusted_zeros(F, var, r=2):
 
 def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, normal_sharpness=NORMAL_SHARPNESS,
             range_sigmas=RANGE_SIGMAS, range_flat=RANGE_FLAT, pilot_bandwidth=PILOT_BANDWIDTH,
-            bias_scale=BIAS_SCALE, margin=0, neighbours="surface", use_error=True, use_bias=True):
+            bias_scale=BIAS_SCALE, margin=0, threads=2, neighbours="surface", use_error=True, use_bias=True):
     """Denoise a baked AO map over the surface; return it with its standard error.
 
     Parameters
@@ -610,6 +610,8 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     bias_scale : factor on the double-smoothing bias estimate (see the module docstring).
     margin : re-dilate this many texels around the covered ones (as the bake does); 0: texels outside
         the mask keep their input value.
+    threads : bands of rows filtered at the same time (numpy releases the GIL in its loops); the
+        result does not depend on it.
     neighbours : 'surface' (the filter); 'image' only for the tests that break it on purpose: the
         image window's texels whatever their island, by image distance, nothing across seams.
     use_error, use_bias : off only in the tests that break the filter on purpose: without the error
@@ -655,7 +657,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         return [g if valid is None else np.where(valid, g, zero)]
 
     # The pilot (geometry only, narrow): what the AO term compares, and its variance.
-    Wg, Yg, Vg = _filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=min(r, PILOT_RADIUS))
+    Wg, Yg, Vg = _filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=min(r, PILOT_RADIUS), threads=threads)
     with np.errstate(invalid="ignore", divide="ignore"):
         G = P(np.where(Wg > 0, Yg / Wg, 0).astype(np.float32))
         vG = P(np.where(Wg > 0, Vg / (Wg * Wg), 0).astype(np.float32))
@@ -686,13 +688,14 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         return out[::-1]
 
     # The candidates F_k = S_k y, their variance, then their bias S_k F_k - F_k (same weights).
-    sums = _filter(F, halo, candidates, [(k, x, p) for k in range(K) for x, p in ((None, 1), (yp, 1), (vp, 2))])
+    sums = _filter(F, halo, candidates, [(k, x, p) for k in range(K) for x, p in ((None, 1), (yp, 1), (vp, 2))],
+                   threads=threads)
     Wk, Yk, Vk = sums[0::3], sums[1::3], sums[2::3]
     with np.errstate(invalid="ignore", divide="ignore"):
         Fk = [np.where(Wk[k] > 0, Yk[k] / Wk[k], y).astype(np.float32) for k in range(K)]
         Vark = [np.where(Wk[k] > 0, Vk[k] / (Wk[k] * Wk[k]), var).astype(np.float32) for k in range(K)]
     if use_bias:
-        Sk = _filter(F, halo, candidates, [(k, P(Fk[k]), 1) for k in range(K)])
+        Sk = _filter(F, halo, candidates, [(k, P(Fk[k]), 1) for k in range(K)], threads=threads)
         with np.errstate(invalid="ignore", divide="ignore"):
             Bk = [(np.float32(bias_scale) * np.where(Wk[k] > 0, Sk[k] / Wk[k] - Fk[k], 0)).astype(np.float32)
                   for k in range(K)]
@@ -720,7 +723,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     se = np.where(mask, se, 0).astype(np.float32)
     if margin:
         from .margin import dilate
-        dilate(res, mask, int(margin), out=res)
+        dilate(res, mask, int(margin), threads=threads, out=res)
     info = DenoiseInfo(choice=np.where(mask, choice, 0).astype(np.int8),
                        variance=np.where(mask, varo, 0).astype(np.float32),
                        bias=np.where(mask, bias, 0).astype(np.float32), bandwidths=tuple(bws))

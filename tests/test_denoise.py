@@ -205,11 +205,12 @@ def test_a_converged_texel_keeps_its_value_and_a_noisy_one_borrows():
     assert np.all(info.choice[far] > 0) and np.all(info.choice[patch] == 0)
 
 
-def test_denoising_is_deterministic_and_does_not_depend_on_bands(monkeypatch):
+def test_denoising_is_deterministic_and_does_not_depend_on_bands_or_threads(monkeypatch):
     r, g, ao, se, _ = baked("seam", 0)
     monkeypatch.setattr(D, "BAND_ROWS", 5)
-    ao2, se2, _ = D.denoise(r.ao, r.stderr, r.mask, g)
-    assert np.array_equal(ao, ao2) and np.array_equal(se, se2)
+    for threads in (1, 3):
+        ao2, se2, _ = D.denoise(r.ao, r.stderr, r.mask, g, threads=threads)
+        assert np.array_equal(ao, ao2) and np.array_equal(se, se2)
 
 
 def test_margin_is_filled_and_uncovered_texels_keep_their_value():
