@@ -18,6 +18,8 @@ from scenes import box, plane
 W = 64
 SAMPLES = 16
 SEEDS = range(4)
+#: The error's calibration is checked on more bakes: its statistics are of correlated texels.
+Z_SEEDS = range(8)
 LID = regular_polygon(0.3, 0.25, 64, centre=(0.5, 0.5))
 SIDE_LID = regular_polygon(0.3, 0.25, 64, centre=(0.35, 0.5))
 BOX = ((0.3, 0.3, 0.0), (0.7, 0.6, 0.25))
@@ -119,7 +121,7 @@ def test_guide_links_and_halo_cross_the_seam_to_the_texel_beside_on_the_surface(
 def test_denoised_map_is_unbiased_and_its_error_is_honest(name):
     _, _, truth = scene(name)
     err, z, raw_var, exact_bad = [], [], [], []
-    for seed in SEEDS:
+    for seed in Z_SEEDS:
         r, g, ao, se, info = baked(name, seed)
         e = ao.astype(np.float64) - truth
         err.append(e)
@@ -141,9 +143,10 @@ def test_denoised_map_is_unbiased_and_its_error_is_honest(name):
     se_mean = math.sqrt(np.mean(raw_var) / err.size)
     assert abs(err.mean()) < 0.002 + 4.4 * se_mean, (err.mean(), se_mean)
     z = np.concatenate(z)
-    # z over 4 bakes x 4096 texels; the denoised errors are correlated over a filter's footprint
-    # (about 30 texels effective), leaving ~550 independent values: sd of the estimated sd ~0.03,
-    # so [0.85, 1.15] is 2 to 7 of them from the 0.92-1.04 measured over 24 seeds (4 at a time).
+    # z over 8 bakes x 4096 texels; the denoised errors are correlated over a filter's footprint
+    # (about 30 texels effective), leaving ~1100 independent values: sd of the estimated sd ~0.02
+    # (measured spread of 8-bake groups: 0.025), so [0.85, 1.15] is about 3.5 of them from the
+    # 0.91-0.99 measured over 48 seeds (8 at a time; mean 0.95).
     assert 0.85 <= z.std() <= 1.15, z.std()
     assert np.mean(np.abs(z) > 4) < 0.01, np.mean(np.abs(z) > 4)
 
