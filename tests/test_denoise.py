@@ -1,0 +1,234 @@
+"""The surface-space denoiser (core.denoise): its guide, and its properties on exact scenes.
+
+Every scene is baked at 16 samples with core.bake_ao and denoised; the exact texel AO comes from
+core.analytic. Sizes are 64^2, seeds fixed, nothing timed. Each statistical bound says what it
+allows for noise, so that it holds for any seed.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from core import Mesh, bake_ao
+from core import denoise as D
+from core.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
+from scenes import box, plane
+
+W = 64
+SAMPLES = 16
+SEEDS = range(4)
+#: The error's calibration is checked on more bakes: its statistics are of correlated texels.
+Z_SEEDS = range(8)
+LID = regular_polygon(0.3, 0.25, 64, centre=(0.5, 0.5))
+SIDE_LID = regular_polygon(0.3, 0.25, 64, centre=(0.35, 0.5))
+BOX = ((0.3, 0.3, 0.0), (0.7, 0.6, 0.25))
+
+
+def lid(verts):
+    return Mesh(verts, np.array([[0, i, i + 1] for i in range(1, len(verts) - 1)]), name="lid")
+
+
+def split_plane():
+    """The unit plane cut along x = 0.5 into two UV islands: the left half maps to u in [0, 0.5]
+    as is, the right half turned by 180 degrees into u in [0.5, 1]. The seam (x = 0.5) runs along
+    u = 0.5 on the left island and u = 1 (the image's border) on the right; at u = 0.5 the image
+    puts the left island's seam beside the right island's far edge (x = 1), far away on the surface."""
+    P = np.array([[0, 0, 0], [.5, 0, 0], [1, 0, 0], [0, 1, 0], [.5, 1, 0], [1, 1, 0]], float)
+    F = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]])
+    UV = P[F][:, :, :2].copy()
+    UV[2:] = np.stack([1.5 - UV[2:, :, 0], 1.0 - UV[2:, :, 1]], -1)
+    return Mesh(P, F, UV, name="split")
+
+
+def split_map(world):
+    """A (W, W) map of the unit plane's world texels laid out as split_plane's UVs."""
+    out = np.empty_like(world)
+    out[:, :W // 2] = world[:, :W // 2]
+    out[:, W // 2:] = world[::-1, W - 1:W // 2 - 1:-1]
+    return out
+
+
+_SCENES = {}
+
+
+def scene(name):
+    """(target, occluders, exact texel AO (W, W)) of an exact scene."""
+    if name not in _SCENES:
+        if name == "polygon":
+            _SCENES[name] = plane(), [lid(LID)], texel_mean(lambda p: 1.0 - polygon_form_factor(p, LID), W, W)
+        elif name == "box on plane":
+            _SCENES[name] = plane(), [box(*BOX)], plane_beside_box_ao(*BOX, W, W)
+        elif name == "closed box":
+            _SCENES[name] = plane(), [box((-0.5, -0.5, -0.5), (1.5, 1.5, 1.0))], np.zeros((W, W))
+        elif name == "seam":
+            world = texel_mean(lambda p: 1.0 - polygon_form_factor(p, SIDE_LID), W, W)
+            _SCENES[name] = split_plane(), [lid(SIDE_LID)], split_map(world)
+    return _SCENES[name]
+
+
+_BAKES = {}
+
+
+def baked(name, seed, **kw):
+    key = (name, seed)
+    if key not in _BAKES:
+        target, occ, _ = scene(name)
+        _BAKES[key] = (bake_ao(target, occ, resolution=W, samples=SAMPLES, margin=0, seed=seed),
+                       D.surface_guide(target, W))
+    r, g = _BAKES[key]
+    return (r, g) + D.denoise(r.ao, r.stderr, r.mask, g, **kw)
+
+
+# --- the guide ------------------------------------------------------------------------------------
+
+def test_guide_of_a_plane_is_its_texel_centres():
+    g = D.surface_guide(plane(), (32, 16))
+    assert g.covered.all() and (g.island == 0).all() and len(g.halo_row) == 0 and len(g.links) == 0
+    Y, X = np.mgrid[0:16, 0:32]
+    np.testing.assert_allclose(g.position[..., 0], (X + 0.5) / 32, atol=1e-6)
+    np.testing.assert_allclose(g.position[..., 1], (Y + 0.5) / 16, atol=1e-6)
+    np.testing.assert_allclose(g.normal[..., 2], 1.0)
+    np.testing.assert_allclose(g.scale, math.sqrt(1 / (32 * 16)), rtol=1e-6)
+
+
+def test_guide_links_and_halo_cross_the_seam_to_the_texel_beside_on_the_surface():
+    g = D.surface_guide(split_plane(), W, radius=4)
+    assert sorted(np.unique(g.island)) == [0, 1]
+    # Every row of the seam is linked, left (i, W/2 - 1) to right (W - 1 - i, W - 1): one texel apart.
+    rows, cols = np.divmod(g.links, W)
+    swap = cols[:, 0] > cols[:, 1]
+    rows[swap], cols[swap] = rows[swap][:, ::-1], cols[swap][:, ::-1]
+    assert len(g.links) == W
+    assert np.all(cols[:, 0] == W // 2 - 1) and np.all(cols[:, 1] == W - 1) and np.all(rows[:, 1] == W - 1 - rows[:, 0])
+    p = g.position.reshape(-1, 3)
+    np.testing.assert_allclose(np.linalg.norm(p[g.links[:, 0]] - p[g.links[:, 1]], axis=1), 1 / W, rtol=1e-5)
+    # Halo: 4 texels on each side of the seam for every row, on both islands (the right island's
+    # halo lies beyond the image's border), each standing in by the texel at its unfolded place.
+    assert len(g.halo_row) == 2 * 4 * W
+    left = g.halo_island == g.island[0, 0]
+    assert np.all((g.halo_col[left] >= W // 2) & (g.halo_col[left] < W // 2 + 4))
+    assert np.all(g.halo_col[~left] >= W) and np.all(g.halo_col[~left] < W + 4)
+    # Where the halo texel of the left island would lie on the plane: x = (col + 0.5) / W.
+    src = p[g.halo_source[left]]
+    np.testing.assert_allclose(src[:, 0], (g.halo_col[left] + 0.5) / W, atol=1e-6)
+    np.testing.assert_allclose(src[:, 1], (g.halo_row[left] + 0.5) / W, atol=1e-6)
+
+
+# --- exact scenes ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["polygon", "box on plane", "seam", "closed box"])
+def test_denoised_map_is_unbiased_and_its_error_is_honest(name):
+    _, _, truth = scene(name)
+    err, z, raw_var, exact_bad = [], [], [], []
+    for seed in Z_SEEDS:
+        r, g, ao, se, info = baked(name, seed)
+        e = ao.astype(np.float64) - truth
+        err.append(e)
+        raw_var.append(r.stderr.astype(np.float64) ** 2)
+        pos = se > 0
+        z.append(e[pos] / se[pos])
+        # Texels that report no error are exact (exactly open or occluded), and kept as baked.
+        exact_bad.append(float(np.abs(e[~pos]).max(initial=0.0)))
+        assert np.array_equal(ao[~pos], r.ao[~pos])
+    assert max(exact_bad) < 1e-6, exact_bad
+    err = np.array(err)
+    if name == "closed box":
+        assert np.all(err == 0)
+        return
+    # The mean error is the bias plus noise: the denoised map's mean is a weighted mean of the raw
+    # estimates (each row of weights sums to 1, columns to about 1), whose independent errors give
+    # the mean a standard error of at most about sqrt(mean raw variance / texels). 4.4 of them:
+    # two-sided 1e-5, so the bound holds for any seed; the bias itself must be within 0.002.
+    se_mean = math.sqrt(np.mean(raw_var) / err.size)
+    assert abs(err.mean()) < 0.002 + 4.4 * se_mean, (err.mean(), se_mean)
+    z = np.concatenate(z)
+    # z over 8 bakes x 4096 texels; the denoised errors are correlated over a filter's footprint
+    # (about 30 texels effective), leaving ~1100 independent values: sd of the estimated sd ~0.02
+    # (measured spread of 8-bake groups: 0.025), so [0.85, 1.15] is about 3.5 of them from the
+    # 0.91-0.99 measured over 48 seeds (8 at a time; mean 0.95).
+    assert 0.85 <= z.std() <= 1.15, z.std()
+    assert np.mean(np.abs(z) > 4) < 0.01, np.mean(np.abs(z) > 4)
+
+
+def _rise(profile):
+    """10-90% rise (texels) of a profile that climbs from its first values to its last."""
+    lo, hi = profile[:3].mean(), profile[-2:].mean()
+    p = np.maximum.accumulate((profile - lo) / (hi - lo))
+    x = np.arange(len(p), dtype=np.float64)
+    at = lambda f: np.interp(f, p + 1e-9 * x, x)  # noqa: E731  (strictly increasing for interp)
+    return at(0.9) - at(0.1)
+
+
+def test_contact_edge_stays_as_sharp_as_the_converged_map():
+    # Across the box's left wall (x = 0.3, inside the box's y extent away from its corners), the
+    # profile averaged over 16 rows, from 5 texels under the box to 7 outside.
+    _, _, truth = scene("box on plane")
+    rows = slice(21, 37)
+    cols = np.arange(24, 11, -1)
+    want = _rise(truth[rows][:, cols].mean(axis=0))
+    for seed in SEEDS:
+        _, _, ao, _, _ = baked("box on plane", seed)
+        got = _rise(ao[rows][:, cols].mean(axis=0))
+        assert abs(got - want) <= 1.0, (got, want)
+
+
+def test_texels_either_side_of_a_uv_seam_agree():
+    # For texel pairs that are neighbours on the surface across the seam, the mean |difference| is
+    # no larger than the exact map's plus twice the standard error of a mean of such differences
+    # (from both texels' reported errors): the two sides are filtered from the same texels.
+    _, _, truth = scene("seam")
+    for seed in SEEDS:
+        r, g, ao, se, _ = baked("seam", seed)
+        a, b = g.links[:, 0], g.links[:, 1]
+        f, s, t = ao.reshape(-1), se.reshape(-1), truth.reshape(-1)
+        got = np.abs(f[a] - f[b]).mean()
+        bound = np.abs(t[a] - t[b]).mean() + 2 * math.sqrt(np.sum(s[a] ** 2 + s[b] ** 2)) / len(a)
+        assert got <= bound, (got, bound, np.abs(r.ao.reshape(-1)[a] - r.ao.reshape(-1)[b]).mean())
+
+
+def test_a_converged_texel_keeps_its_value_and_a_noisy_one_borrows():
+    # Arrays alone: a flat map at 0.5 with noise 0.1, and in it a 6 x 6 patch that has converged
+    # (standard error 1e-3) at 0.62, 1.2 noise units above: a real feature. The patch keeps its
+    # value to within a few of its own errors; the noisy texels are smoothed.
+    n = 32
+    rng = np.random.default_rng(7)
+    truth = np.full((n, n), 0.5)
+    truth[13:19, 13:19] = 0.62
+    se = np.full((n, n), 0.1, np.float32)
+    se[13:19, 13:19] = 1e-3
+    ao = (truth + se * rng.standard_normal((n, n))).astype(np.float32)
+    g = D.surface_guide(plane(), n)
+    out, err, info = D.denoise(ao, se, np.ones((n, n), bool), g)
+    patch = (slice(13, 19), slice(13, 19))
+    assert np.all(np.abs(out[patch] - truth[patch]) < 5e-3), np.abs(out[patch] - truth[patch]).max()
+    far = np.zeros((n, n), bool)
+    far[:8] = True
+    assert np.sqrt(np.mean((out[far] - 0.5) ** 2)) < 0.4 * 0.1
+    assert np.all(info.choice[far] > 0) and np.all(info.choice[patch] == 0)
+
+
+def test_denoising_is_deterministic_and_does_not_depend_on_bands_or_threads(monkeypatch):
+    r, g, ao, se, _ = baked("seam", 0)
+    monkeypatch.setattr(D, "BAND_ROWS", 5)
+    for threads in (1, 3):
+        ao2, se2, _ = D.denoise(r.ao, r.stderr, r.mask, g, threads=threads)
+        assert np.array_equal(ao, ao2) and np.array_equal(se, se2)
+
+
+def test_margin_is_filled_and_uncovered_texels_keep_their_value():
+    target = Mesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2]]),
+                  np.array([[[0.1, 0.1], [0.9, 0.1], [0.1, 0.9]]]))
+    r = bake_ao(target, [lid(LID)], resolution=32, samples=SAMPLES, margin=0, seed=1)
+    g = D.surface_guide(target, 32)
+    assert np.all(g.covered[r.mask])  # the guide knows every texel the bake covers
+    out, se, _ = D.denoise(r.ao, r.stderr, r.mask, g)
+    assert np.all(out[~r.mask] == r.ao[~r.mask]) and np.all(se[~r.mask] == 0)
+    filled, _, _ = D.denoise(r.ao, r.stderr, r.mask, g, margin=2)
+    assert np.array_equal(filled[r.mask], out[r.mask]) and np.count_nonzero(filled[~r.mask]) > 0
+
+
+def test_a_guide_of_another_resolution_is_refused():
+    g = D.surface_guide(plane(), 16)
+    with pytest.raises(ValueError, match="16 x 16"):
+        D.denoise(np.zeros((8, 8)), np.zeros((8, 8)), np.ones((8, 8), bool), g)
