@@ -78,6 +78,9 @@ class BakeResult:
     bent : None, or with ``bent_normals``, (H, W, 3) float32 unit bent normals in the bake's
         ``bent_space`` (covered and margin texels; zero elsewhere), see :mod:`core.bent`.
 
+    raw_ao, raw_stderr : with ``denoise``, the estimate and its error before the filter (``ao`` and
+        ``stderr`` are then the denoised map and its error); None otherwise.
+
     The same type for every target. Mesh corners (:func:`core.bake_vertex_ao`): the arrays are per
     corner, (C,) (``bent`` (C, 3)), ``mask`` all true, and ``unit`` (C,) int64 names the sample point
     whose estimate each corner has (corners of one vertex and one normal share one). UDIM tiles
@@ -101,6 +104,8 @@ class BakeResult:
     missed: int = 0
     unit: np.ndarray = None
     tiles: dict = None
+    raw_ao: np.ndarray = None
+    raw_stderr: np.ndarray = None
 
     @property
     def rays_per_second(self):
@@ -324,7 +329,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
-            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, constant_answer=False):
+            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, constant_answer=False,
+            denoise=False):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
@@ -401,6 +407,11 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     workers : 1 (this process, ``threads`` threads), N worker processes (``threads`` threads each,
         None: one) or 'auto' (from the cores and the memory: :func:`core.workers.auto_workers`). The
         same bits for any workers x threads x tiling on one machine (:mod:`core.workers`).
+    denoise : filter the estimate over the surface (:mod:`core.denoise`: neighbours across UV seams,
+        never across islands that only touch in the image, each texel weighed by its error):
+        ``ao`` and ``stderr`` are then the denoised map and its error (its propagated variance and the
+        filter's estimated bias), ``raw_ao`` and ``raw_stderr`` the estimate before it. Needs
+        ``replicates`` >= 2 (an honest error per texel). Adaptive sampling stops on the raw error.
     constant_answer : benchmarks only: no occlusion query reaches Embree (every ray unoccluded), so
         that the bake's own work is measured alone, in every worker too. The result is not AO.
 
@@ -419,6 +430,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
                                     replicates)
     s = dataclasses.replace(s, constant_answer=bool(constant_answer))
+    if denoise and s.replicates < 2:
+        raise SettingsError("denoise needs replicates >= 2: the filter weighs each texel by its standard error, "
+                            "which one replicate only bounds")
     workers = _workers.check_workers(workers)
     target_in, occluders_in, bent_space_in = target, list(occluders or ()), bent_space
     pro = Prologue(target, occluders_in, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,
@@ -487,12 +501,22 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         missed = counters["missed"]
     elif not mask.any() and not empty_ok:
         raise pro.nothing_covered(s, uvtris)
+    raw_ao = raw_se = None
+    if denoise:
+        from . import denoise as _denoise
+
+        raw_ao, raw_se = ao.copy(), se.copy()
+        if s.margin > 0:
+            dilate(raw_ao, mask, s.margin, threads=s.threads, out=raw_ao)
+        ao, se, info = _denoise.denoise(ao, se, mask, _denoise.surface_guide(pro.target, (w, h)), threads=s.threads)
     if s.margin > 0:
         dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:
         bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, s.threads)
     seconds = time.perf_counter() - t_start
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
+    if denoise:
+        metadata["denoise"] = True
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
               "degenerate_triangles": uvtris.degenerate_space,
               "uv_outside_triangles": uvtris.outside, "overlapping_texels": overlap}
@@ -501,7 +525,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         report.update(extra)
     return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=rays, seconds=seconds,
                       trace_seconds=trace_s, threads=s.threads, metadata=metadata, report=report,
-                      trace_cpu_seconds=trace_cpu, bent=bent, miss=miss, missed=missed if s2a is not None else 0)
+                      trace_cpu_seconds=trace_cpu, bent=bent, miss=miss, missed=missed if s2a is not None else 0,
+                      raw_ao=raw_ao, raw_stderr=raw_se)
 
 
 __all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "MAX_RESOLUTION", "SAMPLE_PIECE",

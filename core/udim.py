@@ -227,7 +227,9 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
                       trace_seconds=sum(r.trace_seconds for r in parts), threads=parts[0].threads,
                       trace_cpu_seconds=sum(r.trace_cpu_seconds for r in parts), metadata=dict(parts[0].metadata),
                       report=report, tiles=results,
-                      bent=stack("bent") if parts[0].bent is not None else None)
+                      bent=stack("bent") if parts[0].bent is not None else None,
+                      raw_ao=stack("raw_ao") if parts[0].raw_ao is not None else None,
+                      raw_stderr=stack("raw_stderr") if parts[0].raw_stderr is not None else None)
 
 
 __all__ = ["bake_udim", "covered_tiles", "UdimResult", "TileCoverage", "tile_origin", "tile_of", "tile_seed",

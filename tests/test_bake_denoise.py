@@ -1,0 +1,47 @@
+"""bake_ao(..., denoise=True): the denoised map and its error in ``ao`` and ``stderr``, the raw estimate
+kept, the same for any workers and threads, and refused where the error it needs is not honest."""
+
+import numpy as np
+import pytest
+
+from core import Mesh, SettingsError, bake_ao, bake_udim
+from core import denoise as D
+from scenes import QUAD, plane
+
+LID = np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]])
+
+
+def lid():
+    return Mesh(LID, QUAD, name="lid")
+
+
+def test_the_bake_returns_the_denoised_map_and_keeps_the_raw_one():
+    args = dict(resolution=32, samples=16, seed=4, margin=0, threads=1)
+    raw = bake_ao(plane(), [lid()], **args)
+    r = bake_ao(plane(), [lid()], denoise=True, **args)
+    assert np.array_equal(r.raw_ao, raw.ao) and np.array_equal(r.raw_stderr, raw.stderr)
+    want_ao, want_se, _ = D.denoise(raw.ao, raw.stderr, raw.mask, D.surface_guide(plane(), (32, 32)), threads=1)
+    assert np.array_equal(r.ao, want_ao) and np.array_equal(r.stderr, want_se)
+    assert not np.array_equal(r.ao, raw.ao) and r.metadata["denoise"] is True
+    assert raw.raw_ao is None and "denoise" not in raw.metadata
+
+
+def test_denoised_bakes_are_the_same_for_any_threads_and_workers():
+    args = dict(resolution=32, samples=16, seed=4, margin=4, denoise=True)
+    a = bake_ao(plane(), [lid()], threads=1, **args)
+    for kw in (dict(threads=2), dict(workers=2)):
+        b = bake_ao(plane(), [lid()], **kw, **args)
+        for name in ("ao", "stderr", "raw_ao", "raw_stderr"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), (kw, name)
+
+
+def test_udim_tiles_are_denoised_each():
+    p = plane()
+    tiled = Mesh(p.positions, p.triangles, p.uvs + [1.0, 0.0], name="tile1002")
+    r = bake_udim(tiled, [lid()], resolution=16, samples=16, denoise=True, threads=1)
+    assert r.raw_ao.shape == r.ao.shape == (1, 16, 16) and not np.array_equal(r.raw_ao, r.ao)
+
+
+def test_one_replicate_is_refused_with_denoise():
+    with pytest.raises(SettingsError, match="denoise needs replicates"):
+        bake_ao(plane(), resolution=8, samples=8, replicates=1, denoise=True)
