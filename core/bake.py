@@ -405,8 +405,10 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     empty_ok : a bake whose UVs cover no texel returns an all-zero result instead of raising
         MeshError (a UDIM tile listed but not touched, which Cycles clears).
     workers : 1 (this process, ``threads`` threads), N worker processes (``threads`` threads each,
-        None: one) or 'auto' (from the cores and the memory: :func:`core.workers.auto_workers`). The
-        same bits for any workers x threads x tiling on one machine (:mod:`core.workers`).
+        None: one), 'auto' (from the cores and the memory: :func:`core.workers.auto_workers`), or a
+        ``distributed.Client``: the tiles as tasks on its Dask cluster (a lost worker's tiles are
+        redone). The same bits for any workers x threads x tiling on one machine, and across
+        machines whose CPUs take the same instruction paths (:mod:`core.workers`).
     denoise : filter the estimate over the surface (:mod:`core.denoise`: neighbours across UV seams,
         never across islands that only touch in the image, each texel weighed by its error):
         ``ao`` and ``stderr`` are then the denoised map and its error (its propagated variance and the
@@ -440,10 +442,11 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     s2a = pro.s2a
     w, h = s.width, s.height
     processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
-    if processes > 1 and tile_size is None:
+    if not _workers.in_process(processes) and tile_size is None:
         # Tiles for every thread of every worker, two each at least (they are dealt as workers free up).
-        tw, th = auto_tile_shape(w, h, 2 * processes * per_worker, s.samples)
-        s = dataclasses.replace(s, tile_size=tw, tile_height=th, threads=processes * per_worker)
+        total = _workers.worker_count(processes) * per_worker
+        tw, th = auto_tile_shape(w, h, 2 * total, s.samples)
+        s = dataclasses.replace(s, tile_size=tw, tile_height=th, threads=min(total, _workers.cpu_count()))
     pro.check_memory(s)
     pro.check_cancel()
 
@@ -480,8 +483,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                 r, c, _ = bake.rect(out.key)
                 on_tile(r, c, ao[r, c].copy())
 
-    pool = None if processes == 1 else _workers.pool_for(processes, per_worker)
-    if pool is None:
+    if _workers.in_process(processes):
         shared = Scheduler(bake.planned, progress, cancel)
         bake.trace_setup(shared, cancel, on_rays)
         run_all(lambda key: store(bake.tile(key)), keys, s.threads, shared, progress)
@@ -495,7 +497,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                    highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
                    extrusion=extrusion, max_ray_distance=max_ray_distance,
                    cage=None if cage is None else _workers.mesh_data(cage))
-        rays, trace_s, trace_cpu, counters = pool.run(job, keys, bake.planned, store, progress, cancel)
+        rays, trace_s, trace_cpu, counters = _workers.run_tiles(processes, per_worker, job, keys, bake.planned, store,
+                                                                progress, cancel)
     if s2a is not None:
         extra = _highpoly.finish_report(counters, miss, mask)
         missed = counters["missed"]

@@ -226,7 +226,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
             bent[ids] = out.bent
 
     keys = list(range(len(bake.blocks)))
-    if processes == 1:
+    if _workers.in_process(processes):
         shared = Scheduler(bake.planned, progress, cancel)
         bake.trace_setup(shared, cancel, on_rays)
         run_all(lambda key: store(bake.tile(key)), keys, s.threads, shared, progress)
@@ -237,8 +237,8 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         job = dict(kind="vertex", target=_workers.mesh_data(target), occluders=[_workers.mesh_data(o) for o in occluders],
                    settings=dataclasses.asdict(s), corners=corners, merge=bool(merge), bent_normals=bool(bent_normals),
                    block=bake.block)
-        rays, trace_s, trace_cpu, _ = _workers.pool_for(processes, per_worker).run(job, keys, bake.planned, store,
-                                                                                   progress, cancel)
+        rays, trace_s, trace_cpu, _ = _workers.run_tiles(processes, per_worker, job, keys, bake.planned, store,
+                                                         progress, cancel)
     unit = bake.unit
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
     for key in ("margin", "resolution"):

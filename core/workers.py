@@ -378,13 +378,7 @@ class Pool:
             if progress is not None:
                 progress(1.0)
             parts = list(finished.values())
-            counters = {}
-            for p in parts:
-                for k, v in p["counters"].items():
-                    if isinstance(v, (int, float)) and k != "directions_per_point":
-                        counters[k] = counters.get(k, 0) + v
-                    elif counters.get(k) is None:
-                        counters[k] = v
+            counters = _sum_counters(parts)
             return (sum(p["rays"] for p in parts), sum(p["trace_seconds"] for p in parts),
                     sum(p["trace_cpu_seconds"] for p in parts), counters)
 
@@ -401,6 +395,87 @@ class Pool:
                     w.send("cancel", bake_id)
                 except OSError:
                     workers.discard(w)
+
+
+# -- one bake across machines: the same tile task on a Dask cluster -------------------------------------
+
+#: The bakes a Dask worker process has set up, by token (a bake's tiles reuse its scene); the last few.
+_DASK_BAKES = {}
+_DASK_KEEP = 2
+
+
+def _dask_tile(token, job, key):
+    """One tile of the bake ``job`` on a Dask worker: (the tile's values, this process's totals so far),
+    as plain data. The bake is set up once per process and token; a task that is run again (its
+    worker was lost) gives the same values."""
+    entry = _DASK_BAKES.get(token)
+    if entry is None:
+        bake, shared, threads = _setup(dict(job, quantum=1 << 62), threading.Event(), lambda work: None)
+        entry = _DASK_BAKES[token] = (bake, shared, threads, threading.Lock())
+        while len(_DASK_BAKES) > _DASK_KEEP:
+            _DASK_BAKES.pop(next(iter(_DASK_BAKES)))
+    bake, shared, threads, lock = entry
+    with lock:  # one tile of a bake at a time in a process (its threads share the tile's chunks)
+        outs = []
+        run_all(lambda k: outs.append(bake.tile(k, directions=False)), [key], threads, shared, None)
+        totals = dict(rays=shared.rays, trace_seconds=shared.trace_seconds,
+                      trace_cpu_seconds=shared.trace_cpu_seconds, counters=bake.start.counters())
+    return vars(outs[0]), (os.getpid(), id(entry)), totals
+
+
+def is_dask_client(workers):
+    return hasattr(workers, "submit") and hasattr(workers, "scatter") and hasattr(workers, "gather")
+
+
+def run_dask(client, job, keys, planned, store, progress, cancel, threads=1):
+    """Bake ``keys`` of ``job`` as tasks on the Dask cluster of ``client``; ``store`` each tile as it
+    comes back. The job goes to every worker once; a worker lost mid-bake has its tiles redone
+    elsewhere (the tasks are pure). Returns what :meth:`Pool.run` returns."""
+    import uuid
+
+    from distributed import as_completed
+
+    from .bake import TileOut
+
+    token = uuid.uuid4().hex
+    job = dict(job, settings=dict(job["settings"], threads=int(threads), auto_tiles=False))
+    [shared_job] = client.scatter([job], broadcast=True, hash=False)
+    futures = [client.submit(_dask_tile, token, shared_job, key, key=f"mc_ao-tile-{token}-{i}", retries=3,
+                             pure=False) for i, key in enumerate(keys)]
+    totals, done = {}, 0
+    try:
+        for fut in as_completed(futures):
+            if is_cancelled(cancel):
+                raise BakeCancelled("the bake was cancelled; nothing was written")
+            try:
+                out, process, total = fut.result()
+            except BaseException as e:
+                name = type(e).__name__
+                raise _error(name, str(e)) if isinstance(e, McAoError) else e
+            store(TileOut(**out))
+            totals[process] = total  # each process's latest totals: a redone tile counts once
+            done += 1
+            if progress is not None:
+                progress(min(done / max(len(keys), 1), 1.0))
+    except BaseException:
+        client.cancel(futures)
+        raise
+    parts = list(totals.values())
+    counters = _sum_counters(parts)
+    return (sum(p["rays"] for p in parts), sum(p["trace_seconds"] for p in parts),
+            sum(p["trace_cpu_seconds"] for p in parts), counters)
+
+
+def _sum_counters(parts):
+    """The start stages' counters of several processes, added up (texts: the first given)."""
+    counters = {}
+    for p in parts:
+        for k, v in p["counters"].items():
+            if isinstance(v, (int, float)) and k != "directions_per_point":
+                counters[k] = counters.get(k, 0) + v
+            elif counters.get(k) is None:
+                counters[k] = v
+    return counters
 
 
 _POOL = None
@@ -444,8 +519,9 @@ def auto_workers(triangles, cores=None, memory=None):
 
 
 def check_workers(workers):
-    """``workers`` as given to :func:`core.bake_ao`: 1, a count, or 'auto' (refused otherwise)."""
-    if workers == "auto":
+    """``workers`` as given to :func:`core.bake_ao`: 1, a count, 'auto', or a ``distributed.Client``
+    (refused otherwise)."""
+    if isinstance(workers, str) and workers == "auto" or is_dask_client(workers):
         return workers
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
         raise SettingsError(f"workers must be a positive integer or 'auto', got {workers!r}")
@@ -456,12 +532,33 @@ def processes_of(workers, threads, settings, triangles):
     """(processes, threads each) of a bake given ``workers`` (1, N or 'auto', checked) and the
     ``threads`` argument: with workers, ``threads`` counts each worker's threads (None: one each, or
     what 'auto' picks); workers=1 is this process with ``settings.threads``."""
+    if is_dask_client(workers):
+        return workers, 1 if threads is None else settings.threads
     if workers == 1:
         return 1, settings.threads
     if workers == "auto":
         processes, per_worker = auto_workers(triangles)
         return processes, (per_worker if threads is None else settings.threads)
     return workers, 1 if threads is None else settings.threads
+
+
+def in_process(processes):
+    """Whether a bake of :func:`processes_of`'s ``processes`` runs in this process."""
+    return not is_dask_client(processes) and processes == 1
+
+
+def worker_count(processes):
+    """How many processes bake the tiles (a Dask cluster's workers now)."""
+    if is_dask_client(processes):
+        return max(1, len(processes.scheduler_info().get("workers", {})))
+    return processes
+
+
+def run_tiles(processes, threads, job, keys, planned, store, progress, cancel):
+    """Bake ``keys`` of ``job`` on the local pool or a Dask cluster (:func:`run_dask`)."""
+    if is_dask_client(processes):
+        return run_dask(processes, job, keys, planned, store, progress, cancel, threads)
+    return pool_for(processes, threads).run(job, keys, planned, store, progress, cancel)
 
 
 def pool_for(workers, threads):

@@ -199,3 +199,39 @@ def test_vertex_bakes_in_workers_are_the_bits_of_one_process(monkeypatch):
     for name in ("ao", "stderr", "samples", "unit", "bent"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert a.rays == b.rays
+
+
+@pytest.fixture(scope="module")
+def dask_client():
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                       dashboard_address=None, silence_logs=40)
+    client = distributed.Client(cluster)
+    client.run(lambda: __import__("sys").path.insert(0, ROOT))
+    yield client
+    client.close()
+    cluster.close()
+
+
+def test_a_bake_on_a_dask_cluster_is_the_bits_of_one_process_and_survives_a_lost_worker(dask_client):
+    target, occ = scene()
+    args = dict(resolution=48, samples=32, max_distance=0.7, seed=3, margin=2, tile_size=16)
+    ref = bake_ao(target, occ, threads=1, **args)
+    r = bake_ao(target, occ, workers=dask_client, **args)
+    for name in FIELDS:
+        assert np.array_equal(getattr(ref, name), getattr(r, name)), name
+    assert r.rays == ref.rays
+    # A worker killed after the first tile came back: its tiles are redone elsewhere, the same bits.
+    killed = []
+
+    def progress(f):
+        if not killed and f > 0:
+            pids = dask_client.run(os.getpid)
+            pid = sorted(pids.values())[0]
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+
+    r = bake_ao(target, occ, workers=dask_client, progress=progress, **args)
+    assert killed
+    for name in FIELDS:
+        assert np.array_equal(getattr(ref, name), getattr(r, name)), name
