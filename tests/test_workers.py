@@ -235,3 +235,23 @@ def test_a_bake_on_a_dask_cluster_is_the_bits_of_one_process_and_survives_a_lost
     assert killed
     for name in FIELDS:
         assert np.array_equal(getattr(ref, name), getattr(r, name)), name
+
+
+def test_a_script_without_a_main_guard_runs_once(tmp_path):
+    """Workers are not multiprocessing's spawn children: the script that bakes (Blender's --python
+    file, a user's script without ``if __name__ == '__main__'``) is never run again in a worker."""
+    marker = tmp_path / "runs.txt"
+    script = tmp_path / "bake_script.py"
+    script.write_text(textwrap.dedent(f"""
+        import sys; sys.path[:0] = [{ROOT!r}, {os.path.join(ROOT, 'tests')!r}]
+        with open({str(marker)!r}, "a") as f:
+            f.write("ran\\n")
+        from test_workers import scene
+        from core import bake_ao
+        t, o = scene()
+        r = bake_ao(t, o, resolution=16, samples=4, workers=2)
+        print("covered", int(r.mask.sum()))
+    """))
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "covered" in out.stdout and marker.read_text() == "ran\n"

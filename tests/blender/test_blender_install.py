@@ -134,6 +134,21 @@ def test_install_from_disk_enable_bake_uninstall(bpy, built_zip, user_repo):
     ao, _ = image_ao(bpy.data.images["Ground_AO"])
     assert ao.shape == (16, 16) and ao.min() < 0.5 < ao.max()
     assert f"{ADDON}.core.bake" in sys.modules
+    # Worker processes from the installed extension: they import its core from the repository's folder
+    # (not bl_ext, which a new interpreter cannot import) and the wheels' embreex; the same bits.
+    core = sys.modules[f"{ADDON}.core"]
+    import numpy as np
+
+    P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    plane = core.Mesh(P, F, uvs=P[F][:, :, :2], name="plane")
+    lid = core.Mesh(P * [1, 1, 0] + [0.2, 0.2, 0.3], F, name="lid")
+    one = core.bake_ao(plane, [lid], resolution=16, samples=8, threads=1)
+    two = core.bake_ao(plane, [lid], resolution=16, samples=8, workers=2)
+    assert np.array_equal(one.ao, two.ao) and np.array_equal(one.stderr, two.stderr)
+    pool = sys.modules[f"{ADDON}.core.workers"]._POOL
+    assert pool is not None and all(w.alive for w in pool.workers)
+    sys.modules[f"{ADDON}.core.workers"].shutdown()
 
     index = list(bpy.context.preferences.extensions.repos).index(user_repo)
     assert bpy.ops.extensions.package_uninstall(repo_index=index, pkg_id="mc_ao") == {"FINISHED"}
