@@ -483,6 +483,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                 r, c, _ = bake.rect(out.key)
                 on_tile(r, c, ao[r, c].copy())
 
+    fallback = _workers.usable_pool(processes, per_worker)
+    if fallback is not None:
+        processes = 1
     if _workers.in_process(processes):
         shared = Scheduler(bake.planned, progress, cancel)
         bake.trace_setup(shared, cancel, on_rays)
@@ -526,6 +529,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     if s2a is not None:
         metadata.update(s2a.metadata())
         report.update(extra)
+    if fallback is not None:
+        report["warnings"] = [f"baked on {s.threads} threads of this process, not in worker processes: {fallback}"]
     return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=rays, seconds=seconds,
                       trace_seconds=trace_s, threads=s.threads, metadata=metadata, report=report,
                       trace_cpu_seconds=trace_cpu, bent=bent, miss=miss, missed=missed if s2a is not None else 0,

@@ -226,6 +226,9 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
             bent[ids] = out.bent
 
     keys = list(range(len(bake.blocks)))
+    fallback = _workers.usable_pool(processes, per_worker)
+    if fallback is not None:
+        processes = 1
     if _workers.in_process(processes):
         shared = Scheduler(bake.planned, progress, cancel)
         bake.trace_setup(shared, cancel, on_rays)
@@ -245,6 +248,8 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         metadata.pop(key, None)
     metadata["sample_points"] = m
     report = {"corners": len(corners), "sample_points": m, "degenerate_corners": bake.flat}
+    if fallback is not None:
+        report["warnings"] = [f"baked on {s.threads} threads of this process, not in worker processes: {fallback}"]
     return BakeResult(ao=ao[unit], mask=np.ones(len(unit), bool), stderr=se[unit], samples=count[unit], unit=unit,
                       rays=rays, seconds=time.perf_counter() - t_start, trace_seconds=trace_s,
                       threads=s.threads, trace_cpu_seconds=trace_cpu, metadata=metadata,

@@ -31,6 +31,17 @@ How the processes are started and kept (each point is a trap met in Blender):
   scene is ended (the next bake starts a fresh one).
 - A worker that dies (killed, out of memory) fails the bake with :class:`BakeWorkerError`, nothing is
   written, and the next bake gets a fresh pool.
+- The self-test: a new pool's workers each bake a tiny scene first and must give this process's bits
+  (:func:`self_test`); where one cannot start or differs, bakes run on threads of this process with a
+  warning saying why (``report['warnings']``), and the pool is not tried again in this session.
+
+What each OS needs (tested here on Linux only; the rest is what the code relies on): an interpreter at
+``sys.executable`` that can run ``-c`` (Blender sets it to its bundled Python on Linux, Windows and
+macOS; the bpy module's is the venv's), anonymous pipes (``subprocess.PIPE``; on Windows the worker's
+``os.dup``/``os.dup2`` of fds 1 and 2 work on the C runtime's descriptors) and the wheels' embreex on the
+parent's ``sys.path``, which the worker takes. No ``/dev/shm``, no ``fork``, no signals: the lifeline is
+the pipe, which every OS closes when a process ends. macOS and Windows have no ``sched_getaffinity``
+(the core count is ``os.cpu_count()``) and no cgroup (the memory is what the machine has available).
 """
 
 import atexit
@@ -146,6 +157,10 @@ def main():
             tasks.put(msg)
 
     threading.Thread(target=reader, name="mc_ao-lifeline", daemon=True).start()
+    try:
+        reply("hello", 0, self_test())
+    except BaseException as e:
+        reply("hello", 0, f"the self-test bake failed: {type(e).__name__}: {e}")
     bake = shared = None
     threads = 1
     while True:
@@ -171,6 +186,21 @@ def main():
             reply("cancelled", bake_id)
         except BaseException as e:  # every error goes back to the parent, by name
             reply("error", bake_id, type(e).__name__, str(e), traceback.format_exc())
+
+
+def self_test():
+    """A digest of a tiny bake (a plane under a lid, 16^2 x 8, one thread): what every worker and the
+    parent must agree on before a pool is used (the same numpy, Embree and instruction paths)."""
+    import hashlib
+
+    from .bake import bake_ao
+    from .mesh import Mesh
+
+    p = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    lid = Mesh(p * [0.6, 0.6, 0] + [0.2, 0.2, 0.3], f, name="lid")
+    r = bake_ao(Mesh(p, f, uvs=p[f][:, :, :2], name="plane"), [lid], resolution=16, samples=8, threads=1)
+    return hashlib.sha256(r.ao.tobytes() + r.stderr.tobytes()).hexdigest()
 
 
 def _setup(job, cancel, progress):
@@ -279,6 +309,26 @@ class Pool:
         self.broken = False
         self.bake_id = 0
         self.lock = threading.Lock()  # one bake at a time
+        self.failed = self._check()
+
+    def _check(self):
+        """None when every worker started and its self-test bake gave this process's bits, else why
+        not (the bake then runs on threads, with a warning that says so)."""
+        want = self_test()
+        waiting = set(self.workers)
+        why = None
+        while waiting:
+            w, msg = self.inbox.get()
+            waiting.discard(w)
+            if msg[0] == "died":
+                why = why or (f"worker process {w.index} ended at start-up (exit code {w.process.poll()}): "
+                              "see its message above")
+            elif msg[0] == "hello" and msg[2] != want:
+                why = why or (msg[2] if msg[2].startswith("the self-test") else
+                              f"worker process {w.index} baked the self-test differently from this process")
+        if why is not None:
+            self.broken = True
+        return why
 
     def close(self):
         for w in self.workers:
@@ -561,11 +611,24 @@ def run_tiles(processes, threads, job, keys, planned, store, progress, cancel):
     return pool_for(processes, threads).run(job, keys, planned, store, progress, cancel)
 
 
+def usable_pool(processes, threads):
+    """None when the local pool of ``processes`` started and passed its self-test (or the tiles go to
+    a Dask cluster), else the reason it cannot be used (the bake then runs on threads)."""
+    if in_process(processes) or is_dask_client(processes):
+        return None
+    try:
+        return pool_for(processes, threads).failed
+    except OSError as e:  # the interpreter could not be started at all
+        return f"worker processes could not be started ({e})"
+
+
 def pool_for(workers, threads):
     """The persistent pool of ``workers`` processes of ``threads`` threads (made anew when the count
     changed or the last one broke)."""
     global _POOL
     with _POOL_LOCK:
+        if _POOL is not None and _POOL.failed and (_POOL.workers_wanted, _POOL.threads) == (workers, threads):
+            return _POOL  # its self-test failed: not tried again in this session
         if _POOL is not None and (_POOL.broken or len(_POOL.workers) != workers or _POOL.threads != threads
                                   or not all(w.alive for w in _POOL.workers)):
             _POOL.close()

@@ -255,3 +255,18 @@ def test_a_script_without_a_main_guard_runs_once(tmp_path):
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "covered" in out.stdout and marker.read_text() == "ran\n"
+
+
+def test_a_pool_whose_self_test_fails_falls_back_to_threads_and_says_why(monkeypatch):
+    """Where worker processes bake differently (another platform's numpy or Embree) or cannot start,
+    the bake runs on threads, with the same bits, and a warning that says why."""
+    W.shutdown()
+    monkeypatch.setattr(W, "self_test", lambda: "this process's digest")  # the workers' differ from it
+    target, occ = scene()
+    ref = bake_ao(target, occ, resolution=16, samples=8, threads=1)
+    r = bake_ao(target, occ, resolution=16, samples=8, workers=2)
+    assert np.array_equal(ref.ao, r.ao)
+    (warning,) = r.report["warnings"]
+    assert "not in worker processes" in warning and "self-test differently" in warning
+    assert "warnings" not in ref.report
+    W.shutdown()
