@@ -356,19 +356,26 @@ class _PatternBits:
         j = np.arange(self._next, self._next + count, dtype=np.uint64)
         self._next += count
         out = np.empty((self.sets, count), np.uint64)
-        # hash_more(state, j, tag) a block of patterns at a time, in place: the temporaries stay in
-        # cache (three times faster than whole-array passes for a pool's million words).
-        rows = max(1, _WORDS_BLOCK // max(1, count))
-        tmp = np.empty(rows * count, np.uint64)
+        if count == 0:
+            return out
+        # hash_more(state, j, tag) a block of patterns at a time, in place and on flat arrays: the
+        # temporaries stay in cache, and no inner loop is as short as a pattern's few words.
+        rows = max(1, _WORDS_BLOCK // count)
+        counters = np.tile(j, min(rows, self.sets))
+        tmp = np.empty(counters.size, np.uint64)
         tag = np.uint64(_TAG_SCRAMBLE)
+        flat = out.reshape(-1)
         for r in range(0, self.sets, rows):
-            h = out[r:r + rows]
-            np.bitwise_xor(self._state[r:r + rows, None], j[None, :], out=h)
-            for key in (None, tag):
-                if key is not None:
-                    h ^= key
-                h += _GOLDEN
-                _mix_into(h, tmp[:h.size].reshape(h.shape))
+            state = self._state[r:r + rows]
+            h = flat[r * count:(r + len(state)) * count]
+            t = tmp[:h.size]
+            h[:] = np.repeat(state, count)
+            h ^= counters[:h.size]
+            h += _GOLDEN
+            _mix_into(h, t)
+            h ^= tag
+            h += _GOLDEN
+            _mix_into(h, t)
         return out
 
 

@@ -481,10 +481,11 @@ class PermuteDigits:
         return cls(bases, perms, np.zeros((1, len(bases)), dtype=_U64), capacity)
 
     def __call__(self, indices):
-        """The points of every set at ``indices`` (n,): (sets, n, d) float64 in [0, 1)."""
+        """The points of every set at ``indices`` (n,) as integers over b**K: (sets, n, d) uint64.
+        Divided by :attr:`scales` they are the points in [0, 1)."""
         idx = np.asarray(indices, dtype=_U64).reshape(-1)
         n = idx.size
-        out = np.empty((self.sets, n, len(self.bases)))
+        out = np.empty((self.sets, n, len(self.bases)), dtype=_U64)
         if n == 0:
             return out
         top = int(idx.max())
@@ -501,9 +502,38 @@ class PermuteDigits:
                 digit = q % bb
                 q //= bb
                 acc += np.take(contrib[:, k, :], digit.astype(np.intp), axis=1)
-            # acc < b**K <= 2**52: exact in float64, and acc / b**K rounds to at most 1 - 2**-52.
-            out[:, :, j] = acc.astype(np.float64) / scale
+            out[:, :, j] = acc
         return out
+
+    @property
+    def scales(self):
+        """b**K of every dimension, as floats (exact: at most 2**52)."""
+        return np.array([scale for _, scale, _, _ in self._dims])
+
+    @property
+    def digits(self):
+        """(b, K, D) of every dimension: its base, the digits carried, the digits permuted."""
+        return [(b, _carried_digits(b), contrib.shape[1]) for b, _, contrib, _ in self._dims]
+
+
+def _radical_fixed_point(a, b, K, D):
+    """32-bit fixed point of base-b values ``a / b**K`` (uint64 integers): rounded down, then kept
+    inside the value's interval of length b**-L (L <= D the finest level with b**L <= 2**32), so that
+    the base-b strata of every level up to L survive. Plain rounding down would move a value that
+    lies less than 2**-32 above an interval's start (which is not a multiple of 2**-32 for odd b)
+    into the interval below it."""
+    # a < 2**52: exact in float64; a / b**K < 1 has 52 bits at most, so the product is exact.
+    q = np.floor(a.astype(np.float64) / float(b**K) * 2.0**32).astype(_U64)
+    if b % 2 == 0:
+        return q.astype(_U32)  # base 2: every interval starts on a multiple of 2**-32
+    L = D
+    while b**L > 2**32:
+        L -= 1
+    bl = np.uint64(b**L)
+    s = a // np.uint64(b ** (K - L))  # the value's interval at level L
+    lo = ((s << np.uint64(32)) + bl - np.uint64(1)) // bl  # ceil(s 2**32 / b**L): the first inside
+    top = (((s + np.uint64(1)) << np.uint64(32)) - np.uint64(1)) // bl  # the last inside
+    return np.clip(q, lo, top).astype(_U32)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -526,8 +556,10 @@ class _Source:
 
     Every source also builds many randomised sets at once, for the baker's pools:
     ``cls.sets_uint32(n, d, cls.randomizer_from(bits, d, n))`` is (sets, n, d) uint32, set ``s``
-    being what ``cls(d, randomizer=<set s's randomisation>).random(n)`` returns, times 2**32
-    and rounded down.
+    being what ``cls(d, randomizer=<set s's randomisation>).random_uint32(n)`` returns (for
+    Sobol', in direct rather than Gray-code order). :meth:`random_uint32` gives the points of
+    :meth:`random` in 32-bit fixed point: the same bits, rounded down where the floats have more
+    (Halton keeps its strata in the rounding, see :meth:`Halton.points_uint32`).
     """
 
     name = "source"
@@ -575,6 +607,16 @@ class _Source:
         self.num_generated += n
         return out
 
+    def random_uint32(self, n=1):
+        """Draw ``n`` points as 32-bit fixed point: (n, d) uint32, the coordinates times 2**32.
+
+        The same points as :meth:`random` would give (and the sequence goes on the same way).
+        """
+        n = _check_count(n)
+        out = self._random_uint32(n)
+        self.num_generated += n
+        return out
+
     def reset(self):
         """Return to the state right after construction; returns ``self``."""
         self.rng = copy.deepcopy(self._rng_init)
@@ -598,6 +640,9 @@ class _Source:
         self._random(n)
 
     def _random(self, n):
+        return to_unit_float(self._random_uint32(n))
+
+    def _random_uint32(self, n):
         raise NotImplementedError
 
     def __repr__(self):
@@ -635,6 +680,9 @@ class Independent(_Source):
         w = self._words(n, self.d, self._bits())[0]
         return (w >> np.uint64(11)).astype(np.float64) * 2.0**-53
 
+    def _random_uint32(self, n):
+        return (self._words(n, self.d, self._bits())[0] >> np.uint64(32)).astype(_U32)
+
     def _fast_forward(self, n):
         # Discard in bounded chunks: the words come out row by row, so chunking skips exactly the
         # same words as one random(n) call would, without its memory.
@@ -650,11 +698,19 @@ def _in_stratum(k, m, jitter):
     """32-bit fixed-point coordinates in stratum ``k`` of ``m`` equal strata of [0, 1), placed by the
     32-bit ``jitter``: the integers v with k/m <= v 2**-32 < (k+1)/m, so that floor(v 2**-32 m) == k
     holds exactly in float64 too (for power-of-two m: k in the top bits, the jitter's top bits below)."""
-    k = np.asarray(k).astype(_U64)
-    m = np.uint64(m)
-    lo = ((k << np.uint64(32)) + m - np.uint64(1)) // m
-    hi = (((k + np.uint64(1)) << np.uint64(32)) + m - np.uint64(1)) // m
-    return (lo + (((hi - lo) * jitter.astype(_U64)) >> np.uint64(32))).astype(_U32)
+    k = np.asarray(k)
+    if m & (m - 1) == 0:
+        a = np.uint64(m.bit_length() - 1)
+        return ((k.astype(_U64) << (np.uint64(32) - a)) | (jitter.astype(_U64) >> a)).astype(_U32)
+    # first[k] = ceil(k 2**32 / m), the first such integer; a table of m + 1 entries, looked up.
+    first = ((np.arange(m + 1, dtype=_U64) << np.uint64(32)) + np.uint64(m - 1)) // np.uint64(m)
+    k = k.astype(np.intp)
+    lo = first[k]
+    width = first[k + 1] - lo  # at most 2**32 - 1 + 1, so width * jitter < 2**64
+    width *= jitter.astype(_U64)
+    width >>= np.uint64(32)
+    lo += width
+    return lo.astype(_U32)
 
 
 class Stratified(_Source):
@@ -737,15 +793,16 @@ class Stratified(_Source):
             start += nx * ny
             jitter = w[:, start : start + n]  # both halves of each word: one per coordinate
             start += n
-            out[:, :, j] = _in_stratum(cell % nx, nx, jitter >> np.uint64(32))
-            out[:, :, j + 1] = _in_stratum(cell // nx, ny, jitter & np.uint64(0xFFFFFFFF))
+            row, col = np.divmod(cell, nx)
+            out[:, :, j] = _in_stratum(col, nx, jitter >> np.uint64(32))
+            out[:, :, j + 1] = _in_stratum(row, ny, jitter & np.uint64(0xFFFFFFFF))
         if odd:
             cell = np.argsort(w[:, start : start + n], axis=1, kind="stable")
             out[:, :, -1] = _in_stratum(cell, n, w[:, start + n : start + 2 * n] >> np.uint64(32))
         return out
 
-    def _random(self, n):
-        return to_unit_float(self.sets_uint32(n, self.d, self._bits())[0])
+    def _random_uint32(self, n):
+        return self.sets_uint32(n, self.d, self._bits())[0]
 
 
 class _Sequence(_Source):
@@ -825,13 +882,13 @@ class Sobol(_Sequence):
     def sets_uint32(cls, n, d, randomizer):
         return cls.points_uint32(np.arange(_check_count(n), dtype=_U64), d, randomizer)
 
-    def _random(self, n):
+    def _random_uint32(self, n):
         self._check_room(n)
         i = np.arange(self.num_generated, self.num_generated + n, dtype=np.uint64)
         # Gray-code order, as scipy and Joe-Kuo's generator emit the points; it permutes each
         # aligned block of 2**m indices within itself, so every such block is still a net.
         gray = (i ^ (i >> np.uint64(1))).astype(_U32)
-        return to_unit_float(self.points_uint32(gray, self.d, self.randomizer)[0])
+        return self.points_uint32(gray, self.d, self.randomizer)[0]
 
 
 def _primes(k):
@@ -909,13 +966,26 @@ class Halton(_Sequence):
     @classmethod
     def points(cls, indices, d, randomizer):
         """The points with indices ``indices`` (n,) of every set: (sets, n, d) float64 in [0, 1)."""
-        return cls._permutations(randomizer, _primes(d))(indices)
+        perm = cls._permutations(randomizer, _primes(d))
+        # An integer below b**K <= 2**52 over b**K: exact in float64, rounded to at most 1 - 2**-52.
+        return perm(indices).astype(np.float64) / perm.scales
+
+    @classmethod
+    def points_uint32(cls, indices, d, randomizer):
+        """:meth:`points` as 32-bit fixed point (sets, n, d) uint32: rounded down, except that a
+        value within 2**-32 above the start of one of its base-b intervals stays in it (see
+        :func:`_radical_fixed_point`); so the fixed-point points keep the strata, and they are
+        within 2**-32 of the floats."""
+        perm = cls._permutations(randomizer, _primes(d))
+        a = perm(indices)
+        out = np.empty(a.shape, dtype=_U32)
+        for j, (b, K, D) in enumerate(perm.digits):
+            out[..., j] = _radical_fixed_point(a[..., j], b, K, D)
+        return out
 
     @classmethod
     def sets_uint32(cls, n, d, randomizer):
-        # floor(x * 2**32): x < 1 has at most 52 bits, so the product is exact and below 2**32.
-        x = cls.points(np.arange(_check_count(n), dtype=_U64), d, randomizer)
-        return (x * 2.0**32).astype(_U32)
+        return cls.points_uint32(np.arange(_check_count(n), dtype=_U64), d, randomizer)
 
     def _capacity(self):
         return min(_MAX_INDEX, self._digits.capacity)
@@ -923,7 +993,12 @@ class Halton(_Sequence):
     def _random(self, n):
         self._check_room(n)
         start = self.num_generated
-        return self._digits(np.arange(start, start + n, dtype=_U64))[0]
+        return self.points(np.arange(start, start + n, dtype=_U64), self.d, self._digits)[0]
+
+    def _random_uint32(self, n):
+        self._check_room(n)
+        start = self.num_generated
+        return self.points_uint32(np.arange(start, start + n, dtype=_U64), self.d, self._digits)[0]
 
 
 SOURCES = {cls.name: cls for cls in (Independent, Stratified, Sobol, Halton)}
