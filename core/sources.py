@@ -417,14 +417,15 @@ class PermuteDigits:
     ----------
     bases : list of int
     capacity : int
-        Indices below it can be evaluated (at least the ``capacity`` asked for).
+        Indices below it can be evaluated: the least b**D over the dimensions (at least the
+        ``capacity`` asked for).
     sets : int
     """
 
-    def __init__(self, bases, perms, tails, capacity):
+    def __init__(self, bases, perms, tails):
         self.bases = [int(b) for b in bases]
         self.sets = int(tails.shape[0])
-        self.capacity = int(capacity)
+        self.capacity = min(b ** p.shape[1] for b, p in zip(self.bases, perms))
         # Per dimension: b, b**K, contrib[s, k, v] = pi_k(v) * b**(K-1-k) (digit k of the index
         # becomes the (k+1)-th digit after the point) and high[s, u], what the digit positions
         # u..D-1 (zero digits) and the tail add for an index with u digits. Python ints below
@@ -459,8 +460,8 @@ class PermuteDigits:
         for b, (K, D) in zip(bases, counts):
             keys = w[:, start : start + D * b].reshape(-1, D, b)
             start += D * b
-            # The ranks of independent keys: a uniformly random permutation per set and digit. A
-            # stable sort, so that (vanishingly rare) equal keys give the same order everywhere.
+            # The sorting order of independent keys: a uniformly random permutation per set and
+            # digit. A stable sort, so that (vanishingly rare) equal keys give one order everywhere.
             perms.append(np.argsort(keys, axis=2, kind="stable"))
         tails = np.empty((bits.sets, len(bases)), dtype=_U64)
         for j, (b, (K, D)) in enumerate(zip(bases, counts)):
@@ -469,7 +470,7 @@ class PermuteDigits:
             r = b ** (K - D)
             u = (w[:, start + j] >> np.uint64(11)).astype(np.float64) * 2.0**-53
             tails[:, j] = np.minimum(np.floor(u * float(r)), float(r - 1)).astype(_U64)
-        return cls(bases, perms, tails, capacity)
+        return cls(bases, perms, tails)
 
     @classmethod
     def identity(cls, bases, capacity=_MAX_INDEX):
@@ -478,7 +479,7 @@ class PermuteDigits:
         for b in bases:
             K, D = _digit_counts(b, capacity)
             perms.append(np.tile(np.arange(b, dtype=_U64), (1, D, 1)))
-        return cls(bases, perms, np.zeros((1, len(bases)), dtype=_U64), capacity)
+        return cls(bases, perms, np.zeros((1, len(bases)), dtype=_U64))
 
     def __call__(self, indices):
         """The points of every set at ``indices`` (n,) as integers over b**K: (sets, n, d) uint64.
@@ -522,7 +523,8 @@ def _radical_fixed_point(a, b, K, D):
     the base-b strata of every level up to L survive. Plain rounding down would move a value that
     lies less than 2**-32 above an interval's start (which is not a multiple of 2**-32 for odd b)
     into the interval below it."""
-    # a < 2**52: exact in float64; a / b**K < 1 has 52 bits at most, so the product is exact.
+    # a < 2**52 is exact in float64, a / b**K rounds (as the floats of Halton.points do), and the
+    # product with 2**32 is exact: q is those floats rounded down to 32 bits.
     q = np.floor(a.astype(np.float64) / float(b**K) * 2.0**32).astype(_U64)
     if b % 2 == 0:
         return q.astype(_U32)  # base 2: every interval starts on a multiple of 2**-32
