@@ -34,7 +34,6 @@ every pool point once into the quantities the kernel multiplies by each unit's a
 :mod:`core.kernel`).
 """
 
-import math
 import threading
 from collections import OrderedDict
 
@@ -42,7 +41,7 @@ import numpy as np
 
 from . import warps
 from .errors import SettingsError
-from .sources import Stratified, owen_scramble_uint32, sobol_uint32
+from .sources import SOURCES, Stratified
 
 SOURCE_NAMES = ("sobol", "stratified", "independent", "halton")
 DIMS = 4
@@ -343,68 +342,63 @@ def _pool(source, seed, patterns, span, length):
     return pool
 
 
+class _PatternBits:
+    """The random words of pool patterns, counter-based: word j of pattern e is
+    hash64(seed, e, j, _TAG_SCRAMBLE), so each pattern's randomisation depends on (seed, e) alone.
+    A bit source of :mod:`core.sources` (``sets``, ``words(count)``) for the patterns ``patterns``."""
+
+    def __init__(self, seed, patterns):
+        self._state = hash64(seed, np.asarray(patterns, dtype=np.uint64).reshape(-1))
+        self.sets = len(self._state)
+        self._next = 0
+
+    def words(self, count):
+        j = np.arange(self._next, self._next + count, dtype=np.uint64)
+        self._next += count
+        out = np.empty((self.sets, count), np.uint64)
+        if count == 0:
+            return out
+        # hash_more(state, j, tag) a block of patterns at a time, in place and on flat arrays: the
+        # temporaries stay in cache, and no inner loop is as short as a pattern's few words.
+        rows = max(1, _WORDS_BLOCK // count)
+        counters = np.tile(j, min(rows, self.sets))
+        tmp = np.empty(counters.size, np.uint64)
+        tag = np.uint64(_TAG_SCRAMBLE)
+        flat = out.reshape(-1)
+        for r in range(0, self.sets, rows):
+            state = self._state[r:r + rows]
+            h = flat[r * count:(r + len(state)) * count]
+            t = tmp[:h.size]
+            h[:] = np.repeat(state, count)
+            h ^= counters[:h.size]
+            h += _GOLDEN
+            _mix_into(h, t)
+            h ^= tag
+            h += _GOLDEN
+            _mix_into(h, t)
+        return out
+
+
+_WORDS_BLOCK = 1 << 15
+
+
+def _pattern_randomizer(cls, seed, patterns, count):
+    """The randomisation of the pool patterns ``patterns`` of the source class ``cls``."""
+    return cls.randomizer_from(_PatternBits(seed, patterns), DIMS, count)
+
+
 def _build_pool(source, seed, patterns, span, length):
-    """The points (patterns * span, 4) uint32 of ``source`` for ``seed``."""
-    e = np.arange(patterns, dtype=np.uint64)[:, None]
-    dims = np.arange(DIMS, dtype=np.uint64)[None, :]
-    if source == "sobol":
-        # Each pattern: the first `length` 4D Sobol' points, Owen-scrambled with its own seed per
-        # dimension (a seed shared by two dimensions would correlate them).
-        seeds = (hash64(seed, e, dims, _TAG_SCRAMBLE) >> np.uint64(32)).astype(np.uint32)  # (P, 4)
-        base = sobol_uint32(np.arange(span, dtype=np.uint64), DIMS)  # (span, 4)
-        q = owen_scramble_uint32(base[None, :, :], seeds[:, None, :])
-    elif source == "independent":
-        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(seed) >> 32, 1])
-        q = rng.integers(0, 1 << 32, size=(patterns, span, DIMS), dtype=np.uint32)
-    elif source == "stratified":
-        q = _stratified_pool(seed, patterns, length)
-        q = np.concatenate([q, q], axis=1)  # stored twice: a window i + o needs no wrap
-    else:
-        q = _halton_pool(seed, patterns, span)
+    """The points (patterns * span, 4) uint32 of ``source`` for ``seed``: pattern e is the source's
+    point set (:data:`core.sources.SOURCES`) under the randomisation drawn from (seed, e). A
+    sequence gives its first ``span`` points; a whole set (stratified) of ``length`` points is
+    stored twice in a row, so that a window i + o needs no wrap."""
+    cls = SOURCES[source]
+    count = span if cls.continues else length
+    q = cls.sets_uint32(count, DIMS, _pattern_randomizer(cls, seed, np.arange(patterns), count))
+    if count < span:
+        q = np.tile(q, (1, span // count, 1))
     q = np.ascontiguousarray(q.reshape(patterns * span, DIMS))
     q.setflags(write=False)
-    return q
-
-
-def _stratified_pool(seed, patterns, n):
-    """Jittered sets: dims (0, 1) and (2, 3) each one point per stratum of an nx x ny grid
-    (n = nx * ny, powers of two), each pair in its own random order ("padding")."""
-    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(seed) >> 32, 2])
-    nx, ny = Stratified.grid_shape(n)
-    q = np.empty((patterns, n, DIMS), np.uint32)
-    for pair in range(2):
-        order = np.argsort(rng.random((patterns, n)), axis=1)  # a random stratum per point
-        jitter = rng.integers(0, 1 << 32, size=(patterns, n, 2), dtype=np.uint64)
-        col, row = order % nx, order // nx
-        # (stratum + jitter) / count in 32-bit fixed point: strata are dyadic, so this is exact.
-        q[..., 2 * pair] = ((col.astype(np.uint64) << np.uint64(32)) + jitter[..., 0]) // np.uint64(nx)
-        q[..., 2 * pair + 1] = ((row.astype(np.uint64) << np.uint64(32)) + jitter[..., 1]) // np.uint64(ny)
-    return q
-
-
-_HALTON_BASES = (2, 3, 5, 7)
-
-
-def _halton_pool(seed, patterns, span):
-    """Digit-permuted 4D Halton sets: every pattern its own random permutation of the digits at each
-    digit position of each dimension (pbrt-v4's PermuteDigits), and random digits below those the
-    indices reach (so each point is uniform on [0, 1))."""
-    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(seed) >> 32, 3])
-    idx = np.arange(span)
-    q = np.empty((patterns, span, DIMS), np.uint32)
-    for j, b in enumerate(_HALTON_BASES):
-        ndig = max(1, math.ceil(math.log(span, b) + 1e-9))
-        while b ** ndig < span:
-            ndig += 1
-        perms = np.argsort(rng.random((patterns, ndig, b)), axis=2)  # (P, ndig, b)
-        value = np.zeros((patterns, span))
-        digits = idx.copy()
-        for k in range(ndig):
-            d = digits % b
-            digits //= b
-            value += perms[:, k, d] * float(b) ** -(k + 1)
-        value += rng.random((patterns, 1)) * float(b) ** -ndig  # the random tail below
-        q[..., j] = np.minimum(np.floor(value * 2.0**32), 2.0**32 - 1).astype(np.uint32)
     return q
 
 

@@ -18,6 +18,10 @@ __all__ = [
     "Stratified",
     "Sobol",
     "Halton",
+    "GeneratorBits",
+    "NoRandomizer",
+    "OwenScrambler",
+    "PermuteDigits",
     "SOURCES",
     "make_source",
 ]
@@ -301,6 +305,240 @@ def to_unit_float(x_uint32):
 
 
 # ---------------------------------------------------------------------------------------------
+# Randomisations: where the random bits come from, and what they randomise
+# ---------------------------------------------------------------------------------------------
+#
+# Every source is one point set with its randomisation passed in as a strategy, as in pbrt-v4's
+# samplers: Sobol' takes NoRandomizer or OwenScrambler, Halton NoRandomizer or PermuteDigits, and
+# the stratified and independent sets, which are nothing but their random choices laid out, take a
+# bit source. A randomisation holds ``sets`` independent randomisations at once, so that the baker
+# builds its pool of thousands of randomised sets (core.patterns) with the same code, vectorised,
+# that makes a single set here.
+#
+# A bit source is anything with ``sets`` and ``words(count) -> (sets, count) uint64`` (fresh words
+# on every call). The public classes use GeneratorBits; the baker's pools use counter-based words,
+# hashes of (seed, set, word index), so that each pool pattern depends on (seed, pattern) alone.
+
+
+class GeneratorBits:
+    """Random 64-bit words from a numpy Generator, for one randomisation (``sets == 1``).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Used and advanced as is.
+    """
+
+    sets = 1
+
+    def __init__(self, rng):
+        self.rng = rng
+
+    def words(self, count):
+        """``count`` fresh words, shape (1, count) uint64.
+
+        ``Generator.random()`` is ``(word >> 11) * 2**-53`` of the same words (for numpy's
+        default bit generator), which keeps :class:`Independent` the plain Generator stream.
+        """
+        return self.rng.integers(0, 2**64, size=(1, count), dtype=_U64)
+
+
+class NoRandomizer:
+    """No randomisation (pbrt-v4's ``NoRandomizer``): Sobol' or Halton points as they are."""
+
+    sets = 1
+
+    def __call__(self, u):
+        return u[None]
+
+
+class OwenScrambler:
+    """Nested uniform (Owen) scramble of every dimension of Sobol' points, ``sets`` scrambles at once.
+
+    pbrt-v4's ``FastOwenScrambler`` (see :func:`owen_scramble_uint32`), one seed per set and
+    dimension: a seed shared by two dimensions would correlate them.
+
+    Parameters
+    ----------
+    seeds : array_like of int, shape (sets, d) or (d,)
+        Seeds in [0, 2**32).
+    """
+
+    def __init__(self, seeds):
+        seeds = _as_uint32(seeds, "seeds")
+        if seeds.ndim not in (1, 2):
+            raise ValueError(f"seeds must have shape (sets, d) or (d,), got {seeds.shape}")
+        self.seeds = np.atleast_2d(seeds)
+        self.sets, self.d = self.seeds.shape
+
+    @classmethod
+    def draw(cls, bits, d):
+        """Seeds for ``d`` dimensions of each of ``bits.sets`` scrambles: the top 32 bits of ``d`` words."""
+        return cls((bits.words(d) >> np.uint64(32)).astype(_U32))
+
+    def __call__(self, u):
+        """Scramble the points ``u`` (n, d) uint32 with every set's seeds: (sets, n, d) uint32."""
+        return owen_scramble_uint32(u[None], self.seeds[:, None, :])
+
+
+def _carried_digits(b):
+    """K, the digits of base b carried: b**K <= 2**52, so values are exact in float64."""
+    K = 1
+    while b ** (K + 1) <= 2**52:
+        K += 1
+    return K
+
+
+def _digit_counts(b, capacity):
+    """(K, D) for base b: K digits carried, D digits permuted, the fewest that cover every index
+    below ``capacity`` (b**D >= capacity), at most K."""
+    K = _carried_digits(b)
+    D = 1
+    while b**D < capacity and D < K:
+        D += 1
+    return K, D
+
+
+class PermuteDigits:
+    """Random digit permutations of Halton points (pbrt-v4's ``PermuteDigits``), ``sets`` at once.
+
+    Dimension j with base b maps an index's digit d_k (k = 0 the least significant) to
+    pi_{j,k}(d_k), a uniformly random permutation of {0, ..., b-1} for every set, dimension and
+    digit position k < D, where b**D >= ``capacity`` covers every index the set will be asked for.
+    The digits beyond are zeros for those indices, and permuting them would give independent
+    uniform digits: they are drawn as such at once, a uniform "tail" below b**-D. So each point
+    is uniform on [0, 1)^d, and each digit permutation being a bijection, the first b**k points
+    of a base-b dimension still hold one point in each interval of length b**-k.
+
+    Values are integers over b**K (b**K <= 2**52), so they are exact in float64 and below 1.
+    Make one with :meth:`draw` (random) or :meth:`identity` (the plain radical inverses).
+
+    Attributes
+    ----------
+    bases : list of int
+    capacity : int
+        Indices below it can be evaluated: the least b**D over the dimensions (at least the
+        ``capacity`` asked for).
+    sets : int
+    """
+
+    def __init__(self, bases, perms, tails):
+        self.bases = [int(b) for b in bases]
+        self.sets = int(tails.shape[0])
+        self.capacity = min(b ** p.shape[1] for b, p in zip(self.bases, perms))
+        # Per dimension: b, b**K, contrib[s, k, v] = pi_k(v) * b**(K-1-k) (digit k of the index
+        # becomes the (k+1)-th digit after the point) and high[s, u], what the digit positions
+        # u..D-1 (zero digits) and the tail add for an index with u digits. Python ints below
+        # 2**52 throughout: exact in uint64.
+        self._dims = []
+        for j, b in enumerate(self.bases):
+            perm = perms[j]
+            K, D = _carried_digits(b), perm.shape[1]
+            weight = np.array([b ** (K - 1 - k) for k in range(D)], dtype=_U64)
+            contrib = perm.astype(_U64) * weight[None, :, None]
+            high = np.zeros((self.sets, D + 1), dtype=_U64)
+            high[:, D] = tails[:, j]
+            high[:, :D] = np.cumsum(contrib[:, ::-1, 0], axis=1)[:, ::-1] + tails[:, j : j + 1]
+            self._dims.append((b, float(b**K), contrib, high))
+
+    @classmethod
+    def draw(cls, bits, bases, capacity=_MAX_INDEX):
+        """Independent random permutations (and tails) for ``bits.sets`` sets of the given bases.
+
+        Parameters
+        ----------
+        bits : bit source (see :class:`GeneratorBits`)
+        bases : list of int
+            The base of each dimension.
+        capacity : int
+            The most points any set will be asked for.
+        """
+        counts = [_digit_counts(b, capacity) for b in bases]
+        need = sum(D * b for b, (K, D) in zip(bases, counts))
+        w = bits.words(need + len(bases))
+        perms, start = [], 0
+        for b, (K, D) in zip(bases, counts):
+            keys = w[:, start : start + D * b].reshape(-1, D, b)
+            start += D * b
+            # The sorting order of independent keys: a uniformly random permutation per set and
+            # digit. A stable sort, so that (vanishingly rare) equal keys give one order everywhere.
+            perms.append(np.argsort(keys, axis=2, kind="stable"))
+        tails = np.empty((bits.sets, len(bases)), dtype=_U64)
+        for j, (b, (K, D)) in enumerate(zip(bases, counts)):
+            # Uniform on [0, b**(K-D)) from the word's top 53 bits; the product rounds in float64
+            # (R <= 2**52), hence the clamp. Only its distribution below b**-D matters.
+            r = b ** (K - D)
+            u = (w[:, start + j] >> np.uint64(11)).astype(np.float64) * 2.0**-53
+            tails[:, j] = np.minimum(np.floor(u * float(r)), float(r - 1)).astype(_U64)
+        return cls(bases, perms, tails)
+
+    @classmethod
+    def identity(cls, bases, capacity=_MAX_INDEX):
+        """The identity permutations and no tail: the plain radical inverses (one set)."""
+        perms = []
+        for b in bases:
+            K, D = _digit_counts(b, capacity)
+            perms.append(np.tile(np.arange(b, dtype=_U64), (1, D, 1)))
+        return cls(bases, perms, np.zeros((1, len(bases)), dtype=_U64))
+
+    def __call__(self, indices):
+        """The points of every set at ``indices`` (n,) as integers over b**K: (sets, n, d) uint64.
+        Divided by :attr:`scales` they are the points in [0, 1)."""
+        idx = np.asarray(indices, dtype=_U64).reshape(-1)
+        n = idx.size
+        out = np.empty((self.sets, n, len(self.bases)), dtype=_U64)
+        if n == 0:
+            return out
+        top = int(idx.max())
+        if top >= self.capacity:
+            raise SettingsError(f"Halton: index {top} is beyond the {self.capacity} points these permutations cover")
+        for j, (b, scale, contrib, high) in enumerate(self._dims):
+            used = 1
+            while b**used <= top:
+                used += 1
+            acc = np.repeat(high[:, used : used + 1], n, axis=1)  # (sets, n)
+            q = idx.copy()
+            bb = np.uint64(b)
+            for k in range(used):
+                digit = q % bb
+                q //= bb
+                acc += np.take(contrib[:, k, :], digit.astype(np.intp), axis=1)
+            out[:, :, j] = acc
+        return out
+
+    @property
+    def scales(self):
+        """b**K of every dimension, as floats (exact: at most 2**52)."""
+        return np.array([scale for _, scale, _, _ in self._dims])
+
+    @property
+    def digits(self):
+        """(b, K, D) of every dimension: its base, the digits carried, the digits permuted."""
+        return [(b, _carried_digits(b), contrib.shape[1]) for b, _, contrib, _ in self._dims]
+
+
+def _radical_fixed_point(a, b, K, D):
+    """32-bit fixed point of base-b values ``a / b**K`` (uint64 integers): rounded down, then kept
+    inside the value's interval of length b**-L (L <= D the finest level with b**L <= 2**32), so that
+    the base-b strata of every level up to L survive. Plain rounding down would move a value that
+    lies less than 2**-32 above an interval's start (which is not a multiple of 2**-32 for odd b)
+    into the interval below it."""
+    # a < 2**52 is exact in float64, a / b**K rounds (as the floats of Halton.points do), and the
+    # product with 2**32 is exact: q is those floats rounded down to 32 bits.
+    q = np.floor(a.astype(np.float64) / float(b**K) * 2.0**32).astype(_U64)
+    if b % 2 == 0:
+        return q.astype(_U32)  # base 2: every interval starts on a multiple of 2**-32
+    L = D
+    while b**L > 2**32:
+        L -= 1
+    bl = np.uint64(b**L)
+    s = a // np.uint64(b ** (K - L))  # the value's interval at level L
+    lo = ((s << np.uint64(32)) + bl - np.uint64(1)) // bl  # ceil(s 2**32 / b**L): the first inside
+    top = (((s + np.uint64(1)) << np.uint64(32)) - np.uint64(1)) // bl  # the last inside
+    return np.clip(q, lo, top).astype(_U32)
+
+
+# ---------------------------------------------------------------------------------------------
 # Sources
 # ---------------------------------------------------------------------------------------------
 
@@ -312,19 +550,47 @@ class _Source:
     ----------
     d : int
         Dimension of the points.
+    randomizer : None or a randomisation of this source (see the module's randomisations)
+        Holding one set (``sets == 1``). None: a random one drawn from ``seed``.
     seed : None, int, array_like of int, numpy.random.SeedSequence or numpy.random.Generator
         Normalised once with ``numpy.random.default_rng``. A Generator is used (and advanced) as is,
         like scipy does; a copy of its initial state is kept for :meth:`reset`.
+
+    Every source also builds many randomised sets at once, for the baker's pools:
+    ``cls.sets_uint32(n, d, cls.randomizer_from(bits, d, n))`` is (sets, n, d) uint32, set ``s``
+    being what ``cls(d, randomizer=<set s's randomisation>).random_uint32(n)`` returns (for
+    Sobol', in direct rather than Gray-code order). :meth:`random_uint32` gives the points of
+    :meth:`random` in 32-bit fixed point: the same bits, rounded down where the floats have more
+    (Halton keeps its strata in the rounding, see :meth:`Halton.points_uint32`).
     """
 
     name = "source"
     _max_dim = None
+    #: Whether consecutive calls continue one sequence, so that the first points of a set are a
+    #: set themselves (all but the stratified sets, which are whole sets of n points).
+    continues = True
 
-    def __init__(self, d=2, *, seed=None):
+    def __init__(self, d=2, *, randomizer=None, seed=None):
         self.d = _check_dim(d, self._max_dim, type(self).__name__)
         self.rng = np.random.default_rng(seed)
         self._rng_init = copy.deepcopy(self.rng)
+        if randomizer is not None and getattr(randomizer, "sets", None) != 1:
+            raise SettingsError(f"{type(self).__name__}: the randomizer must hold one randomisation (sets == 1)")
+        self.randomizer = randomizer
+        self._randomizer_init = copy.deepcopy(randomizer)
         self.num_generated = 0
+
+    @classmethod
+    def randomizer_from(cls, bits, d, max_points):
+        """The source's random randomisation for ``d`` dimensions and sets of up to ``max_points``
+        points, ``bits.sets`` of them, their random choices taken from the bit source ``bits``."""
+        raise NotImplementedError
+
+    @classmethod
+    def sets_uint32(cls, n, d, randomizer):
+        """The first ``n`` points of every set of ``randomizer``: (sets, n, d) uint32, the
+        coordinates times 2**32 (rounded down where they have more bits)."""
+        raise NotImplementedError
 
     def random(self, n=1):
         """Draw ``n`` points.
@@ -343,9 +609,20 @@ class _Source:
         self.num_generated += n
         return out
 
+    def random_uint32(self, n=1):
+        """Draw ``n`` points as 32-bit fixed point: (n, d) uint32, the coordinates times 2**32.
+
+        The same points as :meth:`random` would give (and the sequence goes on the same way).
+        """
+        n = _check_count(n)
+        out = self._random_uint32(n)
+        self.num_generated += n
+        return out
+
     def reset(self):
         """Return to the state right after construction; returns ``self``."""
         self.rng = copy.deepcopy(self._rng_init)
+        self.randomizer = copy.deepcopy(self._randomizer_init)
         self.num_generated = 0
         return self
 
@@ -356,10 +633,18 @@ class _Source:
         self.num_generated += n
         return self
 
+    def _bits(self):
+        # The bit source of the sources that draw on every call: the one given, or the rng (read
+        # here, as reset replaces it).
+        return self.randomizer if self.randomizer is not None else GeneratorBits(self.rng)
+
     def _fast_forward(self, n):
         self._random(n)
 
     def _random(self, n):
+        return to_unit_float(self._random_uint32(n))
+
+    def _random_uint32(self, n):
         raise NotImplementedError
 
     def __repr__(self):
@@ -369,22 +654,65 @@ class _Source:
 class Independent(_Source):
     """Independent uniform points (plain Monte Carlo); the baseline every other source must beat.
 
-    Consecutive calls continue one stream: ``random(a)`` then ``random(b)`` equals ``random(a + b)``.
+    The points are their bit source's words laid out row by row, one word per coordinate: the
+    float is ``(word >> 11) * 2**-53`` (with the default bit source, exactly ``rng.random((n, d))``)
+    and the 32-bit fixed point ``word >> 32``. Consecutive calls continue one stream:
+    ``random(a)`` then ``random(b)`` equals ``random(a + b)``.
+
+    Parameters
+    ----------
+    randomizer : None or a bit source (see :class:`GeneratorBits`) with ``sets == 1``
     """
 
     name = "independent"
 
+    @classmethod
+    def randomizer_from(cls, bits, d, max_points=None):
+        return bits
+
+    @staticmethod
+    def _words(n, d, bits):
+        return bits.words(n * d).reshape(bits.sets, n, d)
+
+    @classmethod
+    def sets_uint32(cls, n, d, randomizer):
+        return (cls._words(_check_count(n), d, randomizer) >> np.uint64(32)).astype(_U32)
+
     def _random(self, n):
-        return self.rng.random((n, self.d))
+        w = self._words(n, self.d, self._bits())[0]
+        return (w >> np.uint64(11)).astype(np.float64) * 2.0**-53
+
+    def _random_uint32(self, n):
+        return (self._words(n, self.d, self._bits())[0] >> np.uint64(32)).astype(_U32)
 
     def _fast_forward(self, n):
-        # Discard in bounded chunks: the generator's doubles come out in row-major order, so
-        # chunking skips exactly the same draws as one random(n) call would, without its memory.
+        # Discard in bounded chunks: the words come out row by row, so chunking skips exactly the
+        # same words as one random(n) call would, without its memory.
+        bits = self._bits()
         chunk = max(1, (1 << 20) // self.d)
         while n > 0:
             k = min(n, chunk)
-            self.rng.random((k, self.d))
+            bits.words(k * self.d)
             n -= k
+
+
+def _in_stratum(k, m, jitter):
+    """32-bit fixed-point coordinates in stratum ``k`` of ``m`` equal strata of [0, 1), placed by the
+    32-bit ``jitter``: the integers v with k/m <= v 2**-32 < (k+1)/m, so that floor(v 2**-32 m) == k
+    holds exactly in float64 too (for power-of-two m: k in the top bits, the jitter's top bits below)."""
+    k = np.asarray(k)
+    if m & (m - 1) == 0:
+        a = np.uint64(m.bit_length() - 1)
+        return ((k.astype(_U64) << (np.uint64(32) - a)) | (jitter.astype(_U64) >> a)).astype(_U32)
+    # first[k] = ceil(k 2**32 / m), the first such integer; a table of m + 1 entries, looked up.
+    first = ((np.arange(m + 1, dtype=_U64) << np.uint64(32)) + np.uint64(m - 1)) // np.uint64(m)
+    k = k.astype(np.intp)
+    lo = first[k]
+    width = first[k + 1] - lo  # at most 2**32 - 1 + 1, so width * jitter < 2**64
+    width *= jitter.astype(_U64)
+    width >>= np.uint64(32)
+    lo += width
+    return lo.astype(_U32)
 
 
 class Stratified(_Source):
@@ -392,8 +720,8 @@ class Stratified(_Source):
 
     Dimensions are stratified in pairs: dims (0, 1) on an ``nx x ny`` grid of strata, one jittered
     point per stratum, (2, 3) on another such grid, and so on; an odd last dimension is stratified
-    into ``n`` intervals. Each block is shuffled independently ("padding", as in pbrt), so the
-    strata of different pairs are not correlated.
+    into ``n`` intervals. Each block takes the strata in its own random order ("padding", as in
+    pbrt), so the strata of different pairs are not correlated.
 
     The grid is chosen by :meth:`grid_shape`: an exact factorisation ``nx * ny == n`` with aspect
     ratio at most 2 when one exists (always for powers of two), else the near-square grid with the
@@ -402,11 +730,18 @@ class Stratified(_Source):
     over the grid, its position uniform inside), and the estimate stays unbiased, at the price of
     a little extra variance from the choice of empty strata.
 
-    Repeated ``random(n)`` calls give fresh, independent sets (not a continuation);
-    ``fast_forward(n)`` draws and discards one set of ``n``.
+    Coordinates are 32-bit binary fractions (:func:`_in_stratum`). Repeated ``random(n)`` calls
+    give fresh, independent sets (not a continuation); ``fast_forward(n)`` draws and discards one
+    set of ``n``.
+
+    Parameters
+    ----------
+    randomizer : None or a bit source (see :class:`GeneratorBits`) with ``sets == 1``
+        Where the stratum orders and jitter come from.
     """
 
     name = "stratified"
+    continues = False
 
     @staticmethod
     def grid_shape(n):
@@ -438,23 +773,38 @@ class Stratified(_Source):
         a, b = int(nx[i]), int(ny[i])
         return (max(a, b), min(a, b))
 
-    def _random(self, n):
-        out = np.empty((n, self.d))
+    @classmethod
+    def randomizer_from(cls, bits, d, max_points=None):
+        return bits
+
+    @classmethod
+    def sets_uint32(cls, n, d, randomizer):
+        n = _check_count(n)
+        out = np.empty((randomizer.sets, n, d), dtype=_U32)
         if n == 0:
             return out
-        nx, ny = self.grid_shape(n)
-        for j in range(0, self.d - 1, 2):
-            # permutation(...)[:n] is a uniformly random ordered choice of n distinct strata.
-            cell = self.rng.permutation(nx * ny)[:n]
-            jitter = self.rng.random((n, 2))
-            out[:, j] = (cell % nx + jitter[:, 0]) / nx
-            out[:, j + 1] = (cell // nx + jitter[:, 1]) / ny
-        if self.d % 2:
-            cell = self.rng.permutation(n)
-            out[:, -1] = (cell + self.rng.random(n)) / n
-        # (k + u) / m rounds up to 1.0 when u is within an ulp of 1; keep the half-open interval.
-        np.minimum(out, _BELOW_ONE, out=out)
+        nx, ny = cls.grid_shape(n)
+        pairs, odd = divmod(d, 2)
+        w = randomizer.words(pairs * (nx * ny + n) + odd * 2 * n)
+        start = 0
+        for j in range(0, 2 * pairs, 2):
+            # The first n ranks of independent keys: a uniformly random ordered choice of n distinct
+            # strata, its own for every pair and set. A stable sort, so that (vanishingly rare)
+            # equal keys give the same order everywhere.
+            cell = np.argsort(w[:, start : start + nx * ny], axis=1, kind="stable")[:, :n]
+            start += nx * ny
+            jitter = w[:, start : start + n]  # both halves of each word: one per coordinate
+            start += n
+            row, col = np.divmod(cell, nx)
+            out[:, :, j] = _in_stratum(col, nx, jitter >> np.uint64(32))
+            out[:, :, j + 1] = _in_stratum(row, ny, jitter & np.uint64(0xFFFFFFFF))
+        if odd:
+            cell = np.argsort(w[:, start : start + n], axis=1, kind="stable")
+            out[:, :, -1] = _in_stratum(cell, n, w[:, start + n : start + 2 * n] >> np.uint64(32))
         return out
+
+    def _random_uint32(self, n):
+        return self.sets_uint32(n, self.d, self._bits())[0]
 
 
 class _Sequence(_Source):
@@ -462,14 +812,17 @@ class _Sequence(_Source):
     the same points, and points are indexed by 32-bit integers."""
 
     def reset(self):
-        # The scrambles were drawn at construction and stay: reset replays the same points.
+        # The randomisation was drawn at construction and stays: reset replays the same points.
         self.num_generated = 0
         return self
 
+    def _capacity(self):
+        return _MAX_INDEX
+
     def _check_room(self, n):
-        if self.num_generated + n > _MAX_INDEX:
+        if self.num_generated + n > self._capacity():
             raise SettingsError(
-                f"{type(self).__name__}: cannot go past 2**32 points ({self.num_generated} drawn, {n} more asked)"
+                f"{type(self).__name__}: cannot go past {self._capacity()} points ({self.num_generated} drawn, {n} more asked)"
             )
 
     def _fast_forward(self, n):
@@ -485,9 +838,11 @@ class Sobol(_Sequence):
         Dimension, 1 to ``SOBOL_MAX_DIM`` (21).
     scramble : bool
         If true (default), each dimension gets its own nested uniform scramble
-        (:func:`owen_scramble_uint32`) with a seed drawn from the rng; points are then unbiased
-        and the (t, m, s)-net structure is kept. If false, the points are exactly those of
+        (:class:`OwenScrambler`) with a seed drawn from the rng; points are then unbiased and the
+        (t, m, s)-net structure is kept. If false, the points are exactly those of
         ``scipy.stats.qmc.Sobol(d, scramble=False, bits=32)``, in the same (Gray-code) order.
+    randomizer : None, NoRandomizer or OwenScrambler (one set of ``d`` seeds)
+        Given, it decides the scramble (and ``scramble`` is not used).
     seed : see :class:`Independent`
         Only used for the scramble seeds.
 
@@ -496,30 +851,46 @@ class Sobol(_Sequence):
     Any ``n`` works, but the balance properties hold for blocks of ``2**m`` points starting at a
     multiple of ``2**m``: ask for powers of two (and continue in powers of two) to get them; other
     counts give a valid but less balanced set. Consecutive calls continue the sequence, up to
-    ``2**32`` points in all.
+    ``2**32`` points in all. :meth:`random` emits the points in Gray-code order, as scipy does;
+    :meth:`points_uint32` and :meth:`sets_uint32` take direct indices (pbrt-v4's order). Both
+    orders permute every aligned block of ``2**m`` indices within itself.
     """
 
     name = "sobol"
     _max_dim = SOBOL_MAX_DIM
 
-    def __init__(self, d=2, *, scramble=True, seed=None):
-        super().__init__(d, seed=seed)
-        self.scramble = bool(scramble)
-        # uint32 seeds drawn directly as uint32: no Python-int arithmetic that could overflow.
-        self._seeds = (
-            self.rng.integers(0, 2**32, size=self.d, dtype=np.uint32) if self.scramble else None
-        )
+    def __init__(self, d=2, *, scramble=True, randomizer=None, seed=None):
+        super().__init__(d, randomizer=randomizer, seed=seed)
+        if self.randomizer is None:
+            self.randomizer = (
+                self.randomizer_from(GeneratorBits(self.rng), self.d) if scramble else NoRandomizer()
+            )
+        elif not isinstance(self.randomizer, (NoRandomizer, OwenScrambler)):
+            raise TypeError(f"Sobol takes NoRandomizer or OwenScrambler, got {type(self.randomizer).__name__}")
+        elif isinstance(self.randomizer, OwenScrambler) and self.randomizer.d != self.d:
+            raise SettingsError(f"Sobol: {self.randomizer.d} scramble seeds for {self.d} dimensions")
+        self.scramble = isinstance(self.randomizer, OwenScrambler)
 
-    def _random(self, n):
+    @classmethod
+    def randomizer_from(cls, bits, d, max_points=None):
+        return OwenScrambler.draw(bits, d)
+
+    @classmethod
+    def points_uint32(cls, indices, d, randomizer):
+        """The points with direct indices ``indices`` (n,) of every set: (sets, n, d) uint32."""
+        return randomizer(sobol_uint32(indices, d))
+
+    @classmethod
+    def sets_uint32(cls, n, d, randomizer):
+        return cls.points_uint32(np.arange(_check_count(n), dtype=_U64), d, randomizer)
+
+    def _random_uint32(self, n):
         self._check_room(n)
         i = np.arange(self.num_generated, self.num_generated + n, dtype=np.uint64)
         # Gray-code order, as scipy and Joe-Kuo's generator emit the points; it permutes each
         # aligned block of 2**m indices within itself, so every such block is still a net.
         gray = (i ^ (i >> np.uint64(1))).astype(_U32)
-        u = sobol_uint32(gray, self.d)
-        if self.scramble:
-            u = owen_scramble_uint32(u, self._seeds)
-        return to_unit_float(u)
+        return self.points_uint32(gray, self.d, self.randomizer)[0]
 
 
 def _primes(k):
@@ -542,10 +913,11 @@ class Halton(_Sequence):
 
     Dimension j with base b maps index i = sum_k d_k b^k to sum_k pi_{j,k}(d_k) b^-(k+1), where
     every dimension and digit position has its own uniformly random permutation pi_{j,k} of
-    {0, ..., b-1} (pbrt-v4's ``PermuteDigits``). Each point is then uniform on [0, 1)^d, while each
-    digit permutation is a bijection, so the stratification of the sequence survives: the first
-    ``b**k`` points of a base-b dimension hold one point in each interval of length ``b**-k``, and
-    the first ``2**a * 3**b`` points of dims (0, 1) one in each cell of a ``2**-a x 3**-b`` grid.
+    {0, ..., b-1} (pbrt-v4's ``PermuteDigits``, see :class:`PermuteDigits`). Each point is then
+    uniform on [0, 1)^d, while each digit permutation is a bijection, so the stratification of the
+    sequence survives: the first ``b**k`` points of a base-b dimension hold one point in each
+    interval of length ``b**-k``, and the first ``2**a * 3**b`` points of dims (0, 1) one in each
+    cell of a ``2**-a x 3**-b`` grid.
 
     Digits are carried to ``b**-K`` with ``b**K <= 2**52``, finer than float64 resolves near 1, and
     the value is computed as an exact integer over ``b**K``, so it is always below 1.
@@ -556,6 +928,9 @@ class Halton(_Sequence):
         Dimension, 1 to 1000.
     scramble : bool
         If false, the plain radical inverses (identity permutations).
+    randomizer : None, NoRandomizer or PermuteDigits (one set, the first ``d`` primes as bases)
+        Given, it decides the randomisation (and ``scramble`` is not used); the sequence then
+        stops at the permutations' ``capacity``.
     seed : see :class:`Independent`
         Only used for the permutations.
 
@@ -568,50 +943,64 @@ class Halton(_Sequence):
     name = "halton"
     _max_dim = 1000
 
-    def __init__(self, d=2, *, scramble=True, seed=None):
-        super().__init__(d, seed=seed)
-        self.scramble = bool(scramble)
+    def __init__(self, d=2, *, scramble=True, randomizer=None, seed=None):
+        super().__init__(d, randomizer=randomizer, seed=seed)
         self.bases = _primes(self.d)
-        self._digits = []
-        for b in self.bases:
-            ndig = 1
-            while b ** (ndig + 1) <= 2**52:
-                ndig += 1
-            if self.scramble:
-                # One independent permutation of the digits per digit position.
-                perm = self.rng.permuted(np.tile(np.arange(b, dtype=_U64), (ndig, 1)), axis=1)
-            else:
-                perm = np.tile(np.arange(b, dtype=_U64), (ndig, 1))
-            # weight[k] = b**(ndig-1-k): digit k (least significant of the index) becomes the
-            # (k+1)-th digit after the point. Python ints below 2**52, exact in uint64.
-            weight = np.array([b ** (ndig - 1 - k) for k in range(ndig)], dtype=_U64)
-            contrib = perm * weight[:, None]  # (ndig, b), every entry < b**ndig <= 2**52
-            # Digits above the largest index are all 0: their permuted values add a constant.
-            tail = np.concatenate([np.cumsum(contrib[::-1, 0])[::-1], np.zeros(1, dtype=_U64)])
-            self._digits.append((np.uint64(b), contrib, tail, float(b**ndig)))
+        if self.randomizer is None:
+            self.randomizer = (
+                PermuteDigits.draw(GeneratorBits(self.rng), self.bases) if scramble else NoRandomizer()
+            )
+        elif not isinstance(self.randomizer, (NoRandomizer, PermuteDigits)):
+            raise TypeError(f"Halton takes NoRandomizer or PermuteDigits, got {type(self.randomizer).__name__}")
+        elif isinstance(self.randomizer, PermuteDigits) and self.randomizer.bases != self.bases:
+            raise SettingsError(f"Halton: permutations for bases {self.randomizer.bases}, not {self.bases}")
+        self.scramble = isinstance(self.randomizer, PermuteDigits)
+        self._digits = self._permutations(self.randomizer, self.bases)
+
+    @staticmethod
+    def _permutations(randomizer, bases):
+        return PermuteDigits.identity(bases) if isinstance(randomizer, NoRandomizer) else randomizer
+
+    @classmethod
+    def randomizer_from(cls, bits, d, max_points=_MAX_INDEX):
+        return PermuteDigits.draw(bits, _primes(d), max_points)
+
+    @classmethod
+    def points(cls, indices, d, randomizer):
+        """The points with indices ``indices`` (n,) of every set: (sets, n, d) float64 in [0, 1)."""
+        perm = cls._permutations(randomizer, _primes(d))
+        # An integer below b**K <= 2**52 over b**K: exact in float64, rounded to at most 1 - 2**-52.
+        return perm(indices).astype(np.float64) / perm.scales
+
+    @classmethod
+    def points_uint32(cls, indices, d, randomizer):
+        """:meth:`points` as 32-bit fixed point (sets, n, d) uint32: rounded down, except that a
+        value within 2**-32 above the start of one of its base-b intervals stays in it (see
+        :func:`_radical_fixed_point`); so the fixed-point points keep the strata, and they are
+        within 2**-32 of the floats."""
+        perm = cls._permutations(randomizer, _primes(d))
+        a = perm(indices)
+        out = np.empty(a.shape, dtype=_U32)
+        for j, (b, K, D) in enumerate(perm.digits):
+            out[..., j] = _radical_fixed_point(a[..., j], b, K, D)
+        return out
+
+    @classmethod
+    def sets_uint32(cls, n, d, randomizer):
+        return cls.points_uint32(np.arange(_check_count(n), dtype=_U64), d, randomizer)
+
+    def _capacity(self):
+        return min(_MAX_INDEX, self._digits.capacity)
 
     def _random(self, n):
         self._check_room(n)
-        out = np.empty((n, self.d))
-        if n == 0:
-            return out
         start = self.num_generated
-        idx = np.arange(start, start + n, dtype=_U64)
-        top = start + n - 1
-        for j, (b, contrib, tail, scale) in enumerate(self._digits):
-            bi = int(b)
-            used = 1
-            while bi**used <= top:
-                used += 1
-            q = idx.copy()
-            acc = np.full(n, tail[used], dtype=_U64)
-            for k in range(used):
-                digit = q % b
-                q //= b
-                acc += contrib[k][digit]
-            # acc < b**K <= 2**52: exact in float64, and acc / b**K rounds to at most 1 - 2**-52.
-            out[:, j] = acc.astype(np.float64) / scale
-        return out
+        return self.points(np.arange(start, start + n, dtype=_U64), self.d, self._digits)[0]
+
+    def _random_uint32(self, n):
+        self._check_room(n)
+        start = self.num_generated
+        return self.points_uint32(np.arange(start, start + n, dtype=_U64), self.d, self._digits)[0]
 
 
 SOURCES = {cls.name: cls for cls in (Independent, Stratified, Sobol, Halton)}

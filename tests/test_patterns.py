@@ -25,7 +25,7 @@ from scipy import stats
 
 from core import patterns as P
 from core.patterns import DIMS, SOURCE_NAMES, TexelPattern, hash64, hash_more
-from core.sources import Stratified, sobol_uint32
+from core.sources import SOURCES, Sobol, Stratified, owen_scramble_uint32, sobol_uint32
 
 ALPHA = 1e-3
 #: The texels the statistical tests look at: a 64 x 64 block of a 64-texel-wide image, so that
@@ -246,6 +246,138 @@ def test_texel_keys_are_hashes_of_seed_texel_replicate_and_tag(replicate):
     # The turn is uniform over the circle: chi-square of its angle in 64 bins.
     angle = np.arctan2(k.sin_turn.astype(np.float64), k.cos_turn.astype(np.float64)) % (2 * np.pi)
     assert chi2_uniform(np.minimum(angle / (2 * np.pi), np.nextafter(1.0, 0.0)), 64) > ALPHA
+
+
+# ---------------------------------------------------------------------------------------------
+# The pool: its patterns are the library's point sets, each passing the set's structural checks
+# ---------------------------------------------------------------------------------------------
+
+SEED = 20261201
+
+
+def pool_patterns(source, max_samples=N):
+    """The pattern object and its pool as (patterns, span, 4) uint32."""
+    p = TexelPattern(source, SEED, max_samples)
+    return p, p.q.reshape(p.patterns, p.span, DIMS)
+
+
+def set_size(p):
+    return p.span if SOURCES[p.source].continues else p.length
+
+
+@pytest.mark.parametrize("source", SOURCE_NAMES)
+@pytest.mark.parametrize("max_samples", [N, 5])
+def test_pool_patterns_are_the_library_sets(source, max_samples):
+    # Pattern e of the pool is, bit for bit, the public class of core.sources under pattern e's
+    # randomisation (drawn from (seed, e) alone); a set stored twice is two equal copies.
+    p, q = pool_patterns(source, max_samples)
+    cls = SOURCES[source]
+    count = set_size(p)
+    for e in (0, 1, p.patterns // 2, p.patterns - 1):
+        one = cls(DIMS, randomizer=P._pattern_randomizer(cls, p.seed, [e], count))
+        if cls is Sobol:  # random_uint32 emits Gray-code order: its row i is direct index gray(i)
+            i = np.arange(count)
+            want = np.empty((count, DIMS), np.uint32)
+            want[i ^ (i >> 1)] = one.random_uint32(count)
+        else:
+            want = one.random_uint32(count)
+        np.testing.assert_array_equal(q[e, :count], want, err_msg=f"pattern {e}")
+        for c in range(count, p.span, count):
+            np.testing.assert_array_equal(q[e, c:c + count], want, err_msg=f"pattern {e}, copy")
+
+
+def test_pool_words_are_hashes_of_seed_pattern_and_counter():
+    e = np.array([0, 5, 4095], dtype=np.uint64)
+    bits = P._PatternBits(np.uint64(SEED), e)
+    w = np.concatenate([bits.words(3), bits.words(70000)], axis=1)
+    j = np.arange(70003, dtype=np.uint64)
+    np.testing.assert_array_equal(w, hash64(np.uint64(SEED), e[:, None], j[None, :], P._TAG_SCRAMBLE))
+
+
+def test_sobol_pool_is_owen_scrambled_direct_sobol():
+    # Written out from the definitions: pattern e is the first `span` 4D Sobol' points (direct
+    # order), each dimension Owen-scrambled with the seed hash64(seed, e, dimension) >> 32.
+    p, q = pool_patterns("sobol")
+    e = np.arange(p.patterns, dtype=np.uint64)[:, None]
+    seeds = (hash64(p.seed, e, np.arange(DIMS, dtype=np.uint64)[None, :], P._TAG_SCRAMBLE) >> np.uint64(32)).astype(np.uint32)
+    want = owen_scramble_uint32(sobol_uint32(np.arange(p.span), DIMS)[None], seeds[:, None, :])
+    np.testing.assert_array_equal(q, want)
+
+
+def nets_in_every_block(x, m):
+    """Whether every aligned block of 2^m rows of every pattern of the uint32 points ``x``
+    (patterns, n, s), s = 1 or 2, is a (0, m, s)-net in base 2."""
+    pats, n, s = x.shape
+    x = x.astype(np.uint64).reshape(-1, s)
+    block = np.arange(len(x)) >> m
+    for k in (range(m + 1) if s == 2 else [m]):
+        cell = x[:, 0] >> np.uint64(32 - k)
+        if s == 2:
+            cell = (cell << np.uint64(m - k)) | (x[:, 1] >> np.uint64(32 - (m - k)))
+        counts = np.bincount((block << m) + cell.astype(np.int64), minlength=len(x))
+        if not np.all(counts == 1):
+            return False
+    return True
+
+
+def test_every_sobol_pool_pattern_is_a_net_in_every_block():
+    p, q = pool_patterns("sobol")
+    for m in range(int(math.log2(p.span)) + 1):
+        assert nets_in_every_block(q[..., :2], m), m
+        for j in range(DIMS):
+            assert nets_in_every_block(q[..., j:j + 1], m), (m, j)
+    # The position pair keeps the t of the unscrambled 4D points in every pattern (checked on 64).
+    m = int(math.log2(p.span))
+    t_pos = t_value(sobol_uint32(np.arange(p.span), DIMS)[:, 2:].astype(np.float64) * 2.0**-32, m)
+    for e in range(0, p.patterns, p.patterns // 64):
+        assert elementary_counts_ok(q[e, :, 2:].astype(np.float64) * 2.0**-32, m, t_pos), e
+    # The checker can fail: a toroidal shift of one dimension breaks the nets.
+    assert not nets_in_every_block((q[..., :2] + np.array([0, 2**30 + 12345], np.uint32)), int(math.log2(p.span)))
+
+
+def test_every_halton_pool_pattern_is_stratified():
+    # In every pattern, every aligned block of b^k points of the dimension with base b holds one
+    # point in each interval of length b^-k (b^k up to the pattern's length).
+    p, q = pool_patterns("halton")
+    for j, b in enumerate((2, 3, 5, 7)):
+        k = 1
+        while b**k <= p.span:
+            usable = p.span - p.span % b**k
+            cell = np.floor(q[:, :usable, j].astype(np.float64) * 2.0**-32 * b**k).astype(np.int64)
+            blocks = cell.reshape(p.patterns, -1, b**k)
+            np.testing.assert_array_equal(np.sort(blocks, axis=2), np.broadcast_to(np.arange(b**k), blocks.shape),
+                                          err_msg=f"base {b}, level {k}")
+            k += 1
+
+
+def test_every_stratified_pool_pattern_fills_its_strata():
+    p, q = pool_patterns("stratified")
+    nx, ny = Stratified.grid_shape(p.length)
+    ax, ay = nx.bit_length() - 1, ny.bit_length() - 1
+    for j in (0, 2):
+        cell = (q[:, :p.length, j] >> np.uint32(32 - ax)).astype(np.int64) * ny + (q[:, :p.length, j + 1] >> np.uint32(32 - ay))
+        np.testing.assert_array_equal(np.sort(cell, axis=1), np.broadcast_to(np.arange(p.length), cell.shape),
+                                      err_msg=f"dims {j}, {j + 1}")
+
+
+@pytest.mark.parametrize("source", SOURCE_NAMES)
+def test_pool_patterns_are_independent_randomisations(source):
+    # Over the pool's patterns, a fixed row is uniform on [0, 1)^4: each coordinate on 16 cells,
+    # each pair of coordinates on 8 x 8 (at least 2048 patterns: 128 and 32 expected per cell), and
+    # below the first 4 bits (x * 16 mod 1, on 16 cells) where a randomisation that stops at
+    # the digits the indices reach leaves every pattern on one grid. A pool whose patterns share
+    # a randomisation, or whose dimensions share one (a stratum order, a scramble seed), fails.
+    p, q = pool_patterns(source)
+    assert p.patterns >= 2048
+    u = q.astype(np.float64) * 2.0**-32
+    rows = (0, 1, set_size(p) - 1)
+    level = sidak(ALPHA, len(rows) * (2 * DIMS + len(PAIRS)))
+    for i in rows:
+        for j in range(DIMS):
+            assert chi2_uniform(u[:, i, j], 16) > level, f"row {i}, dimension {j}"
+            assert chi2_uniform(np.mod(u[:, i, j] * 16, 1.0), 16) > level, f"row {i}, dimension {j}, below 1/16"
+        for a, b in PAIRS:
+            assert chi2_joint(u[:, i, a], u[:, i, b], 8) > level, f"row {i}, dimensions {a}, {b}"
 
 
 class TestSobol(PatternContract):

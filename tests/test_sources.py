@@ -9,13 +9,20 @@ import pytest
 from scipy import stats
 from scipy.stats import qmc
 
+from core.errors import SettingsError
 from core.sources import (
     SOBOL_MAX_DIM,
     SOURCES,
+    GeneratorBits,
     Halton,
     Independent,
+    NoRandomizer,
+    OwenScrambler,
+    PermuteDigits,
     Sobol,
     Stratified,
+    _in_stratum,
+    _radical_fixed_point,
     make_source,
     owen_scramble_uint32,
     reverse_bits_uint32,
@@ -178,8 +185,39 @@ class SourceContract:
                 assert uniform_pvalue(cell / 64, 64) > level, f"row {row}, dimensions {j}, {j + 1}"
 
 
+    def test_random_uint32_is_random_in_fixed_point(self):
+        # The same points, the same continuation: floats and fixed point from one implementation.
+        a, b = self.make(3), self.make(3)
+        for n in (5, 27, 0, 64):
+            x, q = a.random(n), b.random_uint32(n)
+            assert q.dtype == np.uint32 and q.shape == (n, 3)
+            assert np.all(np.abs(to_unit_float(q) - x) < 2.0**-32)
+            if self.cls is not Halton:  # Halton rounds to keep its strata (tested below)
+                np.testing.assert_array_equal(q, (x * 2.0**32).astype(np.uint32))
+        assert a.num_generated == b.num_generated == 96
+
+    def test_given_randomizer_reset_replays(self):
+        # A randomisation passed in is used as given, and reset rewinds it like the rng.
+        r = self.cls.randomizer_from(GeneratorBits(np.random.default_rng(4)), 3, 64)
+        src = self.cls(3, randomizer=r)
+        first = src.random(16)
+        src.random(16)
+        src.reset()
+        np.testing.assert_array_equal(src.random(16), first)
+        again = self.cls(3, randomizer=self.cls.randomizer_from(GeneratorBits(np.random.default_rng(4)), 3, 64))
+        np.testing.assert_array_equal(again.random(16), first)
+
+    def test_refuses_a_randomizer_of_several_sets(self):
+        with pytest.raises(ValueError):
+            self.cls(2, randomizer=self.cls.randomizer_from(ManySets(3, seed=0), 2, 8))
+
+
 class TestIndependent(SourceContract):
     cls = Independent
+
+    def test_is_the_generators_stream(self):
+        # The default bit source keeps Independent exactly numpy's Generator.random.
+        np.testing.assert_array_equal(Independent(3, seed=5).random(10), np.random.default_rng(5).random((10, 3)))
 
 
 class TestStratified(SourceContract):
@@ -193,6 +231,161 @@ class TestSobol(SourceContract):
 
 class TestHalton(SourceContract):
     cls = Halton
+
+
+# ---------------------------------------------------------------------------------------------
+# Many randomised sets at once (the baker's pools) are the public sets
+# ---------------------------------------------------------------------------------------------
+
+
+class ManySets:
+    """A bit source of ``sets`` randomisations, set ``s`` drawing from its own Generator: that set
+    alone is ``GeneratorBits(default_rng(seeds[s]))``."""
+
+    def __init__(self, sets, seed):
+        self.seeds = [seed * 1000 + s for s in range(sets)]
+        self.gens = [np.random.default_rng(x) for x in self.seeds]
+        self.sets = sets
+
+    def words(self, count):
+        return np.concatenate([GeneratorBits(g).words(count) for g in self.gens])
+
+
+class FastManySets:
+    """Many sets from one Generator (no per-set stream): for statistics over thousands of sets."""
+
+    def __init__(self, sets, seed):
+        self.rng = np.random.default_rng(seed)
+        self.sets = sets
+
+    def words(self, count):
+        return self.rng.integers(0, 2**64, size=(self.sets, count), dtype=np.uint64)
+
+
+def direct_order(cls, q):
+    """Rows of ``random_uint32`` output in the order of :meth:`sets_uint32` (Sobol' emits Gray-code
+    order: its row i is direct index gray(i))."""
+    if cls is not Sobol:
+        return q
+    out = np.empty_like(q)
+    out[gray(np.arange(len(q))).astype(np.int64)] = q
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(SOURCES))
+@pytest.mark.parametrize("n,d", [(64, 4), (37, 3), (1, 5), (0, 2)])
+def test_sets_are_the_public_sets(name, n, d):
+    # One implementation: set s of a many-set build is, bit for bit, what the public class gives
+    # with set s's randomisation (and its floats, to the last bit they carry).
+    cls = SOURCES[name]
+    many = cls.sets_uint32(n, d, cls.randomizer_from(ManySets(3, seed=n), d, n))
+    assert many.shape == (3, n, d) and many.dtype == np.uint32
+    full = n if cls is not Sobol else 1 << max(0, (n - 1).bit_length())  # whole aligned block
+    for s, seed in enumerate(ManySets(3, seed=n).seeds):
+        one = lambda: cls(d, randomizer=cls.randomizer_from(GeneratorBits(np.random.default_rng(seed)), d, full))
+        q = direct_order(cls, one().random_uint32(full))[:n]
+        np.testing.assert_array_equal(many[s], q, err_msg=f"set {s}")
+        x = direct_order(cls, one().random(full))[:n]
+        assert np.all(np.abs(to_unit_float(many[s]) - x) < 2.0**-32)
+        if cls in (Sobol, Stratified):  # natively 32-bit: the floats are the same bits
+            np.testing.assert_array_equal(to_unit_float(many[s]), x)
+    if n > 1:
+        assert not np.array_equal(many[0], many[1])
+
+
+def test_sobol_sets_are_owen_scrambles_of_the_direct_form():
+    seeds = np.array([[1, 2, 3], [2**32 - 1, 0, 77]], dtype=np.uint32)
+    got = Sobol.sets_uint32(16, 3, OwenScrambler(seeds))
+    base = sobol_uint32(np.arange(16), 3)
+    for s in range(2):
+        np.testing.assert_array_equal(got[s], owen_scramble_uint32(base, seeds[s]))
+    np.testing.assert_array_equal(Sobol.sets_uint32(16, 3, NoRandomizer())[0], base)
+
+
+def test_randomizers_are_checked():
+    with pytest.raises(TypeError):
+        Sobol(2, randomizer=PermuteDigits.identity([2, 3]))
+    with pytest.raises(TypeError):
+        Halton(2, randomizer=OwenScrambler([1, 2]))
+    with pytest.raises(ValueError):
+        Sobol(3, randomizer=OwenScrambler([1, 2]))
+    with pytest.raises(ValueError):
+        Halton(2, randomizer=PermuteDigits.identity([2, 5]))
+    np.testing.assert_array_equal(Halton(3, randomizer=NoRandomizer()).random(50), Halton(3, scramble=False).random(50))
+
+
+def test_halton_stops_at_its_permutations_capacity():
+    r = PermuteDigits.draw(GeneratorBits(np.random.default_rng(0)), [2, 3], capacity=100)
+    assert r.capacity >= 100
+    src = Halton(2, randomizer=r)
+    src.random(r.capacity)
+    with pytest.raises(ValueError):
+        src.random(1)
+
+
+def test_halton_tail_is_uniform_below_the_permuted_digits():
+    # Below the D permuted digits (b**D >= capacity), every point's value is the random tail,
+    # uniform: x * b**D modulo 1, over 4096 randomisations, on 16 cells. A randomisation that
+    # left out the tail (points on the grid of b**-D) or drew it badly fails.
+    n, d, sets = 20, 3, 4096
+    r = Halton.randomizer_from(FastManySets(sets, seed=3), d, n)
+    x = Halton.points(np.arange(n), d, r)
+    level = sidak(ALPHA, 2 * d)
+    for j, (b, K, D) in enumerate(r.digits):
+        assert b**D >= n > b ** (D - 1)
+        for i in (0, n - 1):
+            frac = np.mod(x[:, i, j] * float(b**D), 1.0)
+            assert uniform_pvalue(frac, 16) > level, (b, i)
+
+
+def test_stratified_sets_fill_their_strata_and_pad_independently():
+    # Many sets at once: each set's pairs fill the grid, and over sets the two pairs' strata are
+    # independent ("padding"): the stratum of point 0 in dims (0, 1) against that in dims (2, 3)
+    # on 8 x 8 strata (16 x 8 grid for n = 128, columns halved), 64 expected per cell.
+    n, sets = 128, 4096
+    q = Stratified.sets_uint32(n, 4, FastManySets(sets, seed=5))
+    nx, ny = Stratified.grid_shape(n)
+    for j in (0, 2):
+        cell = (q[..., j] >> np.uint32(32 - 4)).astype(np.int64) * ny + (q[..., j + 1] >> np.uint32(32 - 3))
+        np.testing.assert_array_equal(np.sort(cell, axis=1), np.broadcast_to(np.arange(n), (sets, n)))
+    a = (q[:, 0, 0] >> np.uint32(29)).astype(np.int64) * 8 + (q[:, 0, 2] >> np.uint32(29))
+    assert stats.chisquare(np.bincount(a, minlength=64)).pvalue > ALPHA
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 5, 7, 12, 64, 1000, 10007, 2**20])
+def test_in_stratum_is_exact(m):
+    # Every jitter, extremes included, lands in its stratum, and the float of the fixed point
+    # too; power-of-two strata (shifts) follow the same rule as the others (divisions).
+    rng = np.random.default_rng(m)
+    k = np.concatenate([[0, m - 1], rng.integers(0, m, 500)])
+    jitter = np.concatenate([[0, 2**32 - 1], rng.integers(0, 2**32, 500, dtype=np.uint64)]).astype(np.uint64)
+    for jit in (jitter, np.zeros_like(jitter), np.full_like(jitter, 2**32 - 1)):
+        v = _in_stratum(k, m, jit)
+        assert v.dtype == np.uint32
+        np.testing.assert_array_equal(np.floor(to_unit_float(v) * m).astype(np.int64), k)
+        first = [-(-(int(a) << 32) // m) for a in k]
+        last = [-(-((int(a) + 1) << 32) // m) for a in k]
+        ref = [f + (((l - f) * int(j)) >> 32) for f, l, j in zip(first, last, jit)]
+        assert [int(x) for x in v] == ref
+
+
+@pytest.mark.parametrize("b", [3, 5, 7, 11])
+def test_halton_fixed_point_keeps_the_strata(b):
+    # Values just above an interval's start (not a multiple of 2**-32 for odd b) stay in it;
+    # elsewhere the fixed point is the value rounded down.
+    K, D = 52 // int(np.log2(b)), 4
+    while b**K > 2**52:
+        K -= 1
+    starts = np.arange(b**D, dtype=np.uint64) * np.uint64(b ** (K - D))
+    a = np.concatenate([starts, starts + np.uint64(1), starts + np.uint64(b ** (K - D) - 1)])
+    q = _radical_fixed_point(a, b, K, D)
+    s = a // np.uint64(b ** (K - D))
+    np.testing.assert_array_equal(np.floor(to_unit_float(q) * b**D).astype(np.int64), s.astype(np.int64))
+    x = a.astype(np.float64) / float(b**K)
+    assert np.all(np.abs(to_unit_float(q) - x) < 2.0**-32)
+    # Plain rounding down would have failed here: the check can fail.
+    plain = np.floor(x * 2.0**32) * 2.0**-32
+    assert np.any(np.floor(plain * b**D) != s)
 
 
 def test_make_source_unknown_name():
