@@ -161,6 +161,17 @@ def _normalized_scene(target, occluders):
 
 
 
+def empty_reason(no_area=0, no_uv_area=0, outside=0, outside_udim=0):
+    """Why a bake covered nothing, from the counts its report gives (one wording for the core and the
+    add-on)."""
+    reasons = [f"{n} {text}" for n, text in (
+        (no_area, "of its triangles have no area"),
+        (no_uv_area, "of its UV triangles have no area in the UV map"),
+        (outside, "of its UV triangles lie outside the image's UV square [0, 1]"),
+        (outside_udim, "of its UV triangles lie outside the UDIM tiles 1001 to 2000")) if n]
+    return "; ".join(reasons) or "its UV triangles are too small to cover a texel centre at this resolution"
+
+
 class Prologue:
     """What every bake does before its first ray, whatever its target (texels, UDIM tiles, mesh
     corners, selected to active): check the meshes and the target-specific settings, move the scene
@@ -223,17 +234,9 @@ class Prologue:
 
     def nothing_covered(self, s, uvtris):
         """The error of a texel bake that covered no texel, saying why (the counts of the UV triangles)."""
-        total = self.target.triangle_count
-        why = []
-        if uvtris.degenerate:
-            why.append(f"{uvtris.degenerate} of its {total} triangles have no area in the UV map")
-        if uvtris.degenerate_space:
-            why.append(f"{uvtris.degenerate_space} have no area in space")
-        if uvtris.outside:
-            why.append(f"{uvtris.outside} reach outside the UV square [0, 1] (UDIM tiles are baked with use_udim)")
-        reason = "; ".join(why) if why else "its UV triangles cover no texel centre's square"
-        return MeshError(f"mesh {self.name!r} covers no texel of the {s.width} x {s.height} image, so nothing was "
-                         f"baked: {reason}. Unwrap it (UV > Unwrap) so that its UVs lie inside [0, 1]")
+        return MeshError(f"mesh {self.name!r}: the bake covered no texel of the {s.width} x {s.height} image "
+                         f"({empty_reason(uvtris.degenerate_space, uvtris.degenerate, uvtris.outside)}): "
+                         "nothing was written")
 
 
 @dataclass

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bake import BakeResult, bake_ao
+from .bake import BakeResult, bake_ao, empty_reason
 from .errors import MeshError, SettingsError
 from .mesh import Mesh
 from .raster import MIN_FRAGMENT_AREA, _clip, prepare, rasterize_tile
@@ -215,9 +215,11 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
     report["tiles"] = list(todo)
     parts = list(results.values())
     if not any(r.mask.any() for r in parts):
-        raise MeshError(f"mesh {target.name!r} covers no texel of the UDIM tiles {', '.join(map(str, todo))} at "
-                        f"{parts[0].ao.shape[1]} x {parts[0].ao.shape[0]}, so nothing was baked: its UVs have no area "
-                        "there (check its UV map)" if parts else f"mesh {target.name!r}: no UDIM tile to bake")
+        reason = empty_reason(report.get("degenerate_triangles", 0), report.get("degenerate_uv_triangles", 0), 0,
+                              coverage.outside)
+        raise MeshError(f"mesh {target.name!r}: the bake covered no texel of the UDIM tiles "
+                        f"{', '.join(map(str, todo))} ({reason}): nothing was written" if parts
+                        else f"mesh {target.name!r}: the bake covered no texel (no UDIM tile): nothing was written")
 
     def stack(name):
         return np.stack([getattr(r, name) for r in parts])

@@ -146,7 +146,7 @@ def test_random_meshes_and_settings(mesh, res, samples, max_distance, distributi
     except MeshError as e:
         # A bake that covers no texel is refused, naming the mesh; the same bake allowed to be empty
         # covers nothing indeed.
-        assert "covers no texel" in str(e) and repr(mesh.name) in str(e)
+        assert "the bake covered no texel" in str(e) and repr(mesh.name) in str(e)
         r = bake_ao(mesh, [mesh], empty_ok=True, **kw)
         assert not r.mask.any() and not r.ao.any()
     else:
@@ -257,7 +257,7 @@ def test_progress_follows_the_bakes_events_not_a_clock():
 # --- a bake that covers nothing is an error, never an empty success ----------------------------------
 
 @pytest.mark.parametrize("case, words", [
-    ("outside", "reach outside the UV square"),
+    ("outside", "lie outside the image's UV square"),
     ("no_uv_area", "have no area in the UV map"),
 ])
 def test_a_bake_that_covers_no_texel_is_refused_naming_the_mesh_and_why(case, words):
@@ -266,7 +266,7 @@ def test_a_bake_that_covers_no_texel_is_refused_naming_the_mesh_and_why(case, wo
     target = Mesh(p.positions, p.triangles, uvs, name="Crate")
     with pytest.raises(MeshError, match=words) as e:
         bake_ao(target, resolution=8, samples=4, threads=1)
-    assert "'Crate'" in str(e.value) and "covers no texel" in str(e.value)
+    assert "'Crate'" in str(e.value) and "the bake covered no texel" in str(e.value)
     # Allowed to be empty (a UDIM tile listed but not touched), the same bake is all zero.
     r = bake_ao(target, resolution=8, samples=4, threads=1, empty_ok=True)
     assert not r.mask.any() and not r.ao.any() and not r.samples.any()
@@ -277,7 +277,7 @@ def test_a_udim_bake_that_covers_nothing_is_refused():
 
     p = plane()
     target = Mesh(p.positions, p.triangles, np.zeros_like(p.uvs) + 0.5, name="Flat")
-    with pytest.raises(MeshError, match="'Flat'.*covers no texel"):
+    with pytest.raises(MeshError, match="'Flat'.*the bake covered no texel"):
         bake_udim(target, resolution=8, samples=4, tiles=[1001], threads=1)
 
 

@@ -43,7 +43,10 @@ def test_the_script_fails_the_object_that_covered_no_texel(blend_file, tmp_path,
     proc = subprocess.run([sys.executable, SCRIPT, blend_file, "--objects", "Ground", name, "--output", out,
                            "--summary-json", summary, *FAST], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1, proc.stdout + proc.stderr
-    assert f"bake_ao: {name}: the bake covered no texel ({why}): nothing was written" in proc.stderr
+    # One line names the object, says the bake covered nothing, why, and that nothing was written
+    # (the core's MeshError or the add-on's own check of a result, whichever finds it first).
+    line = next(x for x in proc.stderr.splitlines() if x.startswith(f"bake_ao: {name}: "))
+    assert "the bake covered no texel" in line and why in line and line.endswith("nothing was written"), line
     assert sorted(p.name for p in out.iterdir()) == ["Ground_AO.png"]
     record = {o["object"]: o for o in json.loads(summary.read_text())["objects"]}
     assert record["Ground"]["status"] == "ok" and record[name]["status"] == "failed"
@@ -57,7 +60,7 @@ def test_the_batch_fails_the_task_and_bakes_it_again_on_a_rerun(blend_file, tmp_
         proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "bake_batch.py"), str(manifest), "--output",
                                str(tmp_path / "out"), "--blender", "bpy"], capture_output=True, text=True, timeout=300)
         assert proc.returncode == 1 and "0 baked, 0 already done, 1 failed" in proc.stdout, proc.stdout
-        assert "Outside: the bake covered no texel" in proc.stdout
+        assert "Outside: " in proc.stdout and "the bake covered no texel" in proc.stdout
 
 
 def test_the_operator_reports_the_object_and_saves_nothing(bpy, scene, tmp_path):
@@ -72,5 +75,5 @@ def test_the_operator_reports_the_object_and_saves_nothing(bpy, scene, tmp_path)
     assert session.start(bpy.context, live=True)
     tick_until(bpy, session, lambda: False)
     errors = [m for kind, m in reports if kind == "ERROR"]
-    assert any(m.startswith("Outside: the bake covered no texel") for m in errors), reports
+    assert any(m.startswith("Outside: ") and "the bake covered no texel" in m for m in errors), reports
     assert list(tmp_path.iterdir()) == []
