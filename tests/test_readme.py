@@ -200,3 +200,35 @@ def test_quick_start_runs(title, tmp_path):
     for name in named:
         if not name.endswith("/"):
             assert (tmp_path / name).is_file(), f"{title}: the README says {name} is written"
+
+
+def table_values(text):
+    """The second column of every row of the Markdown tables in ``text``."""
+    return [row[1].strip() for row in re.findall(r"^\|([^|\n]+)\|([^|\n]+)\|\s*$", text, re.M)]
+
+
+def test_performance_figures_are_the_bench_tables():
+    """What the README says about performance is the bench's current table (bench/README.md), value
+    for value, so that a new bench run that changes a figure shows where the README must follow."""
+    bench = (ROOT / "bench" / "README.md").read_text()
+    current = table_values(re.search(r"^## Where mc_ao stands\n(.*?)(?=^## |\Z)", bench, re.S | re.M).group(1))
+    ours = [v for v in table_values(section("Performance")) if v not in ("value", "---")]
+    assert len(ours) >= 10
+    assert [v for v in ours if v not in current] == [], "README figures that the bench's table does not have"
+
+
+def anchor(heading, seen):
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens, -1, -2 for repeats."""
+    slug = re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+    n = seen.get(slug, 0)
+    seen[slug] = n + 1
+    return f"{slug}-{n}" if n else slug
+
+
+def test_links_within_the_readme_lead_somewhere():
+    seen = {}
+    anchors = {anchor(h, seen) for h in re.findall(r"^#+ (.+)$", re.sub(r"^```.*?^```", "", README, flags=re.S | re.M), re.M)}
+    links = re.findall(r"\]\(#([^)]+)\)", README)
+    assert links and [link for link in links if link not in anchors] == []
+    for target in re.findall(r"\]\(([^)#:]+)\)", README):  # pictures and files
+        assert (ROOT / target).exists(), target
