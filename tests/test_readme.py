@@ -2,6 +2,7 @@
 every command of its quick start runs on the shipped sample scenes and writes the files it names."""
 
 import importlib.util
+import os
 import platform
 import re
 import shlex
@@ -176,7 +177,10 @@ def run_command(line, cwd):
     args = [sys.executable, *shrink(args[1:])]
     if "scripts/build_extension.py" in args:  # its zips into the mirror's dist/, its wheels where they live
         args += ["--output-dir", str(cwd / "dist"), "--wheel-dir", str(ROOT / "wheels")]
-    return subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=900)
+    # PWD as a shell sets it: Blender takes its working folder from $PWD before getcwd() (bpy 4.2 saves
+    # a relative --save path there), and subprocess's cwd= leaves PWD as the parent's.
+    env = {**os.environ, "PWD": str(cwd)}
+    return subprocess.run(args, cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
 
 
 @pytest.mark.blender
