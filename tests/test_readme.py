@@ -236,3 +236,30 @@ def test_links_within_the_readme_lead_somewhere():
     assert links and [link for link in links if link not in anchors] == []
     for target in re.findall(r"\]\(([^)#:]+)\)", README):  # pictures and files
         assert (ROOT / target).exists(), target
+
+
+def reference_commands():
+    """The command lines after the quick start that need nothing but this checkout: no Blender
+    executable, farm manager, scheduler or shared folder (those are the farm's, shown as examples)."""
+    rest = README[README.index("\n## Sample scenes\n"):]
+    return [line for line in command_lines(rest)
+            if line.startswith(".venv/bin/python scripts/") and not re.search(r"https?://|tcp://|/shared/", line)]
+
+
+def test_reference_has_local_commands():
+    assert len(reference_commands()) >= 3, reference_commands()
+
+
+@pytest.mark.blender
+@pytest.mark.parametrize("line", reference_commands())
+def test_reference_command_runs(line, tmp_path):
+    """The reference's own commands (the script, the batch's local, Dask and Open Job Description
+    runners) run as the quick start's do, small."""
+    if importlib.util.find_spec("bpy") is None:
+        pytest.skip("the commands bake .blend files: they need the bpy module")
+    if "--runner dask" in line and importlib.util.find_spec("distributed") is None:
+        pytest.skip("--runner dask needs distributed (requirements-batch.txt)")
+    mirror(tmp_path)
+    proc = run_command(line, tmp_path)
+    assert proc.returncode == 0, f"{line}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    assert "warning" not in (proc.stdout + proc.stderr).lower(), f"{line}\n{proc.stdout}\n{proc.stderr}"
