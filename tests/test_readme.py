@@ -51,7 +51,7 @@ def test_sample_manifest_plans_every_sample_scene(tmp_path):
 
     path = ROOT / "sample_scenes" / "library.toml"
     tasks = manifest.plan(path, tmp_path / "out")
-    assert {Path(t.blend).name for t in tasks} == {"suzanne.blend", "room.blend", "analytic.blend", "rock.blend"}
+    assert {Path(t.blend).name for t in tasks} == {"suzanne.blend", "room.blend", "analytic.blend", "rock.blend", "udim.blend"}
     assert all(Path(t.blend).is_file() for t in tasks)
     assert "scripts/bake_batch.py sample_scenes/library.toml --output" in path.read_text()
 
@@ -263,3 +263,10 @@ def test_reference_command_runs(line, tmp_path):
     proc = run_command(line, tmp_path)
     assert proc.returncode == 0, f"{line}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     assert "warning" not in (proc.stdout + proc.stderr).lower(), f"{line}\n{proc.stdout}\n{proc.stderr}"
+
+
+def test_manifest_shown_is_the_sample_manifest():
+    """The README's TOML is sample_scenes/library.toml as shipped (below its opening comment)."""
+    shown = re.search(r"```toml\n(.*?)```", README, re.S).group(1)
+    shipped = (ROOT / "sample_scenes" / "library.toml").read_text()
+    assert shown.strip() == shipped[shipped.index("[defaults]"):].strip()
