@@ -270,3 +270,25 @@ def test_manifest_shown_is_the_sample_manifest():
     shown = re.search(r"```toml\n(.*?)```", README, re.S).group(1)
     shipped = (ROOT / "sample_scenes" / "library.toml").read_text()
     assert shown.strip() == shipped[shipped.index("[defaults]"):].strip()
+
+
+@pytest.mark.blender
+def test_summary_json_example_has_the_scripts_fields(tmp_path):
+    """The README's --summary-json example has the fields the script writes, for the command it names."""
+    if importlib.util.find_spec("bpy") is None:
+        pytest.skip("the command bakes a .blend file: it needs the bpy module")
+    import json
+
+    shown = json.loads(re.search(r"```json\n(.*?)```", README, re.S).group(1))
+    text = section("The background script")
+    line = next(l for l in command_lines(text) if l.startswith(".venv/bin/python"))
+    assert "the second command" in text
+    mirror(tmp_path)
+    proc = run_command(line + " --summary-json out/summary.json", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    written = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert sorted(shown) == sorted(written)
+    assert sorted(shown["settings"]) == sorted(written["settings"])
+    assert [sorted(o) for o in shown["objects"]] == [sorted(o) for o in written["objects"]]
+    assert [o["object"] for o in shown["objects"]] == [o["object"] for o in written["objects"]]
+    assert shown["blend"] == written["blend"] and shown["settings"]["samples"] == int(line.split("--samples ")[1].split()[0])
