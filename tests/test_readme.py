@@ -292,3 +292,25 @@ def test_summary_json_example_has_the_scripts_fields(tmp_path):
     assert [sorted(o) for o in shown["objects"]] == [sorted(o) for o in written["objects"]]
     assert [o["object"] for o in shown["objects"]] == [o["object"] for o in written["objects"]]
     assert shown["blend"] == written["blend"] and shown["settings"]["samples"] == int(line.split("--samples ")[1].split()[0])
+
+
+def script_options(script):
+    out = subprocess.run([sys.executable, str(ROOT / "scripts" / script), "--help"], capture_output=True, text=True,
+                         timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    return set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", out.stdout))
+
+
+def test_options_the_readme_names_exist():
+    """Every option of the Settings table and of the README's bake_ao.py and bake_batch.py command
+    lines is one the script has (its --help lists it)."""
+    if importlib.util.find_spec("bpy") is None:
+        pytest.skip("the scripts' --help runs under the bpy module's Python")
+    named = {"bake_ao.py": set(re.findall(r"`(--[a-z][a-z0-9-]*)", section("Settings"))), "bake_batch.py": set()}
+    for line in command_lines(README):
+        for script in named:
+            if f"scripts/{script}" in line:
+                after = line.split(f"scripts/{script}", 1)[1].split(" -- ", 1)[-1]
+                named[script] |= set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", after))
+    for script, options in named.items():
+        assert options and options - script_options(script) == set(), script
