@@ -12,11 +12,11 @@ newer Blender does not open in older ones (Blender 4.2 to 4.4 cannot read 5.0's 
 only with ``--output``, into another folder, so that it cannot replace the shipped files by
 ones 4.2 cannot open.
 
-Every mesh has a UV map inside [0, 1] whose islands do not overlap, after the modifiers too (what a
-bake reads), so each is a valid bake target that bakes without a warning (tests/blender/
+Every mesh has a UV map inside [0, 1] (udim.blend's Bust: inside its two tiles) whose islands do not
+overlap, after the modifiers too (what a bake reads), so each is a valid bake target that bakes without a warning (tests/blender/
 test_sample_scenes.py checks that). Scenes:
 
-  suzanne.blend   Suzanne on a ground plane: the README's default.
+  suzanne.blend   Suzanne (one subdivision level, applied) on a ground plane: the README's default.
   room.blend      a box interior with furniture-like blocks: contact shadows, corners, occlusion
                   between separate objects.
   analytic.blend  a plane under a hovering disk (a 64-gon) whose exact AO is known: AO = 1 - F,
@@ -26,6 +26,8 @@ test_sample_scenes.py checks that). Scenes:
   rock.blend      Selected to Active: Rock_high (an icosphere subdivided and displaced by modifiers
                   into 123k triangles) baked onto Rock_low (an 80-triangle icosphere, smooth, Smart
                   UV Project; --match-suffix _high _low pairs them), on a ground plane.
+  udim.blend      UDIM tiles: Suzanne on a pedestal, one mesh (Bust) whose head is in tile 1001 and
+                  pedestal in tile 1002, on a ground plane.
 """
 
 import argparse
@@ -142,11 +144,20 @@ def suzanne():
     bpy.ops.mesh.primitive_monkey_add(size=1.0, location=(0, 0, 0.62), rotation=(math.radians(-35), 0, 0))
     monkey = bpy.context.active_object
     monkey.name = monkey.data.name = "Suzanne"
+    subdivided_suzanne(monkey)
+    save("suzanne.blend")
+
+
+def subdivided_suzanne(monkey):
+    """One subdivision level, unwrapped without overlaps, then applied: the file holds the mesh that
+    is baked, so that every target takes it as it is (a color attribute lives on the mesh's own
+    vertices: a live Subdivision modifier would refuse it)."""
     mod = monkey.modifiers.new("Subdivision", "SUBSURF")
     mod.levels = mod.render_levels = 1
     shade(monkey, True)
     unwrap_without_overlaps(monkey)
-    save("suzanne.blend")
+    active(monkey)
+    bpy.ops.object.modifier_apply(modifier=mod.name)
 
 
 def room():
@@ -237,7 +248,30 @@ def rock():
     save("rock.blend")
 
 
-SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense, "rock": rock}
+def udim():
+    """Suzanne on a pedestal as one mesh, Bust, laid out over two UDIM tiles as a character's head and
+    body get tiles of their own: the head in tile 1001 (u, v in [0, 1)), the pedestal in 1002 (u in
+    [1, 2)); on a ground plane (tile 1001). Baked with --udim: Bust_AO.1001 and Bust_AO.1002."""
+    reset()
+    ground(4.0)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0, 0, 0.35))
+    pedestal = bpy.context.active_object
+    pedestal.scale = (0.9, 0.9, 0.7)
+    bpy.ops.object.transform_apply(scale=True)
+    smart_uv(pedestal)
+    for corner in pedestal.data.uv_layers.active.data:
+        corner.uv = (corner.uv[0] + 1.0, corner.uv[1])  # tile 1002
+    bpy.ops.mesh.primitive_monkey_add(size=1.0, location=(0, 0, 1.12), rotation=(math.radians(-35), 0, 0))
+    monkey = bpy.context.active_object
+    subdivided_suzanne(monkey)
+    active(monkey)
+    pedestal.select_set(True)
+    bpy.ops.object.join()  # into the head's object; both UV maps are "UVMap", so they become one
+    monkey.name = monkey.data.name = "Bust"
+    save("udim.blend")
+
+
+SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense, "rock": rock, "udim": udim}
 
 
 #: Where save() writes; main() sets it.

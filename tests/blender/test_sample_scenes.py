@@ -27,8 +27,14 @@ SAVED_BY = (4, 2)
 #: 5.2.3's Smart UV Project cuts Suzanne's islands otherwise (672 of its 23616 UV corners moved, by up
 #: to 0.23): there make_scenes.py makes the same geometry with other UVs, which only have to be valid.
 SAME_UVS = {(4, 2), (5, 0)}
-#: Extra arguments a scene needs for a meaningful bake (the README says why: the room is closed).
-EXTRA = {"room": ["--max-distance", "1"]}
+#: Extra arguments a scene needs for a meaningful bake (the README says why: the room is closed, the
+#: bust's UVs are laid out over two UDIM tiles).
+EXTRA = {"room": ["--max-distance", "1"], "udim": ["--udim"]}
+#: The files a bake of a scene's objects writes where they are not one <object>_AO.png each.
+FILES = {"udim": ["Bust_AO.1001.png", "Bust_AO.1002.png", "Ground_AO.1001.png"]}
+#: The scenes that keep modifiers to stay small (the README says which); every other mesh is stored
+#: as it is baked, so that each target takes it, a color attribute included.
+LIVE_MODIFIERS = {"dense", "rock"}
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +81,7 @@ def bake(blend, out, *args):
 
 
 def test_there_are_scenes():
-    assert SCENES == ["analytic", "dense", "rock", "room", "suzanne"]
+    assert SCENES == ["analytic", "dense", "rock", "room", "suzanne", "udim"]
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -143,7 +149,39 @@ def test_scene_bakes_without_a_warning(name, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "warning" not in proc.stdout + proc.stderr, proc.stderr
     assert f"baked {len(objects)} of {len(objects)} objects" in proc.stdout
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"{obj}_AO.png" for obj in objects)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(FILES.get(name, [f"{obj}_AO.png" for obj in objects]))
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_modifiers_are_applied_where_the_readme_says(fresh, name):
+    """The README says which scenes keep modifiers: in every other one each mesh is stored as it is baked."""
+    bpy = fresh
+    open_scene(bpy, SAMPLES / f"{name}.blend")
+    kept = {obj.name: [m.type for m in obj.modifiers] for obj in bpy.data.objects if obj.modifiers}
+    section = re.search(r"^## Sample scenes\n(.*?)^## ", (ROOT / "README.md").read_text(), re.S | re.M).group(1)
+    if name in LIVE_MODIFIERS:
+        assert kept, f"{name}.blend has no modifiers: take it out of LIVE_MODIFIERS"
+        assert re.search(rf"^\| `{name}\.blend` \|.*modifiers", section, re.M), name
+    else:
+        assert kept == {}, f"{name}.blend keeps modifiers {kept}; the README says they are applied"
+
+
+def test_default_scene_bakes_into_a_color_attribute(tmp_path):
+    """The README's colour-attribute bake of Suzanne: a color attribute lives on the mesh's own
+    vertices, which a live Subdivision modifier would change, so the file must hold the applied mesh."""
+    proc = bake(SAMPLES / "suzanne.blend", tmp_path, "--objects", "Suzanne", "--target", "vertex-colors",
+                "--samples", "4", "--save", str(tmp_path / "suzanne_ao.blend"))
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" not in proc.stdout + proc.stderr, proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Suzanne_AO.ply", "suzanne_ao.blend"]
+
+
+def test_udim_scene_covers_two_tiles(fresh):
+    """udim.blend's Bust: the head in tile 1001, the pedestal in 1002, nothing elsewhere."""
+    bpy = fresh
+    uvs = mesh_data(bpy, SAMPLES / "udim.blend")["Bust"][2].reshape(-1, 2)
+    tiles = 1001 + np.floor(uvs[:, 0]).astype(int) + 10 * np.floor(uvs[:, 1]).astype(int)
+    assert sorted(set(tiles.tolist())) == [1001, 1002]
 
 
 def test_rock_bakes_selected_to_active_without_a_miss(tmp_path):
