@@ -14,7 +14,7 @@ adaptive     docs/adaptive.png: an adaptive bake's AO, its standard-error map an
              0.25: open floor stops at the minimum, the contact shadow and the disk's shade take more).
 cycles       docs/cycles_vs_mc_ao.png: Suzanne of suzanne.blend baked by Cycles' AO bake and by this
              add-on's operator at the same resolution, samples and threads, with the times and the
-             difference (bench/cycles.py runs Cycles as the benchmark does).
+             difference (bench/comparators/cycles.py runs Cycles as the benchmark does).
 selected     docs/selected_to_active.png: rock.blend's 123k-triangle Rock_high baked onto its
              80-triangle Rock_low by scripts/bake_ao.py --match-suffix _high _low; Cycles renders of
              the high-poly under a white sky (direct light only: its AO) and of the low-poly showing
@@ -119,7 +119,8 @@ def gallery(res=256, samples=64):
 def cycles_side_by_side(res=256, samples=128, threads=2):
     import bpy
 
-    from bench import cycles, mcao
+    from bench.comparators import cycles
+    from bench.harness import mcao
 
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "suzanne.blend"))
     bpy.context.scene.world = bpy.data.worlds.new("World") if bpy.context.scene.world is None else bpy.context.scene.world

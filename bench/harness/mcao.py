@@ -5,7 +5,7 @@ import time
 import numpy as np
 
 _registered = False
-#: Wall and process-CPU seconds of the last operator bake (see bench.cycles.LAST).
+#: Wall and process-CPU seconds of the last operator bake (see bench.comparators.cycles.LAST).
 LAST = {"wall": None, "cpu": None}
 
 

@@ -365,7 +365,7 @@ def cycles_bake(bpy, low, high):
     scene.render.threads_mode, scene.render.threads = "FIXED", 2
     scene.world = scene.world or bpy.data.worlds.new("World")
     scene.world.light_settings.distance = DISTANCE
-    # The AO of the surface itself (bench/cycles.py); Cycles' object setting moved from obj.cycles (4.2)
+    # The AO of the surface itself (bench/comparators/cycles.py); Cycles' object setting moved from obj.cycles (4.2)
     # to the object (5.0).
     owner = high if hasattr(high, "shadow_terminator_geometry_offset") else high.cycles
     owner.shadow_terminator_geometry_offset = 0.0
