@@ -23,6 +23,7 @@ keeps AO continuous across smooth-shaded terminators.
 """
 
 import dataclasses
+import functools
 import math
 import threading
 import time
@@ -269,11 +270,16 @@ class TexelBake:
         self.pro, self.bent_normals = pro, bool(bent_normals)
         self.uvtris = prepare(pro.target, s.width, s.height)
         self.s = s.fit_tiles(R.uv_centres(self.uvtris))  # automatic tiles of dense meshes: fewer triangles each
-        self.table = SurfaceTable.build(pro.target, self.uvtris)
         self.bins = bin_triangles(self.uvtris, s.width, s.height, self.s.tile_shape)
         # Planned work: a tile's texels are unknown before rasterising, so count each tile's bounding
         # rectangle's texels times samples, and credit what it did not cover as it is rasterised.
         self.planned = sum(self.rect(key)[2] for key in self.bins) * self.s.samples
+
+    @functools.cached_property
+    def table(self):
+        """The target's surface table, built where tiles are baked (a parent whose workers bake them
+        never needs it: hundreds of bytes a triangle it does not hold)."""
+        return SurfaceTable.build(self.pro.target, self.uvtris)
 
     def rect(self, key):
         """Rows, columns and texel count of tile ``key``."""
