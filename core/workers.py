@@ -155,6 +155,7 @@ def main():
             if msg[0] == "setup":  # a new bake: cancels of the last one no longer apply
                 current["bake"], current["cancel"] = msg[1], threading.Event()
             tasks.put(msg)
+            del msg  # not kept while waiting for the next one: a setup's arrays belong to its bake
 
     threading.Thread(target=reader, name="mc_ao-lifeline", daemon=True).start()
     try:
@@ -164,15 +165,17 @@ def main():
     bake = shared = None
     threads = 1
     while True:
-        msg = tasks.get()
-        kind, bake_id = msg[0], msg[1]
+        kind, bake_id, *args = tasks.get()
         try:
             if kind == "setup":
-                bake, shared, threads = _setup(msg[2], current["cancel"], lambda work: reply("progress", bake_id, work))
+                bake = shared = None  # the last bake's scene goes before the next one is built
+                job = args.pop()  # only the bake keeps what it needs of the input: the job's arrays go
+                bake, shared, threads = _setup(job, current["cancel"], lambda work: reply("progress", bake_id, work))
+                del job
                 reply("ready", bake_id)
             elif kind == "tile":
                 outs = []
-                run_all(lambda key: outs.append(bake.tile(key, directions=False)), [msg[2]], threads, shared, None)
+                run_all(lambda key: outs.append(bake.tile(key, directions=False)), [args[0]], threads, shared, None)
                 reply("tile", bake_id, vars(outs[0]))
             elif kind == "finish":
                 shared.flush()
