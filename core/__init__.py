@@ -10,7 +10,7 @@ from .errors import (
     MeshTypeError,
     SettingsError,
 )
-from . import stats, warps
+from . import cost, stats, warps
 from .integrate import Estimate, estimate, integrate
 from .stats import RunningStats
 from .mesh import Mesh

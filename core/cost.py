@@ -1,0 +1,89 @@
+"""What a bake will cost before it runs: its time and its memory, from its size, calibrated by the bench.
+
+The time is a linear model of the work a bake does, fitted to the bench's own bakes
+(bench/results/latest.json: the resolution, one-sample and triangle rows, 2 shared cores):
+
+    CPU seconds = NS_PER_RAY rays + NS_PER_TEXEL covered texels + NS_PER_TRIANGLE triangles + FIXED
+
+(rays: covered texels times samples; triangles: every mesh the bake holds), and the wall time is that
+over the cores the bake uses at PARALLEL_EFFICIENCY. It is 0.53-1.27 times the measured time on every
+bench row (one-sample 512^2 the lowest)
+(tests/test_cost.py), and by more on machines far from that one (a faster core scales it all) and on
+scenes whose rays cost more (long rays through dense geometry): an estimate to show before a bake,
+not a promise. Adaptive sampling takes fewer samples than the most it may: the estimate is for the
+most.
+
+The memory: the result's planes and the margin's work per image texel, each process's copy of the
+scene per triangle, a process's fixed share (an interpreter with numpy, embreex and the sample pool),
+and the chunks of rays in flight per thread (the model the bench's peak memory rows check).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: The time model (nanoseconds), fitted to the bench's bakes on 2 cores (see the module docstring).
+NS_PER_RAY, NS_PER_TEXEL, NS_PER_TRIANGLE, FIXED_SECONDS = 168.0, 520.0, 3570.0, 0.075
+#: Wall time over CPU time on n cores, the bench's 2-thread bakes: 0.52-0.67 of the CPU time.
+PARALLEL_EFFICIENCY = 0.9
+#: Bytes: per image texel (ao, stderr, samples, mask planes, the margin's work), per triangle held by
+#: a process (its meshes, surface table, UV triangles and Embree scene: 770-830 measured per worker on
+#: a 524k-triangle grid), a process's own, and per ray of a chunk in flight.
+BYTES_PER_TEXEL, BYTES_PER_TRIANGLE, BYTES_PER_PROCESS, BYTES_PER_CHUNK_RAY = 26, 850, 150 << 20, 200
+
+
+@dataclass(frozen=True)
+class Cost:
+    """An estimate: ``seconds`` of wall time and peak ``bytes`` (every process together)."""
+
+    seconds: float
+    bytes: int
+
+    def describe(self):
+        """E.g. 'about 12 s and 1.3 GiB'."""
+        s = self.seconds
+        t = f"{s:.1f} s" if s < 10 else f"{s:.0f} s" if s < 120 else f"{s / 60:.0f} min"
+        gib = self.bytes / 2 ** 30
+        m = f"{gib:.1f} GiB" if gib >= 1 else f"{self.bytes / 2 ** 20:.0f} MiB"
+        return f"about {t} and {m}"
+
+
+def estimate(covered_texels, samples, triangles, image_texels=None, threads=1, processes=1, chunk_rays=1 << 16):
+    """The :class:`Cost` of a bake of ``covered_texels`` at ``samples`` each, holding ``triangles``
+    (every mesh: target, occluders, high-poly), on ``processes`` x ``threads`` (``image_texels``: the
+    whole image, for the memory; the covered ones when not given)."""
+    covered_texels, triangles = int(covered_texels), int(triangles)
+    rays = covered_texels * int(samples)
+    cpu = (NS_PER_RAY * rays + NS_PER_TEXEL * covered_texels + NS_PER_TRIANGLE * triangles) * 1e-9 + FIXED_SECONDS
+    cores = max(1, int(threads) * int(processes))
+    seconds = cpu / cores / (PARALLEL_EFFICIENCY if cores > 1 else 1.0)
+    image = covered_texels if image_texels is None else int(image_texels)
+    memory = (BYTES_PER_TEXEL * image + int(processes) * (BYTES_PER_TRIANGLE * triangles + BYTES_PER_PROCESS)
+              + cores * min(int(chunk_rays), rays) * BYTES_PER_CHUNK_RAY)
+    return Cost(float(seconds), int(memory))
+
+
+def covered_fraction(uvs):
+    """About the share of a [0, 1] UV square that UV triangles ``uvs`` (T, 3, 2) cover: their areas
+    inside the square added up (overlaps counted twice), at most 1."""
+    uv = np.clip(np.asarray(uvs, np.float64), 0.0, 1.0)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    return float(min(1.0, 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()))
+
+
+def estimate_bake(target, occluders=(), resolution=(1024, 1024), samples=256, threads=1, processes=1,
+                  highpoly=()):
+    """The :class:`Cost` of :func:`core.bake_ao` of these meshes, before any work: the covered texels
+    from the UVs' area (:func:`covered_fraction`), plus the texels along the islands' borders."""
+    w, h = (resolution, resolution) if np.ndim(resolution) == 0 else resolution
+    frac = covered_fraction(target.uvs) if target.uvs is not None else 0.0
+    covered = frac * w * h
+    # Texels cut by an island's border are covered too: about a texel per texel of border.
+    uv = np.asarray(target.uvs, np.float64) * [w, h] if target.uvs is not None else np.zeros((0, 3, 2))
+    border = 0.5 * np.linalg.norm(np.roll(uv, -1, axis=1) - uv, axis=2).sum()
+    covered = min(w * h, covered + border)
+    triangles = target.triangle_count + sum(m.triangle_count for m in list(occluders) + list(highpoly))
+    return estimate(covered, samples, triangles, image_texels=w * h, threads=threads, processes=processes)
+
+
+__all__ = ["Cost", "estimate", "estimate_bake", "covered_fraction"]
