@@ -7,10 +7,9 @@ The time is a linear model of the work a bake does, fitted to the bench's own ba
 
 (rays: covered texels times samples; triangles: every mesh the bake holds), and the wall time is that
 over the cores the bake uses at PARALLEL_EFFICIENCY. It is 0.53-1.27 times the measured time on every
-bench row (one-sample 512^2 the lowest)
-(tests/test_cost.py), and by more on machines far from that one (a faster core scales it all) and on
-scenes whose rays cost more (long rays through dense geometry): an estimate to show before a bake,
-not a promise. Adaptive sampling takes fewer samples than the most it may: the estimate is for the
+bench row (tests/test_cost.py; the one-sample 512^2 bake the lowest), and errs more on machines far
+from that one (a faster core scales it all) and on scenes whose rays cost more (long rays through
+dense geometry): an estimate to show before a bake, not a promise. Adaptive sampling takes fewer samples than the most it may: the estimate is for the
 most.
 
 The memory: the result's planes and the margin's work per image texel, each process's copy of the
