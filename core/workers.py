@@ -63,6 +63,8 @@ from .errors import BakeCancelled, McAoError, SettingsError
 from .scheduler import Scheduler, is_cancelled, run_all
 
 _HEADER = struct.Struct("<Q")
+#: Tiles dealt to a worker ahead of the one it bakes, so that it never waits for the parent.
+AHEAD = 2
 #: Progress messages per worker and bake, at most (a message per chunk would let a busy parent slow them).
 PROGRESS_STEPS = 512
 #: Bytes a worker holds per triangle of the bake's meshes beyond its Embree scene (the surface table,
@@ -272,7 +274,7 @@ class _Worker:
         path = [root] + [p for p in sys.path if p and p != root]
         self.process = subprocess.Popen([sys.executable, "-c", _BOOT, json.dumps(path), os.path.join(root, "core")],
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
-        self.index, self.busy, self.ready, self.alive = index, None, False, True
+        self.index, self.busy, self.ready, self.alive = index, [], False, True
         self.lock = threading.Lock()
         threading.Thread(target=self._read, args=(inbox,), name=f"mc_ao-worker-{index}", daemon=True).start()
 
@@ -356,7 +358,7 @@ class Pool:
             job = dict(job, quantum=quantum, settings=dict(job["settings"], threads=self.threads, auto_tiles=False))
             for w in self.workers:
                 w.send("setup", bake_id, job)
-                w.ready = False
+                w.ready, w.busy = False, []
             todo = list(keys)
             todo.reverse()
             out_standing = set()  # workers holding a tile or not yet ready
@@ -366,12 +368,14 @@ class Pool:
             cancelled = False
 
             def deal(w):
-                if todo and failure is None and not cancelled:
+                """Keep ``AHEAD`` tiles with the worker (it starts the next while its last result is on
+                its way); once none is left, ask it for its totals."""
+                while len(w.busy) < AHEAD and todo and failure is None and not cancelled:
                     key = todo.pop()
-                    w.busy = key
+                    w.busy.append(key)
                     w.send("tile", bake_id, key)
-                else:
-                    w.busy = None
+                if not w.busy and failure is None and not cancelled:
+                    w.send("finish", bake_id)
 
             pending = set(self.workers)
             try:
@@ -402,13 +406,10 @@ class Pool:
                     elif kind == "ready":
                         w.ready = True
                         deal(w)
-                        if w.busy is None:
-                            w.send("finish", bake_id)
                     elif kind == "tile":
+                        w.busy.remove(msg[2]["key"])
                         store(TileOut(**msg[2]))
                         deal(w)
-                        if w.busy is None:
-                            w.send("finish", bake_id)
                     elif kind == "finish":
                         finished[w] = msg[2]
                         pending.discard(w)
