@@ -46,6 +46,7 @@ from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE,
 from .surface import SurfaceTable
 from .tilebaker import SurfaceStart, TileBaker
 from .tracing import Tracer
+from . import ground as _ground
 from . import highpoly as _highpoly
 from . import workers as _workers
 
@@ -187,6 +188,7 @@ class Prologue:
             self.s2a = s2a.normalized(*_frame(target), MAX_SCENE_SPAN)
         self.bent_space = bent_mod.check_space(bent_space, target) if bent_normals else None
         self.name = target.name
+        self.frame = _frame(target)
         self.target, self.occluders, self.unit = _normalized_scene(target, occluders)
 
     @property
@@ -210,9 +212,23 @@ class Prologue:
         if is_cancelled(self.cancel):
             raise BakeCancelled("the bake was cancelled before it started")
 
+    def ground_height(self, s):
+        """(world height, height in the bake's frame) of the ground plane (:mod:`core.ground`), or
+        (None, None). 'auto': the lowest point of the surface whose AO is baked (the high-poly
+        meshes' with selected to active, else the target's)."""
+        if s.ground is None:
+            return None, None
+        centre, unit = self.frame
+        if s.ground == "auto":
+            baked = self.s2a.highs if self.s2a is not None else [self.target]
+            low = min(float(m.positions[:, 2].min()) for m in baked)
+            return float(centre[2]) + low * unit, low
+        return s.ground, _ground.frame_height(s.ground, centre[2], unit)
+
     def tracer(self, s):
-        """The occlusion tracer of the target and its occluders, in the bake's frame."""
-        return Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit)
+        """The occlusion tracer of the target and its occluders (and the ground), in the bake's frame."""
+        return Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit,
+                      ground=self.ground_height(s)[1])
 
     def nothing_covered(self, s, uvtris):
         """The error of a texel bake that covered no texel, saying why (the counts of the UV triangles)."""
@@ -274,7 +290,7 @@ class TexelBake:
         pro, s = self.pro, self.s
         stage = None if pro.s2a is None else _highpoly.HighPolyStage(
             pro.s2a, pro.target, pro.occluders, self.uvtris, self.table, self.bins, s, pro.unit,
-            lambda: is_cancelled(cancel))
+            lambda: is_cancelled(cancel), ground=pro.ground_height(s)[1])
         tracer = pro.tracer(s) if stage is None else stage.scene.tracer
         pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
         kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
@@ -321,7 +337,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
-            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1):
+            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, ground=None):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
@@ -395,6 +411,12 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         extrusion is then not used).
     empty_ok : a bake whose UVs cover no texel returns an all-zero result instead of raising
         MeshError (a UDIM tile listed but not touched, which Cycles clears).
+    ground : None (no ground), 'auto' or a height (world units): an analytic infinite ground plane
+        z = height (world up is +z, Blender's) that occludes as a huge plane mesh would, without
+        triangles; 'auto' puts it at the lowest point of the baked surface (the target's; with
+        ``highpoly``, the high-poly meshes'). Faces lying on it are in contact (occluded). With a
+        falloff, a ray meeting it is weighed by its distance. See :mod:`core.ground`. Recorded in
+        ``metadata['ground']`` ('none', 'auto' or 'height') and ``metadata['ground_height']``.
 
     Returns
     -------
@@ -409,7 +431,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     t_start = time.perf_counter()
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
-                                    replicates)
+                                    replicates, ground=ground)
     pro = Prologue(target, occluders, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,
                    max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
     target_in, occluders_in, bent_space_in = target, list(occluders or ()), bent_space
@@ -491,6 +513,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, s.threads)
     seconds = time.perf_counter() - t_start
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
+    if s.ground is not None:
+        metadata["ground_height"] = pro.ground_height(s)[0]
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
               "degenerate_triangles": uvtris.degenerate_space,
               "uv_outside_triangles": uvtris.outside, "overlapping_texels": overlap}

@@ -82,6 +82,7 @@ import threading
 
 import numpy as np
 
+from . import ground as _ground
 from . import warps
 from .errors import MeshError, SettingsError
 from .adaptive import replicate_samples
@@ -234,10 +235,11 @@ class HighPolyScene:
     Parameters
     ----------
     s2a : a normalised :class:`SelectedToActive`; occluders : the other occluders (normalised);
-    ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the frame).
+    ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the frame);
+    ground : the ground plane's height in the frame, or None (:mod:`core.ground`).
     """
 
-    def __init__(self, s2a, occluders, ignore_backfaces, falloff, max_distance):
+    def __init__(self, s2a, occluders, ignore_backfaces, falloff, max_distance, ground=None):
         self.s2a = s2a
         highs = s2a.highs
         self.owner = np.repeat(np.arange(len(highs)), [h.triangle_count for h in highs])
@@ -248,7 +250,7 @@ class HighPolyScene:
         # Occlusion: the high-poly meshes and the occluders, as one mesh (Tracer's contact scene is for a
         # single target; contact here is per high-poly mesh, below).
         everything = _concatenate(highs + list(occluders), "high-poly and occluders")
-        self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance)
+        self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance, ground=ground)
         # Matching: the high-poly meshes alone, in Embree's robust mode (a low-poly lying on the
         # high-poly surface starts its rays on it, see core.tracing.OCCLUSION_ROBUST).
         self.match_scene = embree_scene([high])[0]
@@ -314,8 +316,10 @@ class _Contact:
 
     def touching(self, owner, tri_corners, points, gn):
         """Per point (on high-poly mesh ``owner``, triangle corners (m, 3, 3)), whether another
-        object's surface crosses it."""
+        object's surface (or the ground) crosses it."""
         out = np.zeros(len(points), bool)
+        if self.tracer.ground is not None:
+            out |= _ground.touching(points[:, 2], gn[:, 2], self.tracer.point_offset(points), self.tracer.ground)
         for i in np.unique(owner):
             entry = self.scenes.get(int(i))
             if entry is None:
@@ -456,7 +460,7 @@ class HighPolyStart:
                 found, htri, hq, hn, hgn = scene.match(origins[cast], directions[cast])
                 point = cast[found]  # index (piece * k + j) of every point that hit
                 touch = None
-                if scene.contact.scenes and len(point):
+                if (scene.contact.scenes or scene.tracer.ground is not None) and len(point):
                     touch = scene.contact.touching(scene.owner[htri], scene.corners[htri], hq, hgn)
         nh = len(point)
         piece = point // k
@@ -534,13 +538,14 @@ class HighPolyStage:
     cancelled : callable, True to stop (checked while scanning).
     """
 
-    def __init__(self, s2a, target, occluders, uvtris, table, bins, settings, unit, cancelled=lambda: False):
+    def __init__(self, s2a, target, occluders, uvtris, table, bins, settings, unit, cancelled=lambda: False,
+                 ground=None):
         self.s2a, self.target, self.uvtris, self.table, self.unit = s2a, target, uvtris, table, unit
         self.s = settings
         self.g = directions_per_point(settings.samples, settings.min_samples, settings.adaptive,
                                       settings.replicates)
         self.scene = HighPolyScene(s2a, occluders, settings.ignore_backfaces, settings.falloff,
-                                   settings.max_distance / unit)
+                                   settings.max_distance / unit, ground=ground)
         cage_table = None
         if s2a.cage is not None:
             cage = s2a.cage

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SettingsError
+from .ground import check_ground
 from .patterns import POOL_POINTS, SOURCE_NAMES
 
 DISTRIBUTIONS = ("cosine", "uniform")
@@ -94,6 +95,7 @@ class BakeSettings:
     replicates: int = 2
     tile_height: int = None  # rows of a tile; None: tile_size (square tiles)
     auto_tiles: bool = False  # the tiles were chosen by auto_tile_shape (and may shrink: fit_tiles)
+    ground: object = None  # None, 'auto' or a world height (core.ground)
 
     @property
     def tile_shape(self):
@@ -109,7 +111,8 @@ class BakeSettings:
 
     @classmethod
     def from_arguments(cls, resolution, samples, min_samples, target_error, max_distance, distribution, source,
-                       margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays, replicates=2):
+                       margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays, replicates=2, *,
+                       ground=None):
         w, h = _resolution(resolution)
         samples = _positive_int(samples, "samples")
         if samples > MAX_SAMPLES:
@@ -154,7 +157,7 @@ class BakeSettings:
                    target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
                    margin=margin, seed=seed, threads=threads, ignore_backfaces=bool(ignore_backfaces),
                    falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays, replicates=replicates,
-                   tile_height=tile_height, auto_tiles=auto_tiles)
+                   tile_height=tile_height, auto_tiles=auto_tiles, ground=check_ground(ground))
 
     def fit_tiles(self, centres):
         """These settings with automatic tiles shrunk until no tile holds more than TILE_TRIANGLES
@@ -207,7 +210,8 @@ class BakeSettings:
                 "ignore_backfaces": self.ignore_backfaces, "margin": self.margin, "replicates": self.replicates,
                 "error_estimate": ("replicates" if self.replicates > 1
                                    else "independent" if self.source == "independent" else "bound"),
-                "resolution": f"{self.width}x{self.height}"}
+                "resolution": f"{self.width}x{self.height}",
+                "ground": "none" if self.ground is None else "auto" if self.ground == "auto" else "height"}
 
 
 def pattern_span(source, samples):

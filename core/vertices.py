@@ -174,7 +174,7 @@ def _block_neighbours(pairs, lo, hi):
 def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_samples=16, target_error=0.0,
                    max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
                    ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None,
-                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False):
+                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False, ground=None):
     """Bake ambient occlusion at the face corners of ``target`` (Cycles' colour-attribute bake).
 
     Parameters
@@ -190,6 +190,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         the spread between replicates, pooled over each sample point's neighbourhood on the mesh
         (its vertex and the vertices that share an edge with it: :class:`Neighbours`), as a
         texel's is pooled over the texels around it.
+    ground : as for :func:`core.bake_ao` ('auto': the target's lowest point).
     The other parameters are those of :func:`core.bake_ao`; progress is reported per chunk of
     rays and ``on_rays`` batches name the sample point (``texels``) of each ray.
 
@@ -203,7 +204,8 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     """
     t_start = time.perf_counter()
     s = BakeSettings.from_arguments(1, samples, min_samples, target_error, max_distance, distribution, source,
-                                    0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates)
+                                    0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates,
+                                    ground=ground)
     pro = Prologue(target, occluders, s, cancel, uvs=False)
     corners = all_corners(pro.target) if corners is None else _check_corners(corners, pro.target)
     target = pro.target
@@ -232,7 +234,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
 
     def work(ids):
         contact = np.zeros(len(ids), bool)
-        if tracer.contact_scene is not None:
+        if tracer.touches:
             contact = tracer.contact(p[ids], gn[ids])
         near = None if pairs is None else _block_neighbours(pairs, int(ids[0]), int(ids[-1]) + 1)
         est, sums = baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None)
@@ -249,6 +251,8 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     for key in ("margin", "resolution"):
         metadata.pop(key, None)
     metadata["sample_points"] = m
+    if s.ground is not None:
+        metadata["ground_height"] = pro.ground_height(s)[0]
     report = {"corners": len(corners), "sample_points": m, "degenerate_corners": flat}
     return BakeResult(ao=ao[unit], mask=np.ones(len(unit), bool), stderr=se[unit], samples=count[unit], unit=unit,
                       rays=shared.rays, seconds=time.perf_counter() - t_start, trace_seconds=shared.trace_seconds,
