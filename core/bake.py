@@ -179,6 +179,9 @@ class Prologue:
                 raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
         self.cancel = cancel
         self.s2a = None
+        if bent_normals and settings.quantity != "ao":
+            raise SettingsError(f"bent normals come with quantity='ao' only, not {settings.quantity!r}: bake them "
+                                "in an AO bake")
         if highpoly is not None:  # selected to active: checked here, before any work
             if bent_normals:
                 raise SettingsError("bent normals are not baked with selected to active (highpoly): bake them "
@@ -226,7 +229,10 @@ class Prologue:
         return s.ground, _ground.frame_height(s.ground, centre[2], unit)
 
     def tracer(self, s):
-        """The occlusion tracer of the target and its occluders (and the ground), in the bake's frame."""
+        """The occlusion tracer of the target and its occluders (and the ground), in the bake's frame;
+        for a thickness map, of the target alone (:mod:`core.thickness`)."""
+        if s.quantity == "thickness":
+            return Tracer([self.target], s.ignore_backfaces, s.falloff, s.max_distance / self.unit)
         return Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit,
                       ground=self.ground_height(s)[1])
 
@@ -290,7 +296,8 @@ class TexelBake:
         pro, s = self.pro, self.s
         stage = None if pro.s2a is None else _highpoly.HighPolyStage(
             pro.s2a, pro.target, pro.occluders, self.uvtris, self.table, self.bins, s, pro.unit,
-            lambda: is_cancelled(cancel), ground=pro.ground_height(s)[1])
+            lambda: is_cancelled(cancel), ground=pro.ground_height(s)[1],
+            occluding=s.quantity == "ao")
         tracer = pro.tracer(s) if stage is None else stage.scene.tracer
         pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
         kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
@@ -337,7 +344,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
-            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, ground=None):
+            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, ground=None, quantity="ao"):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
@@ -417,6 +424,13 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         ``highpoly``, the high-poly meshes'). Faces lying on it are in contact (occluded). With a
         falloff, a ray meeting it is weighed by its distance. See :mod:`core.ground`. Recorded in
         ``metadata['ground']`` ('none', 'auto' or 'height') and ``metadata['ground_height']``.
+    quantity : 'ao' (default) or 'thickness': the thickness map, AO with the normal inverted (rays
+        into the mesh, in the hemisphere about the inverted shading normal, up to ``max_distance``),
+        occluded by the target alone (with ``highpoly``, the high-poly meshes alone): black = thin,
+        white = thick, as Substance's thickness baker. ``ao`` then holds it, with the same estimator,
+        error map and adaptive sampling. The occluders play no part; ``ground``, ``ignore_backfaces``
+        and ``bent_normals`` are refused with it. See :mod:`core.thickness` (definition, open
+        meshes, smooth-shading terminators). Recorded in ``metadata['quantity']``.
 
     Returns
     -------
@@ -431,7 +445,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     t_start = time.perf_counter()
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
-                                    replicates, ground=ground)
+                                    replicates, ground=ground, quantity=quantity)
     pro = Prologue(target, occluders, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,
                    max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
     target_in, occluders_in, bent_space_in = target, list(occluders or ()), bent_space

@@ -236,10 +236,11 @@ class HighPolyScene:
     ----------
     s2a : a normalised :class:`SelectedToActive`; occluders : the other occluders (normalised);
     ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the frame);
-    ground : the ground plane's height in the frame, or None (:mod:`core.ground`).
+    ground : the ground plane's height in the frame, or None (:mod:`core.ground`); occluding : False
+    for a thickness map (:mod:`core.thickness`): the high-poly meshes alone occlude, without contact.
     """
 
-    def __init__(self, s2a, occluders, ignore_backfaces, falloff, max_distance, ground=None):
+    def __init__(self, s2a, occluders, ignore_backfaces, falloff, max_distance, ground=None, occluding=True):
         self.s2a = s2a
         highs = s2a.highs
         self.owner = np.repeat(np.arange(len(highs)), [h.triangle_count for h in highs])
@@ -249,13 +250,15 @@ class HighPolyScene:
         self.face_normals = high.face_normals
         # Occlusion: the high-poly meshes and the occluders, as one mesh (Tracer's contact scene is for a
         # single target; contact here is per high-poly mesh, below).
+        if not occluding:
+            occluders, ground = [], None
         everything = _concatenate(highs + list(occluders), "high-poly and occluders")
         self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance, ground=ground)
         # Matching: the high-poly meshes alone, in Embree's robust mode (a low-poly lying on the
         # high-poly surface starts its rays on it, see core.tracing.OCCLUSION_ROBUST).
         self.match_scene = embree_scene([high])[0]
         self.limit = np.float32(min(s2a.max_ray_distance, FAR) if s2a.max_ray_distance > 0 else FAR)
-        self.contact = _Contact(highs, list(occluders), self.tracer)
+        self.contact = _Contact(highs if occluding else [], list(occluders), self.tracer)
 
     def match(self, origins, directions):
         """Cast matching rays (m, 3) float64; returns (hit (m,) bool, and for the hits: high-poly
@@ -480,7 +483,8 @@ class HighPolyStart:
         table = point_table(hq, hn, hgn, scene.corners[htri], smooth=True)
         ids = np.arange(nh, dtype=np.int64)
         hit_tile = TileContext(table, point_units(ids, units.texel[unit][piece]), tile.keys, tile.texel_ids,
-                               np.zeros(tile.texels, bool), scene.tracer.offset, tris=ids, blocked=touch)
+                               np.zeros(tile.texels, bool), scene.tracer.offset, tris=ids, blocked=touch,
+                               inward=tile.inward)
         vec = None if vectors is None else np.empty((nh, 3))
         s1, s2, rays, sec, cpu = kernel.run(hit_tile, True, ids, (first[piece] + point % k) * g, g, nh, vectors=vec,
                                             replicates=None if replicates is None else replicates[piece])
@@ -539,13 +543,13 @@ class HighPolyStage:
     """
 
     def __init__(self, s2a, target, occluders, uvtris, table, bins, settings, unit, cancelled=lambda: False,
-                 ground=None):
+                 ground=None, occluding=True):
         self.s2a, self.target, self.uvtris, self.table, self.unit = s2a, target, uvtris, table, unit
         self.s = settings
         self.g = directions_per_point(settings.samples, settings.min_samples, settings.adaptive,
                                       settings.replicates)
         self.scene = HighPolyScene(s2a, occluders, settings.ignore_backfaces, settings.falloff,
-                                   settings.max_distance / unit, ground=ground)
+                                   settings.max_distance / unit, ground=ground, occluding=occluding)
         cage_table = None
         if s2a.cage is not None:
             cage = s2a.cage

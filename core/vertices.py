@@ -23,7 +23,7 @@ import numpy as np
 
 from ._version import __version__
 from .bake import BakeResult, Prologue
-from .errors import MeshError
+from .errors import MeshError, SettingsError
 from .estimators import ErrorModel
 from .kernel import Kernel
 from .mesh import corner_positions
@@ -174,7 +174,7 @@ def _block_neighbours(pairs, lo, hi):
 def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_samples=16, target_error=0.0,
                    max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
                    ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None,
-                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False, ground=None):
+                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False, ground=None, quantity="ao"):
     """Bake ambient occlusion at the face corners of ``target`` (Cycles' colour-attribute bake).
 
     Parameters
@@ -190,7 +190,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         the spread between replicates, pooled over each sample point's neighbourhood on the mesh
         (its vertex and the vertices that share an edge with it: :class:`Neighbours`), as a
         texel's is pooled over the texels around it.
-    ground : as for :func:`core.bake_ao` ('auto': the target's lowest point).
+    ground, quantity : as for :func:`core.bake_ao` ('auto': the target's lowest point).
     The other parameters are those of :func:`core.bake_ao`; progress is reported per chunk of
     rays and ``on_rays`` batches name the sample point (``texels``) of each ray.
 
@@ -205,7 +205,9 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     t_start = time.perf_counter()
     s = BakeSettings.from_arguments(1, samples, min_samples, target_error, max_distance, distribution, source,
                                     0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates,
-                                    ground=ground)
+                                    ground=ground, quantity=quantity)
+    if bent_normals and s.quantity != "ao":
+        raise SettingsError(f"bent normals come with quantity='ao' only, not {s.quantity!r}: bake them in an AO bake")
     pro = Prologue(target, occluders, s, cancel, uvs=False)
     corners = all_corners(pro.target) if corners is None else _check_corners(corners, pro.target)
     target = pro.target
