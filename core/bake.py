@@ -167,7 +167,7 @@ class Prologue:
     normalised :class:`core.highpoly.SelectedToActive` or None), bent_space (checked).
     """
 
-    def __init__(self, target, occluders, settings, cancel, *, uvs=True, highpoly=None, extrusion=0.0,
+    def __init__(self, target, occluders, settings, cancel, *, uvs=True, highpoly=None, extrusion=None,
                  max_ray_distance=0.0, cage=None, bent_normals=False, bent_space=None):
         if not isinstance(target, Mesh):
             raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
@@ -193,6 +193,8 @@ class Prologue:
         self.name = target.name
         self.frame = _frame(target)
         self.target, self.occluders, self.unit = _normalized_scene(target, occluders)
+        if self.s2a is not None:
+            self.s2a.resolve(self.target)  # an automatic extrusion, measured from the meshes
 
     @property
     def triangle_count(self):
@@ -344,7 +346,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
-            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, ground=None, quantity="ao"):
+            extrusion=None, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, ground=None, quantity="ao"):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
@@ -410,7 +412,15 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         baked into the target's UVs. The high-poly meshes occlude, as do the ``occluders``; the target
         and the cage never do (left out of the occluders if they are among them).
     extrusion : with ``highpoly``, the distance (world units, >= 0) the matching rays start out from the
-        target's surface along its interpolated normal, pointing back along it (Cycles' Extrusion).
+        target's surface along its interpolated normal, pointing back along it (Cycles' Extrusion);
+        None or 'auto' (the default): measured from the meshes, the smallest distance that lets the
+        matching rays start outside the high-poly where it bulges out of the target without
+        starting beyond another part of it in concave places (:func:`core.highpoly.auto_extrusion`).
+        ``report['extrusion']`` and ``metadata['extrusion']`` give the distance used (world units),
+        ``metadata['extrusion_auto']`` whether it was measured. Whatever the extrusion, more than 1%
+        of the matching rays meeting the high-poly from behind (they start inside it: the bright or
+        dark blobs of a too small extrusion) puts a warning naming the object in
+        ``report['warnings']``.
     max_ray_distance : with ``highpoly``, the longest matching ray (world units, measured from where it
         starts), 0 for no limit.
     cage : with ``highpoly``, None or a Mesh of the target's topology (same vertex count and triangles,
@@ -513,11 +523,12 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         job = dict(target=_workers.mesh_data(target_in), occluders=[_workers.mesh_data(o) for o in occluders_in],
                    settings=dataclasses.asdict(s), bent_normals=bent_normals, bent_space=bent_space_in,
                    highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
-                   extrusion=extrusion, max_ray_distance=max_ray_distance,
+                   extrusion=extrusion if s2a is None else s2a.world.extrusion,  # measured once, here
+                   max_ray_distance=max_ray_distance,
                    cage=None if cage is None else _workers.mesh_data(cage))
         rays, trace_s, trace_cpu, counters = pool.run(job, keys, bake.planned, store, progress, cancel)
     if s2a is not None:
-        extra = _highpoly.finish_report(counters, miss, mask)
+        extra = _highpoly.finish_report(counters, miss, mask, s2a)
         missed = counters["missed"]
     elif not mask.any() and not empty_ok:
         raise pro.nothing_covered(s, uvtris)
