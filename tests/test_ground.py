@@ -197,3 +197,23 @@ def test_bad_ground_values_are_refused_by_name(bad):
         bake_ao(wall(), resolution=16, samples=8, ground=bad)
     with pytest.raises(SettingsError, match="ground"):
         bake_vertex_ao(wall(), samples=8, ground=bad)
+
+
+def test_udim_tiles_bake_with_the_ground_of_the_whole_object():
+    """The wall's UVs over two UDIM tiles (its lower half in 1001, its upper half in 1002): 'auto' is
+    the whole object's lowest point in both, each tile the bits of bake_ao on its own shifted UVs."""
+    from core import bake_udim
+    from core.udim import shifted, tile_seed
+
+    t = wall(0.3, 1.3)
+    P, F = t.positions, t.triangles
+    uv = np.stack([P[:, 1], (P[:, 2] - 0.3) * 2.0], axis=1)  # v in [0, 2]: tiles 1001 and 1011
+    m = Mesh(P, F, uv[F], name="tall wall")
+    r = bake_udim(m, resolution=16, samples=32, max_distance=D, margin=0, ground="auto")
+    assert sorted(r.tiles) == [1001, 1011]
+    for tile, part in r.tiles.items():
+        assert part.metadata["ground"] == "auto" and part.metadata["ground_height"] == pytest.approx(0.3)
+        alone = bake_ao(shifted(m, tile), resolution=16, samples=32, max_distance=D, margin=0, ground=0.3,
+                        seed=tile_seed(0, tile), empty_ok=True)
+        assert np.array_equal(part.ao, alone.ao)
+    assert r.tiles[1001].ao[r.tiles[1001].mask].mean() < r.tiles[1011].ao[r.tiles[1011].mask].mean()

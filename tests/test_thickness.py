@@ -274,3 +274,15 @@ def test_bad_values_are_refused_by_name(kw, message):
         bake_ao(slab(), resolution=16, samples=8, **kw)
     with pytest.raises(SettingsError, match=message):
         bake_vertex_ao(slab(), samples=8, **kw)
+
+
+def test_udim_tiles_and_a_falloff_bake_thickness_too():
+    from core import bake_udim
+
+    r = bake_udim(slab(), resolution=16, samples=64, max_distance=D, quantity="thickness", margin=0)
+    part = r.tiles[1001]
+    assert part.metadata["quantity"] == "thickness"
+    assert abs(part.ao[interior(part)].mean() - (DEPTH / D) ** 2) < 0.05
+    # With a falloff, a far side met at t occludes by (1 - t / D)^p: between the plain map and white.
+    f = bake_ao(slab(), resolution=16, samples=64, max_distance=D, quantity="thickness", margin=0, falloff=1.0)
+    assert (DEPTH / D) ** 2 + 0.05 < f.ao[interior(f)].mean() < 0.95
