@@ -545,7 +545,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
               "uv_outside_triangles": uvtris.outside, "overlapping_texels": overlap}
     if s2a is not None:
         metadata.update(s2a.metadata())
+        warnings = extra.pop("warnings")
         report.update(extra)
+        report.setdefault("warnings", []).extend(warnings)  # beside any other warning of the bake
     return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=rays, seconds=seconds,
                       trace_seconds=trace_s, threads=s.threads, metadata=metadata, report=report,
                       trace_cpu_seconds=trace_cpu, bent=bent, miss=miss, missed=missed if s2a is not None else 0)
