@@ -250,8 +250,10 @@ class SelectedToActive:
         if self.cage is not None:
             self.extrusion = self.world.extrusion = 0.0
             return
-        self.extrusion = self.measured().extrusion
-        self.world.extrusion = self.extrusion * self.unit
+        self.world.extrusion = self.measured().extrusion * self.unit
+        # In the frame as normalized() takes a given one (world / unit): a worker process, handed the
+        # world value, computes the same bits.
+        self.extrusion = self.world.extrusion / self.unit
 
     def measured(self):
         """The automatic extrusion's measure (:class:`AutoExtrusion`, the bake's frame), taken now if

@@ -132,3 +132,19 @@ def test_workers_bake_with_the_parents_measure():
     one = bake_ao(low, occ, highpoly=highs, **kw)
     two = bake_ao(low, occ, highpoly=highs, workers=2, **kw)
     assert np.array_equal(one.ao, two.ao) and one.report["extrusion"] == two.report["extrusion"]
+
+
+def test_workers_bake_a_measured_extrusion_in_an_odd_frame_with_the_same_bits():
+    # Scaled by an odd factor: the frame's unit is not a power of two, and the workers, handed the
+    # world extrusion, must arrive at the parent's value in the frame bit for bit.
+    low, highs, occ = bumpy_plane()
+    k = 1.37
+
+    def scaled(m):
+        return Mesh(m.positions * k, m.triangles, m.uvs, name=m.name)
+
+    kw = dict(resolution=32, samples=16, seed=1, margin=0)
+    one = bake_ao(scaled(low), [scaled(o) for o in occ], highpoly=[scaled(h) for h in highs], **kw)
+    two = bake_ao(scaled(low), [scaled(o) for o in occ], highpoly=[scaled(h) for h in highs], workers=2, **kw)
+    assert np.array_equal(one.ao, two.ao) and np.array_equal(one.stderr, two.stderr)
+    assert one.report["extrusion"] == pytest.approx(k * bake_ao(low, occ, highpoly=highs, **kw).report["extrusion"])
