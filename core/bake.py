@@ -47,6 +47,7 @@ from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE,
 from .surface import SurfaceTable
 from .tilebaker import SurfaceStart, TileBaker
 from .tracing import Tracer
+from . import ground as _ground
 from . import highpoly as _highpoly
 from . import workers as _workers
 
@@ -183,7 +184,7 @@ class Prologue:
     normalised :class:`core.highpoly.SelectedToActive` or None), bent_space (checked).
     """
 
-    def __init__(self, target, occluders, settings, cancel, *, uvs=True, highpoly=None, extrusion=0.0,
+    def __init__(self, target, occluders, settings, cancel, *, uvs=True, highpoly=None, extrusion=None,
                  max_ray_distance=0.0, cage=None, bent_normals=False, bent_space=None):
         if not isinstance(target, Mesh):
             raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
@@ -195,6 +196,9 @@ class Prologue:
                 raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
         self.cancel = cancel
         self.s2a = None
+        if bent_normals and settings.quantity != "ao":
+            raise SettingsError(f"bent normals come with quantity='ao' only, not {settings.quantity!r}: bake them "
+                                "in an AO bake")
         if highpoly is not None:  # selected to active: checked here, before any work
             if bent_normals:
                 raise SettingsError("bent normals are not baked with selected to active (highpoly): bake them "
@@ -204,7 +208,10 @@ class Prologue:
             self.s2a = s2a.normalized(*_frame(target), MAX_SCENE_SPAN)
         self.bent_space = bent_mod.check_space(bent_space, target) if bent_normals else None
         self.name = target.name
+        self.frame = _frame(target)
         self.target, self.occluders, self.unit = _normalized_scene(target, occluders)
+        if self.s2a is not None:
+            self.s2a.resolve(self.target)  # an automatic extrusion, measured from the meshes
 
     @property
     def triangle_count(self):
@@ -227,9 +234,27 @@ class Prologue:
         if is_cancelled(self.cancel):
             raise BakeCancelled("the bake was cancelled before it started")
 
+    def ground_height(self, s):
+        """(world height, height in the bake's frame) of the ground plane (:mod:`core.ground`), or
+        (None, None). 'auto': the lowest point of the surface whose AO is baked (the high-poly
+        meshes' with selected to active, else the target's)."""
+        if s.ground is None:
+            return None, None
+        centre, unit = self.frame
+        if s.ground == "auto":
+            baked = self.s2a.highs if self.s2a is not None else [self.target]
+            low = min(float(m.positions[:, 2].min()) for m in baked)
+            return float(centre[2]) + low * unit, low
+        return s.ground, _ground.frame_height(s.ground, centre[2], unit)
+
     def tracer(self, s):
-        """The occlusion tracer of the target and its occluders, in the bake's frame."""
-        tracer = Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit)
+        """The occlusion tracer of the target and its occluders (and the ground), in the bake's frame;
+        for a thickness map, of the target alone (:mod:`core.thickness`)."""
+        if s.quantity == "thickness":
+            tracer = Tracer([self.target], s.ignore_backfaces, s.falloff, s.max_distance / self.unit)
+        else:
+            tracer = Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit,
+                            ground=self.ground_height(s)[1])
         tracer.constant_answer = s.constant_answer
         return tracer
 
@@ -290,7 +315,8 @@ class TexelBake:
         pro, s = self.pro, self.s
         stage = None if pro.s2a is None else _highpoly.HighPolyStage(
             pro.s2a, pro.target, pro.occluders, self.uvtris, self.table, self.bins, s, pro.unit,
-            lambda: is_cancelled(cancel))
+            lambda: is_cancelled(cancel), ground=pro.ground_height(s)[1],
+            occluding=s.quantity == "ao")
         tracer = pro.tracer(s) if stage is None else stage.scene.tracer
         tracer.constant_answer = s.constant_answer
         pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
@@ -338,8 +364,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0, threads=None,
             ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, on_tile=None,
             tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None, highpoly=None,
-            extrusion=0.0, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, constant_answer=False,
-            denoise=False):
+            extrusion=None, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1, ground=None, quantity="ao",
+            constant_answer=False, denoise=False):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
@@ -405,7 +431,15 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         baked into the target's UVs. The high-poly meshes occlude, as do the ``occluders``; the target
         and the cage never do (left out of the occluders if they are among them).
     extrusion : with ``highpoly``, the distance (world units, >= 0) the matching rays start out from the
-        target's surface along its interpolated normal, pointing back along it (Cycles' Extrusion).
+        target's surface along its interpolated normal, pointing back along it (Cycles' Extrusion);
+        None or 'auto' (the default): measured from the meshes, the smallest distance that lets the
+        matching rays start outside the high-poly where it bulges out of the target without
+        starting beyond another part of it in concave places (:func:`core.highpoly.auto_extrusion`).
+        ``report['extrusion']`` and ``metadata['extrusion']`` give the distance used (world units),
+        ``metadata['extrusion_auto']`` whether it was measured. Whatever the extrusion, more than 1%
+        of the matching rays meeting the high-poly from behind (they start inside it: the bright or
+        dark blobs of a too small extrusion) puts a warning naming the object in
+        ``report['warnings']``.
     max_ray_distance : with ``highpoly``, the longest matching ray (world units, measured from where it
         starts), 0 for no limit.
     cage : with ``highpoly``, None or a Mesh of the target's topology (same vertex count and triangles,
@@ -413,6 +447,19 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         extrusion is then not used).
     empty_ok : a bake whose UVs cover no texel returns an all-zero result instead of raising
         MeshError (a UDIM tile listed but not touched, which Cycles clears).
+    ground : None (no ground), 'auto' or a height (world units): an analytic infinite ground plane
+        z = height (world up is +z, Blender's) that occludes as a huge plane mesh would, without
+        triangles; 'auto' puts it at the lowest point of the baked surface (the target's; with
+        ``highpoly``, the high-poly meshes'). Faces lying on it are in contact (occluded). With a
+        falloff, a ray meeting it is weighed by its distance. See :mod:`core.ground`. Recorded in
+        ``metadata['ground']`` ('none', 'auto' or 'height') and ``metadata['ground_height']``.
+    quantity : 'ao' (default) or 'thickness': the thickness map, AO with the normal inverted (rays
+        into the mesh, in the hemisphere about the inverted shading normal, up to ``max_distance``),
+        occluded by the target alone (with ``highpoly``, the high-poly meshes alone): black = thin,
+        white = thick, as Substance's thickness baker. ``ao`` then holds it, with the same estimator,
+        error map and adaptive sampling. The occluders play no part; ``ground``, ``ignore_backfaces``
+        and ``bent_normals`` are refused with it. See :mod:`core.thickness` (definition, open
+        meshes, smooth-shading terminators). Recorded in ``metadata['quantity']``.
     workers : 1 (this process, ``threads`` threads), N worker processes (``threads`` threads each,
         None: one), 'auto' (from the cores and the memory: :func:`core.workers.auto_workers`), or a
         ``distributed.Client``: the tiles as tasks on its Dask cluster (a lost worker's tiles are
@@ -439,7 +486,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     t_start = time.perf_counter()
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
-                                    replicates)
+                                    replicates, ground=ground, quantity=quantity)
     s = dataclasses.replace(s, constant_answer=bool(constant_answer))
     if denoise and s.replicates < 2:
         raise SettingsError("denoise needs replicates >= 2: the filter weighs each texel by its standard error, "
@@ -507,12 +554,13 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         job = dict(target=_workers.mesh_data(target_in), occluders=[_workers.mesh_data(o) for o in occluders_in],
                    settings=dataclasses.asdict(s), bent_normals=bent_normals, bent_space=bent_space_in,
                    highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
-                   extrusion=extrusion, max_ray_distance=max_ray_distance,
+                   extrusion=extrusion if s2a is None else s2a.world.extrusion,  # measured once, here
+                   max_ray_distance=max_ray_distance,
                    cage=None if cage is None else _workers.mesh_data(cage))
         rays, trace_s, trace_cpu, counters = _workers.run_tiles(processes, per_worker, job, keys, bake.planned, store,
                                                                 progress, cancel)
     if s2a is not None:
-        extra = _highpoly.finish_report(counters, miss, mask)
+        extra = _highpoly.finish_report(counters, miss, mask, s2a)
         missed = counters["missed"]
     elif not mask.any() and not empty_ok:
         raise pro.nothing_covered(s, uvtris)
@@ -532,14 +580,19 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
     if denoise:
         metadata["denoise"] = True
+    if s.ground is not None:
+        metadata["ground_height"] = pro.ground_height(s)[0]
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
               "degenerate_triangles": uvtris.degenerate_space,
               "uv_outside_triangles": uvtris.outside, "overlapping_texels": overlap}
     if s2a is not None:
         metadata.update(s2a.metadata())
+        warnings = extra.pop("warnings")
         report.update(extra)
+        report.setdefault("warnings", []).extend(warnings)  # beside any other warning of the bake
     if fallback is not None:
-        report["warnings"] = [f"baked on {s.threads} threads of this process, not in worker processes: {fallback}"]
+        report.setdefault("warnings", []).append(
+            f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
     return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=rays, seconds=seconds,
                       trace_seconds=trace_s, threads=s.threads, metadata=metadata, report=report,
                       trace_cpu_seconds=trace_cpu, bent=bent, miss=miss, missed=missed if s2a is not None else 0,

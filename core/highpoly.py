@@ -11,9 +11,9 @@ init_from_bake.h``, ``shade_surface.h``: ``integrate_surface_ao``). The rules, e
    low-poly's normal there (the normalised interpolation of its corner normals on smooth faces, the
    face normal on flat ones):
 
-   - *extrusion* (no cage): origin ``p + e n``, direction ``-n``, e the extrusion distance: the
-     ray starts outside the low surface and points back into it, along the normal only (a high
-     surface farther out than ``e`` is never found);
+   - *extrusion* (no cage): origin ``p + e n``, direction ``-n``, e the extrusion distance (given,
+     or measured: see below): the ray starts outside the low surface and points back into it, along
+     the normal only (a high surface farther out than ``e`` is never found);
    - *cage*: origin the cage's point of the same triangle at the same barycentrics, direction from
      it towards p (normalised; it does not stop at p). A cage point on p gives no direction: a miss.
      The extrusion is not used with a cage.
@@ -41,6 +41,20 @@ init_from_bake.h``, ``shade_surface.h``: ``integrate_surface_ao``). The rules, e
    object of the view layer); never the low-poly target or the cage, even when passed among the
    occluders. Another object's face lying on the high-poly surface occludes the points it touches
    (contact, as :class:`core.tracing.Tracer` explains for the target).
+
+The extrusion trap, and the automatic extrusion. With a too small extrusion (Cycles' default 0), a
+point under a place where the high-poly bulges out of the low-poly starts its matching ray inside
+the high-poly, and the ray meets the high-poly's far side from behind: the texel bakes the inside of
+the high-poly (bright or dark blobs), and no ray "missed". With a too large one, in concave places a
+ray starts beyond another part of the high-poly (the far wall of a slot) and matches that. The
+default extrusion (None or 'auto') is measured from the meshes by :func:`auto_extrusion`: walking out
+along the low-poly's normal from points spread over it, a surface met from behind is one the point
+lies under (the extrusion must pass it), the first met from the front is another part across a gap
+(the extrusion must stay short of it); the extrusion is the smallest that serves nearly every point.
+``report['extrusion']`` says what was used. Whatever the extrusion, the bake counts the matching
+rays that meet the high-poly from behind (its face normal along the ray) and, above
+:data:`BEHIND_WARNING` of them, puts a warning naming the objects and what fits in
+``report['warnings']``. A cage is used as given.
 
 Differences from Cycles, by design: Cycles casts one matching ray per texel, at its centre, and then
 jitters its AO samples over the high-poly triangle that ray hit; here every sample point has its own
@@ -79,9 +93,11 @@ any thread count, tile size and chunk size.
 
 import math
 import threading
+from dataclasses import dataclass
 
 import numpy as np
 
+from . import ground as _ground
 from . import warps
 from .errors import MeshError, SettingsError
 from .adaptive import replicate_samples
@@ -142,8 +158,13 @@ class SelectedToActive:
 
     def __init__(self, target, highs, extrusion, max_ray_distance, cage):
         self.target, self.highs, self.cage = target, highs, cage
+        # ``extrusion`` None: automatic, measured by :meth:`resolve` (:func:`auto_extrusion`).
         self.extrusion, self.max_ray_distance = extrusion, max_ray_distance
+        self.auto = extrusion is None
+        self.measure = None  # the automatic extrusion's figures (AutoExtrusion), once measured
+        self._frame_target = None
         self.unit = 1.0
+        self._match_scene = None
 
     @classmethod
     def check(cls, target, highpoly, extrusion, max_ray_distance, cage):
@@ -158,9 +179,12 @@ class SelectedToActive:
             if h is target:
                 raise SettingsError(f"{target.name!r} is the low-poly target and cannot also be a high-poly mesh "
                                     "baked onto itself; leave it out of the high-poly meshes")
-        extrusion = _distance(extrusion, "the extrusion")
+        if extrusion is None or (isinstance(extrusion, str) and extrusion == "auto"):
+            extrusion = None  # measured from the meshes (auto_extrusion)
+        else:
+            extrusion = _distance(extrusion, "the extrusion")
         limit = _distance(max_ray_distance, "the max ray distance (0 = no limit)")
-        if not math.isfinite(extrusion):
+        if extrusion is not None and not math.isfinite(extrusion):
             raise SettingsError(f"the extrusion must be a finite distance, got {extrusion}")
         if cage is not None:
             if not isinstance(cage, Mesh):
@@ -203,16 +227,48 @@ class SelectedToActive:
                 raise MeshError(f"{what} {original.name!r} reaches {far:.3g} times the size of {self.target.name!r} "
                                 "away from it; ray tracing in single precision cannot hold both: move it onto "
                                 f"{self.target.name!r}")
-        out = SelectedToActive(self.target, highs, self.extrusion / unit, self.max_ray_distance / unit, cage)
+        out = SelectedToActive(self.target, highs, None if self.auto else self.extrusion / unit,
+                               self.max_ray_distance / unit, cage)
         out.unit = unit
         out.world = self
         return out
+
+    def matching_scene(self):
+        """The high-poly meshes as one committed Embree scene, robust (built once, shared by the
+        automatic extrusion and :class:`HighPolyScene`)."""
+        if self._match_scene is None:
+            self._match_scene = embree_scene([_concatenate(self.highs, "high-poly")])[0]
+        return self._match_scene
+
+    def resolve(self, target):
+        """In the bake's frame (``target`` normalised): an automatic extrusion measured from the
+        meshes (:func:`auto_extrusion`), also set on the world input; nothing to do otherwise (a
+        given extrusion, or a cage, which does not use one)."""
+        self._frame_target = target
+        if not self.auto:
+            return
+        if self.cage is not None:
+            self.extrusion = self.world.extrusion = 0.0
+            return
+        self.world.extrusion = self.measured().extrusion * self.unit
+        # In the frame as normalized() takes a given one (world / unit): a worker process, handed the
+        # world value, computes the same bits.
+        self.extrusion = self.world.extrusion / self.unit
+
+    def measured(self):
+        """The automatic extrusion's measure (:class:`AutoExtrusion`, the bake's frame), taken now if
+        it was not (a bake with a given extrusion asks for it only to say what would fit)."""
+        if self.measure is None:
+            high = _concatenate(self.highs, "high-poly")
+            self.measure = auto_extrusion(self._frame_target, self.matching_scene(), high.face_normals)
+        return self.measure
 
     def metadata(self):
         """What goes into the files' metadata and the result's settings (world units)."""
         world = getattr(self, "world", self)
         return {"selected_to_active": True, "highpoly": ", ".join(h.name for h in world.highs),
                 "extrusion": world.extrusion if world.cage is None else 0.0,
+                "extrusion_auto": bool(world.auto and world.cage is None),
                 "max_ray_distance": world.max_ray_distance,
                 "cage": world.cage.name if world.cage is not None else ""}
 
@@ -234,10 +290,12 @@ class HighPolyScene:
     Parameters
     ----------
     s2a : a normalised :class:`SelectedToActive`; occluders : the other occluders (normalised);
-    ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the frame).
+    ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the frame);
+    ground : the ground plane's height in the frame, or None (:mod:`core.ground`); occluding : False
+    for a thickness map (:mod:`core.thickness`): the high-poly meshes alone occlude, without contact.
     """
 
-    def __init__(self, s2a, occluders, ignore_backfaces, falloff, max_distance):
+    def __init__(self, s2a, occluders, ignore_backfaces, falloff, max_distance, ground=None, occluding=True):
         self.s2a = s2a
         highs = s2a.highs
         self.owner = np.repeat(np.arange(len(highs)), [h.triangle_count for h in highs])
@@ -247,13 +305,15 @@ class HighPolyScene:
         self.face_normals = high.face_normals
         # Occlusion: the high-poly meshes and the occluders, as one mesh (Tracer's contact scene is for a
         # single target; contact here is per high-poly mesh, below).
+        if not occluding:
+            occluders, ground = [], None
         everything = _concatenate(highs + list(occluders), "high-poly and occluders")
-        self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance)
+        self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance, ground=ground)
         # Matching: the high-poly meshes alone, in Embree's robust mode (a low-poly lying on the
         # high-poly surface starts its rays on it, see core.tracing.OCCLUSION_ROBUST).
-        self.match_scene = embree_scene([high])[0]
+        self.match_scene = s2a.matching_scene()
         self.limit = np.float32(min(s2a.max_ray_distance, FAR) if s2a.max_ray_distance > 0 else FAR)
-        self.contact = _Contact(highs, list(occluders), self.tracer)
+        self.contact = _Contact(highs if occluding else [], list(occluders), self.tracer)
 
     def match(self, origins, directions):
         """Cast matching rays (m, 3) float64; returns (hit (m,) bool, and for the hits: high-poly
@@ -314,8 +374,10 @@ class _Contact:
 
     def touching(self, owner, tri_corners, points, gn):
         """Per point (on high-poly mesh ``owner``, triangle corners (m, 3, 3)), whether another
-        object's surface crosses it."""
+        object's surface (or the ground) crosses it."""
         out = np.zeros(len(points), bool)
+        if self.tracer.ground is not None:
+            out |= _ground.touching(points[:, 2], gn[:, 2], self.tracer.point_offset(points), self.tracer.ground)
         for i in np.unique(owner):
             entry = self.scenes.get(int(i))
             if entry is None:
@@ -380,6 +442,122 @@ class LowPoints:
         return (p,) + towards(other, p)
 
 
+#: Points spread over the low-poly surface (by area) that the automatic extrusion is measured from.
+EXTRUSION_POINTS = 1 << 12
+#: The automatic extrusion is the smallest that serves all but this share of the points (of those that
+#: the best extrusion serves): points it gives up are those whose need is far out of line.
+EXTRUSION_SLACK = 1e-3
+#: Headroom above the measured need: this share of it, plus EXTRUSION_FLOOR target sizes.
+EXTRUSION_HEADROOM, EXTRUSION_FLOOR = 0.05, 1e-4
+#: Crossings followed along each point's normal before giving up (nested high-poly shells).
+EXTRUSION_STEPS = 16
+_TAG_EXTRUSION = 37
+
+
+@dataclass
+class AutoExtrusion:
+    """The automatic extrusion and what it was measured from (the bake's frame): ``extrusion``; per
+    point, ``need`` (the extrusion it needs) and ``limit`` (the most it stands); ``served``: the
+    share of the points whose interval holds the extrusion."""
+
+    extrusion: float
+    need: np.ndarray
+    limit: np.ndarray
+    served: float
+
+
+def surface_points(mesh, count, tag):
+    """``count`` points on ``mesh``'s triangles of positive area, spread by area (stratified,
+    deterministic): (triangle, barycentric weights (count, 3))."""
+    from .patterns import hash_uniform
+
+    area = mesh.areas
+    valid = np.flatnonzero(area > 0)
+    if not len(valid):
+        return valid, np.zeros((0, 3))
+    cdf = np.cumsum(area[valid])
+    cdf /= cdf[-1]
+    k = np.arange(count, dtype=np.uint64)
+    u = (np.arange(count) + hash_uniform(np.uint64(1), k, np.uint64(tag))) / count
+    tri = valid[np.minimum(np.searchsorted(cdf, u, side="right"), len(valid) - 1)]
+    w0, w1 = warps.square_to_triangle(hash_uniform(np.uint64(2), k, np.uint64(tag)),
+                                      hash_uniform(np.uint64(3), k, np.uint64(tag)))
+    return tri, np.stack([w0, w1, 1.0 - w0 - w1], axis=1)
+
+
+def auto_extrusion(target, match_scene, face_normals, count=EXTRUSION_POINTS):
+    """The extrusion that lets the most matching rays find the right high-poly surface, measured from
+    the meshes (all in the bake's frame).
+
+    A matching ray starts at p + e n and goes back along -n, taking the nearest high-poly surface
+    (Cycles' rule). It finds the surface that belongs to p when the segment from p + e n to that
+    surface crosses no other part of the high-poly. Walking from p (just below it) out along +n
+    through the high-poly's surfaces tells, per point, which e do that:
+
+    - a surface met from behind (its normal along +n) is one the walk leaves the high-poly through:
+      p lies inside the high-poly, which bulges out of the low-poly there, and e must reach past it.
+      ``need`` is the distance of the last such crossing before the first surface met from the front;
+    - the first surface met from the front (its normal against +n) is another part of the high-poly
+      across a gap (the far wall of a concave part, a neighbouring fold): a ray starting beyond it
+      would take that part instead. ``limit`` is its distance (inf where the walk meets none).
+
+    Each point is served by any e in [need, limit). The extrusion is the smallest e that serves as
+    many points as the best e does, less EXTRUSION_SLACK of them (a few points that need far more
+    than the rest, deep under an overhang, do not push every other ray out past its far walls), plus
+    EXTRUSION_HEADROOM of it and EXTRUSION_FLOOR (rays that start exactly on the surface they should
+    find), kept inside the served interval. Where the high-poly lies wholly inside the low-poly every
+    need is 0 and the extrusion is the floor. ``count`` points are spread over the whole low-poly by
+    area (not only the part the UVs bake), so every UDIM tile and target of one object gets the same
+    extrusion.
+    """
+    tri, w = surface_points(target, count, _TAG_EXTRUSION)
+    if not len(tri):
+        return AutoExtrusion(0.0, np.zeros(0), np.zeros(0), 1.0)
+    p = np.einsum("ij,ijk->ik", w, corner_positions(target.positions, target.triangles[tri]))
+    _, n, _ = extruded(p, np.einsum("ij,ijk->ik", w, target.normals[tri]), target.face_normals[tri], 0.0)
+    n = -n  # extruded() returns the ray direction, -n
+    m = len(p)
+    size = float(np.max(target.positions.max(axis=0) - target.positions.min(axis=0))) or 1.0
+    from .tracing import EPS_POSITION, EPS_SCENE
+
+    step = 2.0 * (EPS_SCENE * size + EPS_POSITION * np.abs(p).max(axis=1))
+    need = np.zeros(m)
+    limit = np.full(m, np.inf)
+    at = -step  # distance along +n from p of each walk's current origin
+    todo = np.arange(m)
+    n32 = np.ascontiguousarray(n, np.float32)
+    for _ in range(EXTRUSION_STEPS):
+        if not len(todo):
+            break
+        origin = (p[todo] + n[todo] * at[todo, None]).astype(np.float32)
+        out = match_scene.run(origin, n32[todo], dists=np.full(len(todo), FAR, np.float32), output=True)
+        prim = out["primID"]
+        hit = prim >= 0
+        t = at[todo] + out["tfar"].astype(np.float64)
+        behind = hit & (np.einsum("ij,ij->i", face_normals[np.maximum(prim, 0)], n[todo]) > 0)
+        front = hit & ~behind
+        limit[todo[front]] = np.maximum(t[front], 0.0)
+        need[todo[behind]] = np.maximum(t[behind], 0.0)
+        at[todo[behind]] = t[behind] + step[todo[behind]]
+        todo = todo[behind]
+    # The smallest e serving (nearly) as many points as the best: coverage(e) = #(need <= e) - #(limit <= e).
+    cand = np.unique(np.concatenate([[0.0], need]))
+    ns, ls = np.sort(need), np.sort(limit)
+
+    def served(e):
+        return np.searchsorted(ns, e, side="right") - np.searchsorted(ls, e, side="right")
+
+    cover = served(cand)
+    best = int(cover.max())
+    e = float(cand[np.flatnonzero(cover >= best - EXTRUSION_SLACK * m)[0]])
+    out = e * (1.0 + EXTRUSION_HEADROOM) + EXTRUSION_FLOOR * size
+    if served(np.array([out]))[0] < served(np.array([e]))[0]:
+        # Headroom would cross a far wall: halfway to the nearest limit above e instead.
+        above = ls[ls > e]
+        out = e + 0.5 * (float(above[0]) - e) if len(above) else out
+    return AutoExtrusion(out, need, limit, float(served(np.array([out]))[0]) / m)
+
+
 def extruded(p, n, fn, extrusion):
     """Extrusion rays: origin p + e n, direction -n, n the normalised interpolated normal (``fn`` where
     it vanishes); all usable."""
@@ -418,6 +596,7 @@ class HighPolyStart:
         self.per_point = stage.g
         self.lock = threading.Lock()
         self.matching_rays = 0
+        self.behind = 0  # matching rays that met the high-poly from behind (they started inside it)
         self.missed = 0
         self.partial = 0
         self.found = 0
@@ -455,14 +634,16 @@ class HighPolyStart:
             with inside:
                 found, htri, hq, hn, hgn = scene.match(origins[cast], directions[cast])
                 point = cast[found]  # index (piece * k + j) of every point that hit
+                behind = int(np.count_nonzero(np.einsum("ij,ij->i", scene.face_normals[htri], directions[point]) > 0))
                 touch = None
-                if scene.contact.scenes and len(point):
+                if (scene.contact.scenes or scene.tracer.ground is not None) and len(point):
                     touch = scene.contact.touching(scene.owner[htri], scene.corners[htri], hq, hgn)
         nh = len(point)
         piece = point // k
         hits = np.bincount(piece, minlength=npieces)
         with self.lock:
             self.matching_rays += len(cast)
+            self.behind += behind
             self.missed += npieces * k - nh
             self.match_seconds += stage.wall
             self.match_cpu_seconds += stage.cpu
@@ -476,7 +657,8 @@ class HighPolyStart:
         table = point_table(hq, hn, hgn, scene.corners[htri], smooth=True)
         ids = np.arange(nh, dtype=np.int64)
         hit_tile = TileContext(table, point_units(ids, units.texel[unit][piece]), tile.keys, tile.texel_ids,
-                               np.zeros(tile.texels, bool), scene.tracer.offset, tris=ids, blocked=touch)
+                               np.zeros(tile.texels, bool), scene.tracer.offset, tris=ids, blocked=touch,
+                               inward=tile.inward)
         vec = None if vectors is None else np.empty((nh, 3))
         s1, s2, rays, sec, cpu = kernel.run(hit_tile, True, ids, (first[piece] + point % k) * g, g, nh, vectors=vec,
                                             replicates=None if replicates is None else replicates[piece])
@@ -503,22 +685,57 @@ class HighPolyStart:
 
     def counters(self):
         """What this process counted (summed over worker processes by :func:`finish_report`)."""
-        return {"matching_rays": self.matching_rays, "missed": self.missed, "partial": self.partial,
+        return {"matching_rays": self.matching_rays, "behind": self.behind, "missed": self.missed,
+                "partial": self.partial,
                 "matching_seconds": self.match_seconds, "matching_cpu_seconds": self.match_cpu_seconds,
                 "directions_per_point": self.per_point,
                 "nothing_matched": self.stage.nothing_matched() if self.matching_rays and not self.found else None}
 
 
-def finish_report(counters, miss, mask):
+#: More than this share of the matching rays meeting the high-poly from behind gets a warning.
+BEHIND_WARNING = 0.01
+
+
+def finish_report(counters, miss, mask, s2a=None):
     """The report entries of a selected-to-active bake from its counters (one process's, or several
-    added up); raises MeshError when no texel matched at all."""
+    added up), with the extrusion used and the warnings of ``s2a`` (the normalised input); raises
+    MeshError when no texel matched at all."""
     if counters["matching_rays"] and not mask.any():
         raise MeshError(counters["nothing_matched"] or "no matching ray found the high-poly surface")
-    return {"matching_rays": counters["matching_rays"], "missed_matching_rays": counters["missed"],
+    extra = {}
+    warnings = []
+    if s2a is not None:
+        world = s2a.world
+        extra["extrusion"] = world.extrusion if world.cage is None else 0.0
+        if s2a.measure is not None:
+            extra["extrusion_served"] = s2a.measure.served
+        behind = counters.get("behind", 0)
+        rays = counters["matching_rays"]
+        if rays and behind > BEHIND_WARNING * rays:
+            low, highs = world.target.name, ", ".join(repr(h.name) for h in world.highs)
+            if world.cage is not None:
+                fix = (f"make the cage {world.cage.name!r} enclose the high-poly surface everywhere, without "
+                       "reaching past other parts of it")
+            elif world.auto:
+                fix = (f"the automatic extrusion ({world.extrusion:.4g}) serves "
+                       f"{100.0 * s2a.measured().served:.1f}% of the points it measured: the high-poly is too far "
+                       f"from {low!r} in places for any one extrusion; use a cage")
+            else:
+                need = s2a.measured().extrusion * s2a.unit
+                fix = (f"the extrusion is {world.extrusion:.4g}, and about {need:.4g} fits these meshes: leave it "
+                       "automatic (None), set it near that, or use a cage")
+            warnings.append(
+                f"{low!r}: {100.0 * behind / rays:.1f}% of the matching rays met the high-poly surface of {highs} from "
+                f"behind: they started inside it (an extrusion smaller than how far it bulges out of {low!r}) or "
+                f"behind another part of it (an extrusion reaching past a far wall), and those texels bake the wrong "
+                f"side (bright or dark blobs); {fix}")
+    extra["matching_rays_behind"] = counters.get("behind", 0)
+    extra["warnings"] = warnings
+    return dict(extra, **{"matching_rays": counters["matching_rays"], "missed_matching_rays": counters["missed"],
             "missed_texels": int(miss.sum()), "partly_missed_texels": counters["partial"],
             "directions_per_point": counters["directions_per_point"],
             "matching_seconds": counters["matching_seconds"],
-            "matching_cpu_seconds": counters["matching_cpu_seconds"]}
+            "matching_cpu_seconds": counters["matching_cpu_seconds"]})
 
 
 class HighPolyStage:
@@ -534,13 +751,14 @@ class HighPolyStage:
     cancelled : callable, True to stop (checked while scanning).
     """
 
-    def __init__(self, s2a, target, occluders, uvtris, table, bins, settings, unit, cancelled=lambda: False):
+    def __init__(self, s2a, target, occluders, uvtris, table, bins, settings, unit, cancelled=lambda: False,
+                 ground=None, occluding=True):
         self.s2a, self.target, self.uvtris, self.table, self.unit = s2a, target, uvtris, table, unit
         self.s = settings
         self.g = directions_per_point(settings.samples, settings.min_samples, settings.adaptive,
                                       settings.replicates)
         self.scene = HighPolyScene(s2a, occluders, settings.ignore_backfaces, settings.falloff,
-                                   settings.max_distance / unit)
+                                   settings.max_distance / unit, ground=ground, occluding=occluding)
         cage_table = None
         if s2a.cage is not None:
             cage = s2a.cage

@@ -23,6 +23,9 @@ numpy's passes over a column of (n, 6) rows cost 2-4 times as much as over a pla
 (6, k) planes are one matrix for BLAS (rows n apart), and Embree reads origins and directions as
 (n, 3) views of the planes (embreex takes any strides).
 
+Thickness (:mod:`core.thickness`) is the same kernel with the direction stage flipped: a tile
+built ``inward`` pushes its origins off the surface to the inside and negates every direction.
+
 Turning each texel's directions by its own random angle (:meth:`core.patterns.TexelPattern.keys`)
 means texels that share a pool pattern trace different directions. Directions below the geometric
 surface are not traced (tfar 0) and count as occluded.
@@ -83,12 +86,14 @@ def _row_table(m, entries):
     return out
 
 
-def triangle_matrices(table, tris, offset, curved_all=False):
+def triangle_matrices(table, tris, offset, curved_all=False, inward=False):
     """Per triangle of ``tris`` (unique ids), the float32 matrix M (6, 6) (flat-shaded) or (6, 11)
     (smooth-shaded, or every triangle with ``curved_all``: a flat triangle's normal is constant)
     taking a feature row to what its rays need, stored transposed, (cols, 6): the form the kernel's
     product per piece takes. Returns (flat, curved, slot, gn, eps), slot mapping
-    a triangle id to its row in the array of its kind (-1 for triangles not in ``tris``)."""
+    a triangle id to its row in the array of its kind (-1 for triangles not in ``tris``).
+    ``inward``: ray origins pushed off the surface to the side opposite the shading normal (rays
+    into the mesh, :mod:`core.thickness`)."""
     def take(a, rows):
         return np.take(a, rows, axis=0, mode="clip")  # numpy's a[rows] is 2-3 times slower on (T, 3[, 3]) arrays
 
@@ -123,8 +128,9 @@ def triangle_matrices(table, tris, offset, curved_all=False):
     fs, ft = np.stack([sx, sy, sz], 1), np.stack([tx, ty, tz], 1)
     p0 = take(table.P0, tris)
     org = np.empty((n, 3))
+    push = -eps if inward else eps
     for k in range(3):
-        np.multiply(gn[:, k], eps, out=org[:, k])
+        np.multiply(gn[:, k], push, out=org[:, k])
         org[:, k] += p0[:, k]  # the offset, folded into the constant row
     slot = np.full(len(table.P0), -1, np.int64)
     flat_i, curved_i = np.flatnonzero(~smooth), np.flatnonzero(smooth)
@@ -162,10 +168,15 @@ class TileContext:
     ``located_curved``: located samples (each on its own triangle) take every triangle's matrix in
     the smooth-shaded form when True (a bake-wide choice: any smooth triangle in the target), in the
     flat form otherwise.
+
+    ``inward``: the tile's rays go into the mesh (:mod:`core.thickness`): origins pushed off the
+    surface to the inside, every direction negated (the hemisphere about the inverted normal).
     """
 
-    def __init__(self, table, units, keys, texel_ids, contact, offset, located_curved=True, tris=None, blocked=None):
+    def __init__(self, table, units, keys, texel_ids, contact, offset, located_curved=True, tris=None, blocked=None,
+                 inward=False):
         self.units = units
+        self.inward = bool(inward)
         # Per unit, True where something lies on its point (every sample occluded), or None: the
         # contact a stage found itself (:mod:`core.highpoly`), beside the probes of ``contact``.
         self.blocked = blocked
@@ -174,7 +185,7 @@ class TileContext:
         self.contact = contact          # per tile texel: probe its samples for contact
         # ``tris``: the tile's triangles, ascending (a superset of its units' is fine).
         tris = np.unique(units.tri) if tris is None else np.asarray(tris, np.int64)
-        self.flat_m, self.curved_m, self.slot, gn, eps = triangle_matrices(table, tris, offset)
+        self.flat_m, self.curved_m, self.slot, gn, eps = triangle_matrices(table, tris, offset, inward=self.inward)
         self.smooth = table.smooth
         # The geometric normal and offset of each of ``tris`` (for contact probes, looked up for the
         # few samples probed: per unit up front they cost more than the probes).
@@ -197,7 +208,7 @@ class TileContext:
             else:
                 ctris = np.unique(cand)
                 flat, curved, self.loc_slot, self.loc_gn, self.loc_eps = triangle_matrices(
-                    table, ctris, offset, curved_all=self.located_curved)
+                    table, ctris, offset, curved_all=self.located_curved, inward=self.inward)
                 self.loc_m = curved if self.located_curved else flat
                 self.loc_rows = _row_table(self.loc_m, CURVED_ENTRIES if self.located_curved else FLAT_ENTRIES)
                 self.loc_pos = np.full(len(table.P0), -1, np.int64)
@@ -370,6 +381,10 @@ class Kernel:
                 weight = 2.0 * np.abs(nv) / np.maximum(length, 1e-30)
                 tfar.fill(self.reach)
                 tfar[below] = 0.0
+        if tile.inward:
+            # Into the mesh: -w is distributed about -n as w is about n (both warps are symmetric),
+            # and -w . (-gn) = w . gn, so ``below`` (a direction leaving through the surface) holds.
+            np.negative(directions, out=directions)
         traced_tfar = tfar.copy() if self.on_rays is not None else None
         clock = Clock()
         touch = None

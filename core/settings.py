@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SettingsError
+from .ground import check_ground
+from .thickness import check_quantity
 from .patterns import POOL_POINTS, SOURCE_NAMES
 
 DISTRIBUTIONS = ("cosine", "uniform")
@@ -99,6 +101,8 @@ class BakeSettings:
     tile_height: int = None  # rows of a tile; None: tile_size (square tiles)
     auto_tiles: bool = False  # the tiles were chosen by auto_tile_shape (and may shrink: fit_tiles)
     constant_answer: bool = False  # benchmarks only: no query reaches Embree (see core.tracing.Tracer)
+    ground: object = None  # None, 'auto' or a world height (core.ground)
+    quantity: str = "ao"  # 'ao' or 'thickness' (core.thickness)
 
     @property
     def tile_shape(self):
@@ -114,7 +118,8 @@ class BakeSettings:
 
     @classmethod
     def from_arguments(cls, resolution, samples, min_samples, target_error, max_distance, distribution, source,
-                       margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays, replicates=2):
+                       margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays, replicates=2, *,
+                       ground=None, quantity="ao"):
         w, h = _resolution(resolution)
         samples = _positive_int(samples, "samples")
         if samples > MAX_SAMPLES:
@@ -159,11 +164,20 @@ class BakeSettings:
         if replicates > MAX_REPLICATES:
             raise SettingsError(f"replicates must be at most {MAX_REPLICATES}, got {replicates}")
         replicates = min(replicates, samples)  # a replicate needs a sample
+        quantity = check_quantity(quantity)
+        ground = check_ground(ground)
+        if quantity == "thickness":
+            if ground is not None:
+                raise SettingsError(f"ground={ground!r} does not apply to a thickness map, which only the object itself "
+                                    "occludes; leave ground None for quantity='thickness'")
+            if ignore_backfaces:
+                raise SettingsError("ignore_backfaces does not apply to a thickness map: its rays meet the far side "
+                                    "from behind, so nothing would count; leave it off for quantity='thickness'")
         return cls(width=w, height=h, samples=samples, min_samples=min(min_samples, samples),
                    target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
                    margin=margin, seed=seed, threads=threads, ignore_backfaces=bool(ignore_backfaces),
                    falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays, replicates=replicates,
-                   tile_height=tile_height, auto_tiles=auto_tiles)
+                   tile_height=tile_height, auto_tiles=auto_tiles, ground=ground, quantity=quantity)
 
     def fit_tiles(self, centres):
         """These settings with automatic tiles shrunk until no tile holds more than TILE_TRIANGLES
@@ -216,7 +230,9 @@ class BakeSettings:
                 "ignore_backfaces": self.ignore_backfaces, "margin": self.margin, "replicates": self.replicates,
                 "error_estimate": ("replicates" if self.replicates > 1
                                    else "independent" if self.source == "independent" else "bound"),
-                "resolution": f"{self.width}x{self.height}"}
+                "resolution": f"{self.width}x{self.height}",
+                "quantity": self.quantity,
+                "ground": "none" if self.ground is None else "auto" if self.ground == "auto" else "height"}
 
 
 def pattern_span(source, samples):

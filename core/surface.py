@@ -348,7 +348,7 @@ def contact_texels(frag, table, width, tracer, samples):
     the per-sample probes. Contact smaller than these probe points are apart can go unnoticed.
     """
     n_tex = len(frag.texels)
-    if tracer.contact_scene is None or n_tex == 0:
+    if not tracer.touches or n_tex == 0:
         return np.zeros(n_tex, bool)
     # The tile's triangles, ascending: marked in a table of every triangle (a tile's texels name
     # them a hundred thousand times over at 4096^2, where sorting them cost more than the probes).

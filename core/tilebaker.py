@@ -159,7 +159,8 @@ class TileBaker:
         # Every replicate's keys in one tile: a round's pieces of all replicates go through the
         # kernel together (each call costs about half a millisecond before its first ray).
         tile = TileContext(self.table, units, TileContext.stacked_keys(keys), texel_ids, contact, self.tracer.offset,
-                           located_curved=getattr(start, "located_curved", False), tris=tris)
+                           located_curved=getattr(start, "located_curved", False), tris=tris,
+                           inward=s.quantity == "thickness")
         if y is not None:  # the texels' windows, set up once for every round's pooling
             x, y = TexelWindows(x, y), None
         done = 0

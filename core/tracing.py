@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import ground as _ground
 from .estimators import falloff_visibility
 from .mesh import corner_positions
 
@@ -33,8 +34,8 @@ class RayBatch:
     origins, directions : (n, 3) float32; directions are not always unit length (see ``tfar``).
     tfar : (n,) float32, each ray's length in units of its direction (0 for a ray not traced because
         its direction points below the geometric surface; it counts as occluded).
-    occluded : (n,) bool, Embree's answer (before samples below the surface or in contact are
-        counted as occluded).
+    occluded : (n,) bool, Embree's answer, or the ground's for rays that cross it (before samples
+        below the surface or in contact are counted as occluded).
     texels : (n,) int64, the flat texel index (row * width + column) each ray belongs to.
     samples : (n,) int64, each ray's sample index within its texel's replicate.
     seconds, cpu_seconds : wall and thread CPU time of the Embree call.
@@ -127,13 +128,17 @@ class Tracer:
     surface along the normal: a hit means other geometry coincides with the surface there, and the
     sample is occluded in every direction.
 
+    The ground (:mod:`core.ground`), when there is one, is asked after Embree for every ray the
+    tracer is given, and joins the contact probes: every target and path sees it.
+
     Parameters
     ----------
     meshes : the target first, then its occluders (in the baker's normalised frame).
     ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the same frame).
+    ground : None, or the height (in the same frame) of the analytic ground plane z = ground.
     """
 
-    def __init__(self, meshes, ignore_backfaces=False, falloff=0.0, max_distance=float("inf")):
+    def __init__(self, meshes, ignore_backfaces=False, falloff=0.0, max_distance=float("inf"), ground=None):
         self.scene, self._mesh, positions = embree_scene(meshes, robust=OCCLUSION_ROBUST)
         self.face_normals = np.concatenate([m.face_normals for m in meshes])
         self.contact_scene = embree_scene(meshes[1:])[0] if len(meshes) > 1 else None
@@ -153,6 +158,12 @@ class Tracer:
         #: Benchmarks only: every query answers "not occluded" without calling Embree, so that a bake
         #: measures its own work alone (``bake_ao(..., constant_answer=True)``; the result is not AO).
         self.constant_answer = False
+        self.ground = None if ground is None else float(ground)
+
+    @property
+    def touches(self):
+        """Whether anything can touch the target (occluders or the ground): contact probes are needed."""
+        return self.contact_scene is not None or self.ground is not None
 
     def offset(self, max_abs):
         """Distance to push ray origins off the surface, given each point's largest |coordinate|."""
@@ -165,16 +176,27 @@ class Tracer:
         return self.offset(np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2]))
 
     def occluded(self, origins, directions, tfar):
-        """Embree's occlusion answer per ray (n,) bool; ``tfar`` (n,) float32 is overwritten."""
+        """The occlusion answer per ray (n,) bool: Embree's, or the ground's where the ray crosses it
+        (those rays are not handed to Embree); ``tfar`` (n,) float32 may be overwritten."""
         if self.constant_answer:
             return np.zeros(len(tfar), bool)
-        return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
+        if self.ground is None:
+            return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
+        out = _ground.crossing(origins[:, 2], directions[:, 2], tfar, self.ground, True)
+        rest = np.flatnonzero(~out)
+        if len(rest) == len(out):
+            return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
+        if len(rest):
+            out[rest] = self.scene.run(origins[rest], directions[rest], query="OCCLUDED", dists=tfar[rest]) >= 0
+        return out
 
     def near_occluders(self, lo, hi):
         """Per box [lo, hi] (n, 3), whether some occluder triangle's bounding box overlaps it: a
         cheap, conservative test of where contact probes can find anything."""
         lo, hi = np.atleast_2d(lo), np.atleast_2d(hi)
         out = np.zeros(len(lo), bool)
+        if self.ground is not None:
+            out |= (lo[:, 2] <= self.ground) & (hi[:, 2] >= self.ground)
         if self.contact_scene is None or not len(lo):
             return out
         # Only occluders overlapping the boxes' union can overlap any of them.
@@ -187,14 +209,21 @@ class Tracer:
         return out
 
     def contact(self, points, normals, lengths=None):
-        """Per point (n, 3), whether another object's surface crosses the segment of length 2 * offset
-        through it along its unit geometric normal (n, 3): whether something touches it."""
+        """Per point (n, 3), whether another object's surface (or the ground) crosses the segment of
+        length 2 * offset through it along its unit geometric normal (n, 3): whether something
+        touches it."""
         points = np.asarray(points, dtype=np.float64)
+        normals = np.asarray(normals)
         e = self.point_offset(points) if lengths is None else np.asarray(lengths, np.float64)
-        below = offset_points(points, normals, -e, np.float32)
-        hit = self.contact_scene.run(below, np.ascontiguousarray(normals, dtype=np.float32), query="OCCLUDED",
-                                     dists=(2.0 * e).astype(np.float32))
-        return hit >= 0
+        if self.contact_scene is None:
+            hit = np.zeros(len(points), bool)
+        else:
+            below = offset_points(points, normals, -e, np.float32)
+            hit = self.contact_scene.run(below, np.ascontiguousarray(normals, dtype=np.float32), query="OCCLUDED",
+                                         dists=(2.0 * e).astype(np.float32)) >= 0
+        if self.ground is not None:
+            hit |= _ground.touching(points[:, 2], normals[:, 2], e, self.ground)
+        return hit
 
     def visibility(self, origins, directions, tfar):
         """Per ray, 1 for unoccluded within its length, 0 for occluded, between with falloff; rays whose
@@ -213,6 +242,13 @@ class Tracer:
         travelled = np.zeros(n)
         vis = np.where(reach > 0, 1.0, 0.0)
         todo = np.flatnonzero(reach > 0)
+        floor = None
+        if self.ground is not None:
+            # Embree looks no farther than the ground; a ray that meets nothing before it meets the ground.
+            floor = _ground.distance(org[:, 2], dirs[:, 2], reach, self.ground, not self.ignore_backfaces)
+            reach = np.minimum(reach, floor)
+            remaining = reach.astype(np.float32)
+            met = np.zeros(n, bool)
         for _ in range(64):
             if not len(todo):
                 break
@@ -228,6 +264,8 @@ class Tracer:
             idx = todo[front]
             dist = travelled[idx] + t[front]
             vis[idx] = falloff_visibility(dist, self.max_distance, self.falloff) if self.falloff > 0 else 0.0
+            if floor is not None:
+                met[idx] = True
             # Back-face hits: continue from just past the hit point with the distance left.
             cont = todo[back]
             if len(cont):
@@ -238,6 +276,11 @@ class Tracer:
                 remaining[cont] = np.maximum(reach[cont] - travelled[cont], 0).astype(np.float32)
                 cont = cont[remaining[cont] > 0]
             todo = cont
+        if floor is not None:
+            down = np.flatnonzero(~met & np.isfinite(floor) & (vis > 0))
+            if len(down):
+                vis[down] = (falloff_visibility(floor[down], self.max_distance, self.falloff) if self.falloff > 0
+                             else 0.0)
         return vis
 
 

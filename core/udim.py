@@ -207,8 +207,10 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
     report = {}
     for r in results.values():
         for key, value in r.report.items():
-            if key in ("degenerate_uv_triangles", "degenerate_triangles"):
-                report[key] = value  # the same in every tile: each tile counts every triangle
+            if key in ("degenerate_uv_triangles", "degenerate_triangles", "extrusion", "extrusion_served"):
+                report[key] = value  # the same in every tile (the extrusion is measured on the whole mesh)
+            elif key == "warnings":
+                report[key] = report.get(key, []) + [w for w in value if w not in report.get(key, [])]
             elif key != "uv_outside_triangles":
                 report[key] = report.get(key, 0) + value
     report["uv_outside_udim_triangles"] = coverage.outside

@@ -176,7 +176,8 @@ def _block_neighbours(pairs, lo, hi):
 def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_samples=16, target_error=0.0,
                    max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
                    ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None,
-                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False, workers=1):
+                   chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False, workers=1, ground=None,
+                   quantity="ao"):
     """Bake ambient occlusion at the face corners of ``target`` (Cycles' colour-attribute bake).
 
     Parameters
@@ -192,6 +193,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         the spread between replicates, pooled over each sample point's neighbourhood on the mesh
         (its vertex and the vertices that share an edge with it: :class:`Neighbours`), as a
         texel's is pooled over the texels around it.
+    ground, quantity : as for :func:`core.bake_ao` ('auto': the target's lowest point).
     The other parameters are those of :func:`core.bake_ao`; progress is reported per chunk of
     rays and ``on_rays`` batches name the sample point (``texels``) of each ray.
 
@@ -205,7 +207,10 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     """
     t_start = time.perf_counter()
     s = BakeSettings.from_arguments(1, samples, min_samples, target_error, max_distance, distribution, source,
-                                    0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates)
+                                    0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates,
+                                    ground=ground, quantity=quantity)
+    if bent_normals and s.quantity != "ao":
+        raise SettingsError(f"bent normals come with quantity='ao' only, not {s.quantity!r}: bake them in an AO bake")
     workers = _workers.check_workers(workers)
     occluders = list(occluders or ())
     pro = Prologue(target, occluders, s, cancel, uvs=False)
@@ -247,9 +252,12 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     for key in ("margin", "resolution"):
         metadata.pop(key, None)
     metadata["sample_points"] = m
+    if s.ground is not None:
+        metadata["ground_height"] = pro.ground_height(s)[0]
     report = {"corners": len(corners), "sample_points": m, "degenerate_corners": bake.flat}
     if fallback is not None:
-        report["warnings"] = [f"baked on {s.threads} threads of this process, not in worker processes: {fallback}"]
+        report.setdefault("warnings", []).append(
+            f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
     return BakeResult(ao=ao[unit], mask=np.ones(len(unit), bool), stderr=se[unit], samples=count[unit], unit=unit,
                       rays=rays, seconds=time.perf_counter() - t_start, trace_seconds=trace_s,
                       threads=s.threads, trace_cpu_seconds=trace_cpu, metadata=metadata,
@@ -291,7 +299,7 @@ class VertexBake:
         the points' numbers (bent normals are world directions already)."""
         ids = self.blocks[key]
         contact = np.zeros(len(ids), bool)
-        if self.tracer.contact_scene is not None:
+        if self.tracer.touches:
             contact = self.tracer.contact(self.p[ids], self.gn[ids])
         near = None if self.pairs is None else _block_neighbours(self.pairs, int(ids[0]), int(ids[-1]) + 1)
         est, sums = self.baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None)
