@@ -162,11 +162,17 @@ def _point_triangle(qx, qy, a, b, c):
     return best, out
 
 
-def _nearest_triangles(xy, tri_ids, width, height, reach):
+def _nearest_triangles(xy, edges, tri_ids, width, height, reach):
     """Texel centres within ``reach`` texels of triangles ``tri_ids`` of ``xy`` (T, 3, 2): for every
     such texel the nearest of them (ties: the lowest triangle index), as (texel flat index, triangle,
-    distance, barycentrics (n, 3))."""
-    parts = []
+    distance, barycentrics (n, 3)).
+
+    ``edges`` (T, 3, 3) are the triangles' edge functions in texels (core.raster.UVTriangles.edges):
+    their least value at a centre is its signed distance inside, which sorts the pairs of each
+    triangle's bounding box cheaply: a centre inside some triangle takes the lowest such triangle
+    (distance 0), and the exact distance to a triangle's edges is computed only for the centres that
+    lie inside none (the islands' borders).
+    """
     lo = np.floor(xy[tri_ids].min(axis=1) - reach - 0.5).astype(np.int64) + 1
     hi = np.floor(xy[tri_ids].max(axis=1) + reach - 0.5).astype(np.int64) + 1
     lo = np.clip(lo, 0, [width, height])
@@ -175,6 +181,8 @@ def _nearest_triangles(xy, tri_ids, width, height, reach):
     count = nx * ny
     ends = np.cumsum(count)
     start = 0
+    inside_t, inside_k, near_t, near_k = [], [], [], []
+    ecols = [np.ascontiguousarray(edges.reshape(len(edges), 9)[:, i]) for i in range(9)]
     while start < len(tri_ids):
         stop = int(np.searchsorted(ends, (ends[start - 1] if start else 0) + _CHUNK_PAIRS, side="right"))
         stop = max(stop, start + 1)
@@ -184,19 +192,48 @@ def _nearest_triangles(xy, tri_ids, width, height, reach):
         col = lo[item, 0] + k % nx[item]
         row = lo[item, 1] + k // nx[item]
         t = tri_ids[item]
-        d, bary = _point_triangle(col + 0.5, row + 0.5, xy[t, 0], xy[t, 1], xy[t, 2])
-        keep = d <= reach
-        parts.append((row[keep] * width + col[keep], t[keep], d[keep], bary[keep]))
+        cx, cy = col + 0.5, row + 0.5
+        m = None
+        for j in range(3):  # column by column (numpy's gathers of (n, 3, 3) rows are slower)
+            v = np.take(ecols[3 * j], t) * cx
+            v += np.take(ecols[3 * j + 1], t) * cy
+            v += np.take(ecols[3 * j + 2], t)
+            m = v if m is None else np.minimum(m, v, out=m)
+        texel = row * width + col
+        ins = m >= 0
+        inside_t.append(texel[ins])
+        inside_k.append(t[ins])
+        near = ~ins & (m >= -reach)  # necessary for a distance within reach
+        near_t.append(texel[near])
+        near_k.append(t[near])
         start = stop
-    texel = np.concatenate([p[0] for p in parts])
-    tri = np.concatenate([p[1] for p in parts])
-    dist = np.concatenate([p[2] for p in parts])
-    bary = np.concatenate([p[3] for p in parts])
-    order = np.lexsort((tri, dist, texel))
-    texel, tri, dist, bary = texel[order], tri[order], dist[order], bary[order]
+    texel, tri = np.concatenate(inside_t), np.concatenate(inside_k)
+    order = np.lexsort((tri, texel))
+    texel, tri = texel[order], tri[order]
     first = np.ones(len(texel), bool)
     first[1:] = texel[1:] != texel[:-1]
-    return texel[first], tri[first], dist[first], bary[first]
+    texel, tri = texel[first], tri[first]
+    dist = np.zeros(len(texel))
+    # Centres inside no triangle: the nearest triangle within reach.
+    nt, nk = np.concatenate(near_t), np.concatenate(near_k)
+    keep = ~np.isin(nt, texel)
+    nt, nk = nt[keep], nk[keep]
+    row, col = np.divmod(nt, width)
+    nd, _ = _point_triangle(col + 0.5, row + 0.5, xy[nk, 0], xy[nk, 1], xy[nk, 2])
+    ok = nd <= reach
+    nt, nk, nd = nt[ok], nk[ok], nd[ok]
+    order = np.lexsort((nk, nd, nt))
+    nt, nk, nd = nt[order], nk[order], nd[order]
+    first = np.ones(len(nt), bool)
+    first[1:] = nt[1:] != nt[:-1]
+    texel = np.concatenate([texel, nt[first]])
+    tri = np.concatenate([tri, nk[first]])
+    dist = np.concatenate([dist, nd[first]])
+    order = np.argsort(texel, kind="stable")
+    texel, tri, dist = texel[order], tri[order], dist[order]
+    row, col = np.divmod(texel, width)
+    _, bary = _point_triangle(col + 0.5, row + 0.5, xy[tri, 0], xy[tri, 1], xy[tri, 2])
+    return texel, tri, dist, bary
 
 
 def _components(n, a, b):
@@ -339,7 +376,7 @@ def surface_guide(mesh, resolution, radius=RADIUS):
                  - (xy[:, 1, 1] - xy[:, 0, 1]) * (xy[:, 2, 0] - xy[:, 0, 0]))
     tscale = np.sqrt(mesh.areas / np.where(det > 0, det / 2.0, 1.0))
     if len(ids):
-        texel, tri, _, bary = _nearest_triangles(xy, ids, w, h, COVER_DISTANCE)
+        texel, tri, _, bary = _nearest_triangles(xy, tris.edges, ids, w, h, COVER_DISTANCE)
         P = mesh.positions[mesh.triangles[tri]]
         N = mesh.normals[tri]
         covered[texel] = True
