@@ -76,7 +76,8 @@ BIAS_SCALE = 1.0
 COVER_DISTANCE = 0.7072
 #: Texel pairs per chunk of the rasteriser of texel centres (bounds its memory).
 _CHUNK_PAIRS = 1 << 22
-#: Rows per band of the filter (bounds its working memory; the result does not depend on it).
+#: Rows per band of the filter: bounds its working memory and orders its float32 additions (a
+#: constant, so that the result is the same bits for any number of threads).
 BAND_ROWS = 64
 
 
@@ -501,13 +502,14 @@ class _Features:
 
     def direct(self, c, o):
         """Neighbours in the image window: on the centre's island, squared surface distance (in
-        texels of the centre) and normals' cosine."""
+        texels, the mean of both texels' squared inverse sizes) and normals' cosine; all symmetric in the pair."""
         valid = (self.island[o] == self.island[c]) & (self.island[c] >= 0)
         d2 = np.zeros(valid.shape, np.float32)
         for k in range(3):
             t = self.p[k][o] - self.p[k][c]
             d2 += t * t
-        d2 *= self.inv_s2[c]
+        d2 *= self.inv_s2[c] + self.inv_s2[o]  # symmetric: the mean of both texels' scales, times 2
+        d2 *= np.float32(0.5)
         dot = self.n[0][o] * self.n[0][c] + self.n[1][o] * self.n[1][c] + self.n[2][o] * self.n[2][c]
         return valid, d2, dot
 
@@ -532,24 +534,28 @@ def _offsets(r):
 
 
 def _halo_pairs(guide, mask, r, F):
-    """Per window offset: (receiver flat index, source flat index, squared distance, cosine) of the
-    halo entries that stand in for the receiver's neighbour at that offset (the receiver on the
-    halo's island, both covered)."""
+    """The halo entries that stand in for a texel's neighbours in its window (the receiver on the
+    halo's island, both covered), every window offset at once, sorted by receiver (offsets in window
+    order within one): (receiver flat index, source flat index, squared distance, cosine, Chebyshev
+    length of the offset)."""
     h, w = guide.height, guide.width
     isl = np.where(mask, guide.island, -1).reshape(-1)
     keep = mask.reshape(-1)[guide.halo_source]
     ty, tx = guide.halo_row[keep], guide.halo_col[keep]
     hisl, hsrc = guide.halo_island[keep], guide.halo_source[keep]
-    out = []
+    recs, srcs, lens = [], [], []
     for dy, dx in _offsets(r):
         ry, rx = ty - dy, tx - dx
         ok = (ry >= 0) & (ry < h) & (rx >= 0) & (rx < w)
         rec = np.where(ok, ry * w + rx, 0)
         ok &= isl[rec] == hisl
-        if ok.any():
-            rec_, src_ = rec[ok], hsrc[ok]
-            out.append(((dy, dx), rec_, src_) + F.pairs(rec_, src_))
-    return out
+        recs.append(rec[ok])
+        srcs.append(hsrc[ok])
+        lens.append(np.full(int(ok.sum()), max(abs(dy), abs(dx)), np.int8))
+    rec, src, cheb = np.concatenate(recs), np.concatenate(srcs), np.concatenate(lens)
+    order = np.argsort(rec, kind="stable")
+    rec, src, cheb = rec[order], src[order], cheb[order]
+    return (rec, src) + F.pairs(rec, src) + (cheb,)
 
 
 def _filter(F, halo, weights, gathers, radius=None, threads=1):
@@ -559,26 +565,34 @@ def _filter(F, halo, weights, gathers, radius=None, threads=1):
     image (``c``, ``o`` index padded images; for halo pairs ``valid`` is None and ``c``, ``o`` are
     flat indices of the unpadded image); ``gathers`` is a list of (candidate, padded array, power):
     each accumulates sum_j w_ij^power x_j (x None: the weights alone) over the offsets within
-    ``radius`` (default: the features' radius). Bands of rows are the outer loop and offsets the
-    inner, so a band's accumulators stay in cache; bands go to ``threads`` threads (numpy releases
-    the GIL in its loops); each texel adds its neighbours in the same order whatever the bands.
+    ``radius`` (default: the features' radius).
+
+    The weights in the image are symmetric (w_ij = w_ji), so each pair of texels is weighed once,
+    at the offsets of one half-plane, and adds to both its texels: half the weights' work. Bands of
+    rows are the outer loop and offsets the inner, so a band's accumulators (its rows and the
+    ``radius`` rows either side that its pairs reach) stay in cache; bands go to ``threads`` threads
+    (numpy releases the GIL in its loops) and are added into the image in their order, so the result
+    does not depend on the threads.
     """
     h, w, r = F.h, F.w, F.r
     rad = r if radius is None else radius
-    out = [np.zeros((h, w), np.float32) for _ in gathers]
     flat = [None if x is None else x[r:r + h, r:r + w].reshape(-1) for _, x, _ in gathers]
     rows_covered = np.flatnonzero((F.island[r:r + h, r:r + w] >= 0).any(axis=1))
-    offsets = _offsets(rad)
+    half = [(0, 0)] + [(dy, dx) for dy, dx in _offsets(rad) if dy > 0 or (dy == 0 and dx > 0)]
 
     def band(y0):
         rows = slice(y0, min(h, y0 + BAND_ROWS))
+        n = rows.stop - rows.start
         if not np.any((rows_covered >= rows.start) & (rows_covered < rows.stop)):
-            return
-        for dy, dx in offsets:
+            return None
+        loc = [np.zeros((n + 2 * rad, w + 2 * rad), np.float32) for _ in gathers]
+        lc = (slice(rad, rad + n), slice(rad, rad + w))
+        for dy, dx in half:
             c, o = F.band(rows, dy, dx)
             ws = weights(*F.direct(c, o), c, o)
+            lo = (slice(rad + dy, rad + dy + n), slice(rad + dx, rad + dx + w))
             sq = {}
-            for acc, (k, x, power) in zip(out, gathers):
+            for acc, (k, x, power) in zip(loc, gathers):
                 if power == 1:
                     g = ws[k]
                 else:
@@ -586,24 +600,42 @@ def _filter(F, halo, weights, gathers, radius=None, threads=1):
                         sq[k] = ws[k] * ws[k]
                     g = sq[k]
                 if x is None:
-                    acc[rows] += g
+                    acc[lc] += g
+                    if dy or dx:
+                        acc[lo] += g
                 else:
-                    acc[rows] += g * x[o]
+                    acc[lc] += g * x[o]
+                    if dy or dx:
+                        acc[lo] += g * x[c]
+        return loc
 
-    starts = range(0, h, BAND_ROWS)
-    if threads > 1 and len(starts) > 1:
-        with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(band, starts))
-    else:
-        for y0 in starts:
-            band(y0)
-    for (dy, dx), rec, src, d2, dot in halo:
-        if max(abs(dy), abs(dx)) > rad:
-            continue
-        ws = weights(None, d2, dot, rec, src)
-        for acc, fx, (k, x, power) in zip(out, flat, gathers):
-            g = ws[k] if power == 1 else ws[k] * ws[k]
-            acc.reshape(-1)[rec] += g if fx is None else g * np.take(fx, src)
+    total = [np.zeros((h + 2 * rad, w + 2 * rad), np.float32) for _ in gathers]
+    starts = list(range(0, h, BAND_ROWS))
+    pool = ThreadPoolExecutor(threads) if threads > 1 and len(starts) > 1 else None
+    try:
+        for y0, loc in zip(starts, pool.map(band, starts) if pool else map(band, starts)):
+            if loc is not None:
+                for t, l in zip(total, loc):
+                    t[y0:y0 + len(l)] += l
+    finally:
+        if pool:
+            pool.shutdown()
+    out = [t[rad:rad + h, rad:rad + w].copy() for t in total]
+    if halo and len(halo[0]):
+        rec, src, d2, dot, cheb = halo
+        if rad < F.r:
+            sel = cheb <= rad
+            rec, src, d2, dot = rec[sel], src[sel], d2[sel], dot[sel]
+        if len(rec):
+            # Each receiver's halo terms summed in their order (reduceat over the sorted receivers),
+            # then added once.
+            starts = np.flatnonzero(np.r_[True, rec[1:] != rec[:-1]])
+            urec = rec[starts]
+            ws = weights(None, d2, dot, rec, src)
+            for acc, fx, (k, x, power) in zip(out, flat, gathers):
+                g = ws[k] if power == 1 else ws[k] * ws[k]
+                v = g if fx is None else g * np.take(fx, src)
+                acc.reshape(-1)[urec] += np.add.reduceat(v, starts)
     return out
 
 
@@ -649,7 +681,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     margin : re-dilate this many texels around the covered ones (as the bake does); 0: texels outside
         the mask keep their input value.
     threads : bands of rows filtered at the same time (numpy releases the GIL in its loops); the
-        result does not depend on it.
+        result does not depend on it (bands are added in their order).
     neighbours : 'surface' (the filter); 'image' only for the tests that break it on purpose: the
         image window's texels whatever their island, by image distance, nothing across seams.
     use_error, use_bias : off only in the tests that break the filter on purpose: without the error
@@ -659,8 +691,8 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     Returns
     -------
     (ao, stderr, info): (H, W) float32 denoised AO in [0, 1] and its standard error (0 outside the
-    mask), and a :class:`DenoiseInfo`. Deterministic: no randomness, and each texel depends only on
-    the texels within a few window radii (and their halo), never on the bands.
+    mask), and a :class:`DenoiseInfo`. Deterministic: no randomness, the same bits for any
+    ``threads``; each texel depends only on the texels within a few window radii and their halo.
     """
     ao = np.asarray(ao)
     h, w = ao.shape
@@ -674,7 +706,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         raise ValueError(f"the window radius {r} exceeds the guide's halo radius {guide.halo_radius}")
     mask = np.asarray(mask, bool) & guide.covered
     F = _Features(guide, mask, r, image=not use_halo)
-    halo = _halo_pairs(guide, mask, r, F) if use_halo else []
+    halo = _halo_pairs(guide, mask, r, F) if use_halo else ()
     y = np.where(mask, ao, 0).astype(np.float32)
     var = np.where(mask, np.asarray(stderr, np.float32) ** 2, 0).astype(np.float32)
     exact = var == 0
