@@ -46,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import MeshError
 from .raster import prepare
 
 #: Window radius in texels: (2 r + 1)^2 image offsets.
@@ -360,6 +361,8 @@ def surface_guide(mesh, resolution, radius=RADIUS):
     -------
     SurfaceGuide
     """
+    if mesh.uvs is None:
+        raise MeshError(f"mesh {mesh.name!r} has no UVs: the denoiser's guide needs the UV map the bake used")
     w, h = _resolution(resolution)
     tris = prepare(mesh, w, h)
     xy = tris.corners

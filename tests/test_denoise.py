@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from core import Mesh, bake_ao
+from core import Mesh, MeshError, bake_ao
 from core import denoise as D
 from core.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
 from scenes import box, plane
@@ -230,6 +230,11 @@ def test_margin_is_filled_and_uncovered_texels_keep_their_value():
     assert np.all(out[~r.mask] == r.ao[~r.mask]) and np.all(se[~r.mask] == 0)
     filled, _, _ = D.denoise(r.ao, r.stderr, r.mask, g, margin=2)
     assert np.array_equal(filled[r.mask], out[r.mask]) and np.count_nonzero(filled[~r.mask]) > 0
+
+
+def test_a_mesh_without_uvs_is_refused_by_name():
+    with pytest.raises(MeshError, match="'lid' has no UVs"):
+        D.surface_guide(lid(LID), 16)
 
 
 def test_a_guide_of_another_resolution_is_refused():
