@@ -14,6 +14,7 @@ Self-contained (core, numpy, pyoidn if installed):
 
     python bench/denoise.py [--resolution 256] [--samples 16] [--reference-samples 1024]
                             [--cost-resolution 1024] [--json out.json] [--reference-cache DIR]
+                            [--picture docs/denoise.png]
 """
 
 import argparse
@@ -94,7 +95,26 @@ class _Ref:
         self.ao, self.stderr, self.mask = z["ao"], z["stderr"], z["mask"]
 
 
-def compare(res, samples, ref_samples, seed=1, threads=2, cache=None):
+def picture(path, maps, ref, mask, crop=None):
+    """A PNG: the maps side by side (top), their |error| against the reference x 5 (bottom), on the
+    covered texels (grey elsewhere); row 0 of the maps is v = 0, as core.imageio writes it."""
+    from core.imageio import write_image
+
+    h, w = ref.shape
+    rows, cols = crop or (slice(0, h), slice(0, w))
+    gap = 4
+    tiles = []
+    for img in maps:
+        top = np.where(mask, img, 0.25)[rows, cols]
+        err = np.where(mask, np.minimum(5 * np.abs(img - ref), 1.0), 0.25)[rows, cols]
+        tiles.append(np.concatenate([err, np.full((gap, top.shape[1]), 1.0), top], axis=0))  # bottom row first
+    out = tiles[0]
+    for t in tiles[1:]:
+        out = np.concatenate([out, np.full((out.shape[0], gap), 1.0), t], axis=1)
+    write_image(path, out.astype(np.float32), bits=8)
+
+
+def compare(res, samples, ref_samples, seed=1, threads=2, cache=None, picture_path=None):
     target, occ, dist = load_scene()
     path = None if cache is None else Path(cache) / f"denoise_reference_{res}_{ref_samples}_{seed}.npz"
     if path is not None and path.exists():
@@ -130,10 +150,15 @@ def compare(res, samples, ref_samples, seed=1, threads=2, cache=None):
             f"raw {8 * samples}": dict(metrics(raw8.ao), cpu=t8.cpu),
             f"mc_ao denoise ({samples})": dict(metrics(dn), cpu=tb.cpu + tg.cpu + td.cpu)}
     filters, version = oidn_filters()
+    shown = [raw.ao, dn]
     for name, f in filters.items():
         with Clock() as t:
             out = f(raw.ao, guide)
         rows[f"{name} ({samples})"] = dict(metrics(out), cpu=tb.cpu + t.cpu)
+        if name == "OIDN RTLightmap":
+            shown.append(out)
+    if picture_path is not None:
+        picture(picture_path, shown + [ref.ao], ref.ao, mask)
     r = ref.ao.reshape(-1)
     seam_ref = float(np.mean(np.abs(r[a] - r[b])))
     sel = mask & (dn_se > 0)
@@ -188,9 +213,11 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--reference-cache", type=Path, default=None, help="folder to keep the reference bake in")
+    ap.add_argument("--picture", type=Path, default=None,
+                    help="PNG: raw, mc_ao denoised, OIDN RTLightmap, reference; |error| x 5 below")
     a = ap.parse_args(argv)
     out = {"compare": compare(a.resolution, a.samples, a.reference_samples, threads=a.threads,
-                              cache=a.reference_cache)}
+                              cache=a.reference_cache, picture_path=a.picture)}
     print(table(out["compare"]))
     if a.cost_resolution:
         c = cost(a.cost_resolution, threads=a.threads)
