@@ -40,6 +40,7 @@ Cost: one pass of the pilot, one of the candidates, one of the bias, each over t
 offsets of the window, as whole-image numpy operations on bands of rows; no loop over texels.
 """
 
+import copy
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -47,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import MeshError
-from .raster import prepare
+from .raster import TOUCH, prepare
 
 #: Window radius in texels: (2 r + 1)^2 image offsets.
 RADIUS = 3
@@ -72,8 +73,7 @@ PILOT_RADIUS = 2
 #: reference: 1.02-1.04); 1.25: 0.95 and 0.95; 1.5: 0.91 and 0.92. With radius 4 (a Gaussian of
 #: 2.5 texels cut less) factor 1 fell short, 1.09 and 1.10, and took 1.5. No factor is needed here.
 BIAS_SCALE = 1.0
-#: Texels whose centre lies within this many texels of a triangle belong to it (a covered texel's
-#: square overlaps the triangle, so its centre is within sqrt(2) / 2 of it).
+#: How far (texels) from a triangle the centres of the texels it covers may lie: sqrt(2) / 2.
 COVER_DISTANCE = 0.7072
 #: Texel pairs per chunk of the rasteriser of texel centres (bounds its memory).
 _CHUNK_PAIRS = 1 << 22
@@ -88,7 +88,7 @@ BAND_ROWS = 64
 class SurfaceGuide:
     """Per texel of a (H, W) map: where on the surface its centre lies, and its seam links.
 
-    covered : (H, W) bool, texels whose centre lies within COVER_DISTANCE texels of a triangle.
+    covered : (H, W) bool, texels whose square a UV triangle overlaps with positive area (the bake's mask).
     triangle : (H, W) int32, the nearest triangle (-1 where not covered).
     position, normal : (H, W, 3) float32, the surface point at the centre (the nearest point of the
         triangle) and its unit shading normal.
@@ -165,9 +165,11 @@ def _point_triangle(qx, qy, a, b, c):
 
 
 def _nearest_triangles(xy, edges, tri_ids, width, height, reach):
-    """Texel centres within ``reach`` texels of triangles ``tri_ids`` of ``xy`` (T, 3, 2): for every
-    such texel the nearest of them (ties: the lowest triangle index), as (texel flat index, triangle,
-    distance, barycentrics (n, 3)).
+    """Texels whose square overlaps triangles ``tri_ids`` of ``xy`` (T, 3, 2) with positive area (as
+    the bake's rasteriser covers them): for every such texel the nearest of those triangles to its
+    centre (ties: the lowest triangle index), as (texel flat index, triangle, distance from the
+    centre, barycentrics (n, 3) of the nearest point). ``reach`` (texels) bounds the bounding boxes
+    searched (a covered texel's centre is within sqrt(2) / 2 of its triangle).
 
     ``edges`` (T, 3, 3) are the triangles' edge functions in texels (core.raster.UVTriangles.edges):
     their least value at a centre is its signed distance inside, which sorts the pairs of each
@@ -185,6 +187,8 @@ def _nearest_triangles(xy, edges, tri_ids, width, height, reach):
     start = 0
     inside_t, inside_k, near_t, near_k = [], [], [], []
     ecols = [np.ascontiguousarray(edges.reshape(len(edges), 9)[:, i]) for i in range(9)]
+    half = [0.5 * (np.abs(edges[:, j, 0]) + np.abs(edges[:, j, 1])) for j in range(3)]
+    blo, bhi = xy.min(axis=1).T.copy(), xy.max(axis=1).T.copy()
     while start < len(tri_ids):
         stop = int(np.searchsorted(ends, (ends[start - 1] if start else 0) + _CHUNK_PAIRS, side="right"))
         stop = max(stop, start + 1)
@@ -196,16 +200,22 @@ def _nearest_triangles(xy, edges, tri_ids, width, height, reach):
         t = tri_ids[item]
         cx, cy = col + 0.5, row + 0.5
         m = None
+        # The texel's square overlaps the triangle with positive area (the bake's coverage): no
+        # separating axis among the square's (bounding boxes) and the triangle's edge normals (the
+        # square's corner farthest inside each edge is half |a| + |b| beyond its centre).
+        over = (cx > np.take(blo[0], t) - 0.5 + TOUCH) & (cx < np.take(bhi[0], t) + 0.5 - TOUCH)
+        over &= (cy > np.take(blo[1], t) - 0.5 + TOUCH) & (cy < np.take(bhi[1], t) + 0.5 - TOUCH)
         for j in range(3):  # column by column (numpy's gathers of (n, 3, 3) rows are slower)
             v = np.take(ecols[3 * j], t) * cx
             v += np.take(ecols[3 * j + 1], t) * cy
             v += np.take(ecols[3 * j + 2], t)
+            over &= v + np.take(half[j], t) > TOUCH
             m = v if m is None else np.minimum(m, v, out=m)
         texel = row * width + col
         ins = m >= 0
         inside_t.append(texel[ins])
         inside_k.append(t[ins])
-        near = ~ins & (m >= -reach)  # necessary for a distance within reach
+        near = ~ins & over
         near_t.append(texel[near])
         near_k.append(t[near])
         start = stop
@@ -222,8 +232,6 @@ def _nearest_triangles(xy, edges, tri_ids, width, height, reach):
     nt, nk = nt[keep], nk[keep]
     row, col = np.divmod(nt, width)
     nd, _ = _point_triangle(col + 0.5, row + 0.5, xy[nk, 0], xy[nk, 1], xy[nk, 2])
-    ok = nd <= reach
-    nt, nk, nd = nt[ok], nk[ok], nd[ok]
     order = np.lexsort((nk, nd, nt))
     nt, nk, nd = nt[order], nk[order], nd[order]
     first = np.ones(len(nt), bool)
@@ -803,4 +811,78 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     return res, se, info
 
 
-__all__ = ["surface_guide", "SurfaceGuide", "denoise", "DenoiseInfo", "BANDWIDTHS", "RADIUS"]
+# --- UDIM ----------------------------------------------------------------------------------------
+
+def udim_canvas(tiles):
+    """The layout of UDIM ``tiles`` (numbers) in one image: (u0, v0, nu, nv), the least tile
+    column and row and how many tile columns and rows the tiles span. Tiles keep their places in
+    UDIM space, so texels of neighbouring tiles stay neighbours and triangles that cross a tile's
+    border are whole."""
+    from .udim import tile_origin
+
+    origins = np.array([tile_origin(t) for t in tiles])
+    u0, v0 = origins.min(axis=0)
+    nu, nv = origins.max(axis=0) - (u0, v0) + 1
+    return int(u0), int(v0), int(nu), int(nv)
+
+
+def udim_guide(mesh, tiles, resolution, radius=RADIUS):
+    """:func:`surface_guide` of UDIM ``tiles`` (each ``resolution``, as :func:`core.bake_udim`
+    bakes them) laid out in one image (:func:`udim_canvas`): seams between tiles are linked as seams
+    within one."""
+    w, h = _resolution(resolution)
+    u0, v0, nu, nv = udim_canvas(tiles)
+    if mesh.uvs is None:
+        raise MeshError(f"mesh {mesh.name!r} has no UVs: the denoiser's guide needs the UV map the bake used")
+    canvas = copy.copy(mesh)
+    canvas.uvs = (mesh.uvs - np.array([u0, v0], np.float64)) / np.array([nu, nv], np.float64)
+    return surface_guide(canvas, (nu * w, nv * h), radius=radius)
+
+
+def denoise_udim(tile_maps, guide, margin=0, **kw):
+    """Denoise UDIM tiles together, across the seams between them.
+
+    Parameters
+    ----------
+    tile_maps : {tile: (ao, stderr, mask)} (H, W) each, as :func:`core.bake_udim`'s results hold them.
+    guide : :func:`udim_guide` of the same tiles and resolution.
+    margin : re-dilate this many texels per tile (as the bake does), 0: outside texels keep their value.
+    kw : :func:`denoise`'s other arguments.
+
+    Returns
+    -------
+    {tile: (ao, stderr, info)} as :func:`denoise` returns them, one per tile.
+    """
+    from .margin import dilate
+    from .udim import tile_origin
+
+    tiles = sorted(tile_maps)
+    u0, v0, nu, nv = udim_canvas(tiles)
+    h, w = np.asarray(tile_maps[tiles[0]][0]).shape
+    if (guide.height, guide.width) != (nv * h, nu * w):
+        raise ValueError(f"the guide is {guide.width} x {guide.height}, the tiles' canvas {nu * w} x {nv * h}")
+    ao = np.zeros((nv * h, nu * w), np.float32)
+    se = np.zeros_like(ao)
+    mask = np.zeros(ao.shape, bool)
+    blocks = {}
+    for t in tiles:
+        tu, tv = tile_origin(t)
+        b = (slice((tv - v0) * h, (tv - v0 + 1) * h), slice((tu - u0) * w, (tu - u0 + 1) * w))
+        blocks[t] = b
+        a, s, m = (np.asarray(x) for x in tile_maps[t])
+        ao[b], se[b], mask[b] = a, s, m
+    out, err, info = denoise(ao, se, mask, guide, margin=0, **kw)
+    result = {}
+    for t in tiles:
+        b = blocks[t]
+        a = np.where(mask[b], out[b], np.asarray(tile_maps[t][0], np.float32)).astype(np.float32)
+        if margin:
+            dilate(a, mask[b], int(margin), out=a)
+        part = DenoiseInfo(choice=info.choice[b].copy(), variance=info.variance[b].copy(), bias=info.bias[b].copy(),
+                           bandwidths=info.bandwidths)
+        result[t] = (a, err[b].copy(), part)
+    return result
+
+
+__all__ = ["surface_guide", "SurfaceGuide", "denoise", "DenoiseInfo", "BANDWIDTHS", "RADIUS", "udim_canvas",
+           "udim_guide", "denoise_udim"]

@@ -225,11 +225,42 @@ def test_margin_is_filled_and_uncovered_texels_keep_their_value():
                   np.array([[[0.1, 0.1], [0.9, 0.1], [0.1, 0.9]]]))
     r = bake_ao(target, [lid(LID)], resolution=32, samples=SAMPLES, margin=0, seed=1)
     g = D.surface_guide(target, 32)
-    assert np.all(g.covered[r.mask])  # the guide knows every texel the bake covers
+    assert np.array_equal(g.covered, r.mask)  # the guide covers the texels the bake covers
     out, se, _ = D.denoise(r.ao, r.stderr, r.mask, g)
     assert np.all(out[~r.mask] == r.ao[~r.mask]) and np.all(se[~r.mask] == 0)
     filled, _, _ = D.denoise(r.ao, r.stderr, r.mask, g, margin=2)
     assert np.array_equal(filled[r.mask], out[r.mask]) and np.count_nonzero(filled[~r.mask]) > 0
+
+
+def test_udim_tiles_are_denoised_across_the_seam_between_them():
+    # split_plane with its right half in tile 1002 (turned, u in [1.5, 2]): the seam runs along the
+    # left tile's u = 0.5 and the right tile's far border. Denoised together, the texels either side
+    # agree as within one image; denoised tile by tile, they do not (each side sees half a window).
+    from core import bake_udim
+    from core.udim import shifted
+
+    n = 32
+    target = split_plane()
+    uv = target.uvs.copy()
+    uv[2:, :, 0] += 1.0
+    target = Mesh(target.positions, target.triangles, uv, name="split over two tiles")
+    r = bake_udim(target, [lid(SIDE_LID)], resolution=n, samples=SAMPLES, margin=0, seed=2)
+    assert sorted(r.tiles) == [1001, 1002]
+    g = D.udim_guide(target, sorted(r.tiles), n)
+    assert (g.width, g.height) == (2 * n, n) and len(g.links) == n
+    out = D.denoise_udim({t: (x.ao, x.stderr, x.mask) for t, x in r.tiles.items()}, g, margin=2)
+    joint = np.concatenate([out[1001][0], out[1002][0]], axis=1).reshape(-1)
+    err = np.concatenate([out[1001][1], out[1002][1]], axis=1).reshape(-1)
+    alone = np.concatenate([D.denoise(x.ao, x.stderr, x.mask, D.surface_guide(shifted(target, t), n))[0]
+                            for t, x in sorted(r.tiles.items())], axis=1).reshape(-1)
+    world = texel_mean(lambda p: 1.0 - polygon_form_factor(p, SIDE_LID), n, n)
+    truth = np.concatenate([world[:, :n // 2], np.zeros((n, n // 2)), np.zeros((n, n // 2)),
+                            world[::-1, n - 1:n // 2 - 1:-1]], axis=1).reshape(-1)
+    a, b = g.links[:, 0], g.links[:, 1]
+    bound = np.abs(truth[a] - truth[b]).mean() + 2 * math.sqrt(np.sum(err[a] ** 2 + err[b] ** 2)) / len(a)
+    assert np.abs(joint[a] - joint[b]).mean() <= bound
+    assert np.abs(alone[a] - alone[b]).mean() > bound
+    assert not r.tiles[1001].mask[:, n // 2:].any() and np.all(out[1001][0][:, n // 2:n // 2 + 2] > 0)  # margin
 
 
 def test_a_mesh_without_uvs_is_refused_by_name():
