@@ -36,8 +36,10 @@ saves in noise is filtered less or not at all, and a texel with sigma_i = 0 (exa
 occluded: every sample and its neighbourhood agree) keeps its value and its zero error. The reported
 standard error is sqrt(V_k + B_k^2) of the chosen candidate.
 
-Cost: one pass of the pilot, one of the candidates, one of the bias, each over the (2r+1)^2 image
-offsets of the window, as whole-image numpy operations on bands of rows; no loop over texels.
+Cost: one pass of the pilot, one of the candidates, one of the bias, each over half of the window's
+image offsets (the weights are symmetric), as numpy operations on bands of rows; no loop over
+texels. Measured (docs/denoise.md): about 3 CPU seconds per megatexel with the guide, 59% of a
+64-sample bake.
 """
 
 import copy
