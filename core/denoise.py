@@ -652,6 +652,139 @@ def _filter(F, halo, weights, gathers, radius=None, threads=1):
     return out
 
 
+def _candidates_and_bias(F, halo, weights, K, yp, vp, y, var, threads=1, bias=True):
+    """The candidates' sums and their bias pass in one sweep over the bands, with each band's weights
+    kept between the two (the same weights serve both): W_k, Y_k, V_k (sum w, w y, w^2 sigma^2),
+    F_k = Y_k / W_k (y where W_k = 0) and S_k = sum w F_k (None without ``bias``), each (H, W).
+
+    With symmetric weights at the offsets of a half-plane (dy >= 0), a band's pairs reach the
+    ``radius`` rows below it only, so once a band's sums are added, every row above its last is
+    final: the bias pass of a band runs as soon as the next band's sums are in. Halo terms (whose
+    sources may be anywhere) are added before the bands (sums) and after them (bias). Bands go to
+    ``threads`` threads a few at a time and are added in their order: the same bits for any count.
+    """
+    h, w, r = F.h, F.w, F.r
+    half = [(0, 0)] + [(dy, dx) for dy, dx in _offsets(r) if dy > 0 or (dy == 0 and dx > 0)]
+    rows_covered = np.flatnonzero((F.island[r:r + h, r:r + w] >= 0).any(axis=1))
+    tot = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(3 * K)]  # W, Y, V per candidate
+    S = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(K)] if bias else None
+    Fp = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(K)]
+    inner = (slice(r, r + h), slice(r, r + w))
+    yf, vf = yp[inner].reshape(-1), vp[inner].reshape(-1)
+
+    hal = None
+    if halo and len(halo[0]):
+        rec, src, d2, dot, _ = halo
+        starts = np.flatnonzero(np.r_[True, rec[1:] != rec[:-1]])
+        urec = rec[starts]
+        ws = weights(None, d2, dot, rec, src)
+        ys, vs = np.take(yf, src), np.take(vf, src)
+        for k in range(K):
+            for j, v in enumerate((ws[k], ws[k] * ys, ws[k] * ws[k] * vs)):
+                part = np.zeros(h * w, np.float32)  # (a padded image's inner block is no flat view)
+                part[urec] = np.add.reduceat(v, starts)
+                tot[3 * k + j][inner] += part.reshape(h, w)
+        hal = (src, starts, urec, ws)
+
+    def sums(y0):
+        rows = slice(y0, min(h, y0 + BAND_ROWS))
+        n = rows.stop - rows.start
+        if not np.any((rows_covered >= rows.start) & (rows_covered < rows.stop)):
+            return None, None
+        loc = [np.zeros((n + 2 * r, w + 2 * r), np.float32) for _ in range(3 * K)]
+        lc = (slice(r, r + n), slice(r, r + w))
+        cache = []
+        for dy, dx in half:
+            c, o = F.band(rows, dy, dx)
+            ws = weights(*F.direct(c, o), c, o)
+            cache.append(ws)
+            lo = (slice(r + dy, r + dy + n), slice(r + dx, r + dx + w))
+            for k in range(K):
+                g = ws[k]
+                g2 = g * g
+                for j, (gg, x) in enumerate(((g, None), (g, yp), (g2, vp))):
+                    acc = loc[3 * k + j]
+                    if x is None:
+                        acc[lc] += gg
+                        if dy or dx:
+                            acc[lo] += gg
+                    else:
+                        acc[lc] += gg * x[o]
+                        if dy or dx:
+                            acc[lo] += gg * x[c]
+        return loc, cache
+
+    def smooth(y0, cache):
+        rows = slice(y0, min(h, y0 + BAND_ROWS))
+        n = rows.stop - rows.start
+        loc = [np.zeros((n + 2 * r, w + 2 * r), np.float32) for _ in range(K)]
+        lc = (slice(r, r + n), slice(r, r + w))
+        for (dy, dx), ws in zip(half, cache):
+            c, o = F.band(rows, dy, dx)
+            lo = (slice(r + dy, r + dy + n), slice(r + dx, r + dx + w))
+            for k in range(K):
+                loc[k][lc] += ws[k] * Fp[k][o]
+                if dy or dx:
+                    loc[k][lo] += ws[k] * Fp[k][c]
+        return loc
+
+    done = [0]  # rows whose F_k are final
+
+    def finalize(upto):
+        a, b = done[0], min(h, upto)
+        if b <= a:
+            return
+        for k in range(K):
+            W_, Y_ = tot[3 * k][r + a:r + b, r:r + w], tot[3 * k + 1][r + a:r + b, r:r + w]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                Fp[k][r + a:r + b, r:r + w] = np.where(W_ > 0, Y_ / W_, y[a:b])
+        done[0] = b
+
+    def add_smooth(y0, loc):
+        for t, l in zip(S, loc):
+            t[y0:y0 + len(l)] += l
+
+    starts = list(range(0, h, BAND_ROWS))
+    pool = ThreadPoolExecutor(threads) if threads > 1 and len(starts) > 1 else None
+    try:
+        ahead = max(1, threads)
+        futures = {}
+
+        def submit(i):
+            if i < len(starts) and i not in futures:
+                futures[i] = pool.submit(sums, starts[i]) if pool else None
+
+        for i in range(ahead):
+            submit(i)
+        previous = None
+        for i, y0 in enumerate(starts):
+            loc, cache = futures.pop(i).result() if pool else sums(y0)
+            submit(i + ahead)
+            if loc is not None:
+                for t, l in zip(tot, loc):
+                    t[y0:y0 + len(l)] += l
+            finalize(y0 + BAND_ROWS)
+            if bias and previous is not None and previous[1] is not None:
+                add_smooth(previous[0], smooth(*previous))
+            previous = (y0, cache)
+        finalize(h)
+        if bias and previous is not None and previous[1] is not None:
+            add_smooth(previous[0], smooth(*previous))
+    finally:
+        if pool:
+            pool.shutdown()
+    if bias and hal is not None:
+        src, starts_, urec, ws = hal
+        for k in range(K):
+            Fk_flat = Fp[k][inner].reshape(-1)
+            part = np.zeros(h * w, np.float32)
+            part[urec] = np.add.reduceat(ws[k] * np.take(Fk_flat, src), starts_)
+            S[k][inner] += part.reshape(h, w)
+    out = [t[inner].copy() for t in tot]
+    Fk = [f[inner].copy() for f in Fp]
+    return out[0::3], out[1::3], out[2::3], Fk, (None if S is None else [t[inner].copy() for t in S])
+
+
 def _trusted_zeros(F, var, r=2):
     """The variance of texels whose error is 0 (every sample and every texel of the bake's pooling
     window agreed) raised to the mean variance of the texels within ``r`` (Chebyshev, same island)
@@ -771,14 +904,11 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         return out[::-1]
 
     # The candidates F_k = S_k y, their variance, then their bias S_k F_k - F_k (same weights).
-    sums = _filter(F, halo, candidates, [(k, x, p) for k in range(K) for x, p in ((None, 1), (yp, 1), (vp, 2))],
-                   threads=threads)
-    Wk, Yk, Vk = sums[0::3], sums[1::3], sums[2::3]
+    Wk, Yk, Vk, Fk, Sk = _candidates_and_bias(F, halo, candidates, K, yp, vp, y, var, threads=threads,
+                                              bias=bool(use_bias))
     with np.errstate(invalid="ignore", divide="ignore"):
-        Fk = [np.where(Wk[k] > 0, Yk[k] / Wk[k], y).astype(np.float32) for k in range(K)]
         Vark = [np.where(Wk[k] > 0, Vk[k] / (Wk[k] * Wk[k]), var).astype(np.float32) for k in range(K)]
     if use_bias:
-        Sk = _filter(F, halo, candidates, [(k, P(Fk[k]), 1) for k in range(K)], threads=threads)
         with np.errstate(invalid="ignore", divide="ignore"):
             Bk = [(np.float32(bias_scale) * np.where(Wk[k] > 0, Sk[k] / Wk[k] - Fk[k], 0)).astype(np.float32)
                   for k in range(K)]
