@@ -115,6 +115,16 @@ def test_guide_links_and_halo_cross_the_seam_to_the_texel_beside_on_the_surface(
     np.testing.assert_allclose(src[:, 1], (g.halo_row[left] + 0.5) / W, atol=1e-6)
 
 
+def test_guide_welds_vertices_split_at_the_same_position():
+    # Exporters split vertices along UV seams: the seam is still found (vertices welded by position).
+    m = split_plane()
+    corners = m.positions[m.triangles].reshape(-1, 3)
+    split = Mesh(corners, np.arange(len(corners)).reshape(-1, 3), m.uvs, name="split vertices")
+    a, b = D.surface_guide(m, 32), D.surface_guide(split, 32)
+    for f in ("covered", "island", "halo_row", "halo_col", "halo_source", "links"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+
+
 # --- exact scenes ---------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("name", ["polygon", "box on plane", "seam", "closed box"])
