@@ -14,7 +14,7 @@ Self-contained (core, numpy, pyoidn if installed):
 
     python bench/denoise.py [--resolution 256] [--samples 16] [--reference-samples 1024]
                             [--cost-resolution 1024] [--json out.json] [--reference-cache DIR]
-                            [--picture docs/denoise.png]
+                            [--picture docs/denoise.png] [--equal-error]
 """
 
 import argparse
@@ -186,6 +186,48 @@ def cost(res, threads=2):
             "cpu_per_megatexel": (tg.cpu + td.cpu) / mt}
 
 
+def equal_error(res, ref_samples, seed=1, threads=2, cache=None, raw_samples=(32, 64, 128, 256),
+                dn_samples=(8, 16, 32)):
+    """RMSE and CPU seconds of raw bakes and of denoised ones at several sample counts (same scene,
+    reference as compare's): the CPU time at which each reaches raw 128's RMSE, by interpolation in
+    log-log between the counts that bracket it."""
+    target, occ, dist = load_scene()
+    path = None if cache is None else Path(cache) / f"denoise_reference_{res}_{ref_samples}_{seed}.npz"
+    if path is not None and path.exists():
+        ref = _Ref(np.load(path))
+    else:
+        ref = bake_ao(target, occ, resolution=res, samples=ref_samples, max_distance=dist, seed=10_000 + seed,
+                      threads=threads)
+    with Clock() as tg:
+        guide = D.surface_guide(target, res)
+    rows = []
+    for kind, counts in (("raw", raw_samples), ("denoised", dn_samples)):
+        for n in counts:
+            with Clock() as tb:
+                r = bake_ao(target, occ, resolution=res, samples=n, max_distance=dist, seed=seed + n, threads=threads)
+            cpu, img = tb.cpu, r.ao
+            if kind == "denoised":
+                with Clock() as td:
+                    img = D.denoise(r.ao, r.stderr, r.mask, guide, threads=threads)[0]
+                cpu += tg.cpu + td.cpu
+            m = r.mask & ref.mask
+            rows.append({"kind": kind, "samples": n, "cpu": cpu,
+                         "rmse": float(np.sqrt(np.mean((img - ref.ao)[m].astype(np.float64) ** 2)))})
+    goal = next(x["rmse"] for x in rows if x["kind"] == "raw" and x["samples"] == 128)
+
+    def time_at(kind):
+        pts = sorted((x["rmse"], x["cpu"]) for x in rows if x["kind"] == kind)
+        for (e0, t0), (e1, t1) in zip(pts, pts[1:]):
+            if e0 <= goal <= e1:
+                f = (math.log(goal) - math.log(e0)) / (math.log(e1) - math.log(e0))
+                return math.exp(math.log(t0) + f * (math.log(t1) - math.log(t0)))
+        return None
+
+    t_raw, t_dn = time_at("raw"), time_at("denoised")
+    return {"resolution": res, "rows": rows, "goal_rmse": goal, "raw_cpu_at_goal": t_raw, "denoised_cpu_at_goal": t_dn,
+            "ratio": (t_dn / t_raw) if t_raw and t_dn else None}
+
+
 def table(c):
     lines = [f"Suzanne scene {c['resolution']}^2, {c['covered']} covered texels ({c['border_texels']} on island "
              f"borders, {c['seam_pairs']} texel pairs across UV seams); reference {c['reference_samples']} samples "
@@ -213,6 +255,8 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--reference-cache", type=Path, default=None, help="folder to keep the reference bake in")
+    ap.add_argument("--equal-error", action="store_true",
+                    help="also: CPU time to reach raw 128's RMSE, raw against denoised")
     ap.add_argument("--picture", type=Path, default=None,
                     help="PNG: raw, mc_ao denoised, OIDN RTLightmap, reference; |error| x 5 below")
     a = ap.parse_args(argv)
@@ -225,6 +269,16 @@ def main(argv=None):
         print(f"\nCost at {c['resolution']}^2: guide {c['guide_cpu']:.2f} + filter {c['denoise_cpu']:.2f} CPU s "
               f"= {100 * c['ratio_cpu']:.0f}% of a 64-sample bake ({c['bake64_cpu']:.2f} CPU s); "
               f"{c['cpu_per_megatexel']:.2f} CPU s per megatexel.")
+    if a.equal_error:
+        e = equal_error(a.resolution, a.reference_samples, threads=a.threads, cache=a.reference_cache)
+        out["equal_error"] = e
+        print(f"\nEqual error at {e['resolution']}^2 (raw 128's RMSE {e['goal_rmse']:.4f}):")
+        print("| map | samples | RMSE | CPU s |\n|---|---|---|---|")
+        for x in e["rows"]:
+            print(f"| {x['kind']} | {x['samples']} | {x['rmse']:.4f} | {x['cpu']:.2f} |")
+        fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
+        print(f"CPU s to reach it: raw {fmt(e['raw_cpu_at_goal'])}, denoised {fmt(e['denoised_cpu_at_goal'])}"
+              f" (ratio {fmt(e['ratio'])})")
     if a.json:
         a.json.write_text(json.dumps(out, indent=1))
     return out
