@@ -38,7 +38,7 @@ standard error is sqrt(V_k + B_k^2) of the chosen candidate.
 
 Cost: one pass of the pilot, one of the candidates, one of the bias, each over half of the window's
 image offsets (the weights are symmetric), as numpy operations on bands of rows; no loop over
-texels. Measured (docs/denoise.md): about 3 CPU seconds per megatexel with the guide, 59% of a
+texels. Measured (docs/denoise.md): 2.1-3.3 CPU seconds per megatexel with the guide, 39-60% of a
 64-sample bake.
 """
 
