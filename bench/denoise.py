@@ -239,7 +239,8 @@ def table(c):
     for name, m in c["rows"].items():
         lines.append(f"| {name} | {m['rmse']:.4f} | {m['border_rmse']:.4f} | {m['seam_mean_abs_diff']:.4f} | "
                      f"{m['cpu']:.2f} |")
-    lines += ["", f"mc_ao denoise: z sd {c['z_sd']:.3f}, mean {c['z_mean']:+.3f}, |z| > 4 on {100 * c['z_over_4']:.2f}% "
+    lines += ["", f"mc_ao denoise: z sd {c['z_sd']:.3f}, mean {c['z_mean']:+.3f}, "
+                  f"|z| > 4 on {100 * c['z_over_4']:.2f}% "
                   f"(z against the reference, both errors); candidates taken (raw, then by bandwidth) {c['choice']}; "
                   f"guide {c['guide_cpu']:.2f} s + filter {c['denoise_cpu']:.2f} s CPU against the bake's "
                   f"{c['bake_cpu']:.2f} s."]

@@ -21,11 +21,13 @@ the same island; across a UV seam (a mesh edge shared in 3D, split in UV) the te
 island's border are replaced by the texels of the other side (a *halo*: the other island's chart
 unfolded across the seam edge by the similarity that maps the edge onto itself). Weights are
 
-    w_ij = exp(-|p_i - p_j|^2 / (2 (h s_i)^2)) * exp(-beta (1 - n_i . n_j)) * exp(-(g_i - g_j)^2 / (2 kappa^2 (v_i + v_j) + eps))
+    w_ij = exp(-|p_i - p_j|^2 / (2 h^2 s^2)) * exp(-beta (1 - n_i . n_j))
+           * exp(-max(0, (g_i - g_j)^2 / (2 kappa^2 (v_i + v_j)) - flat))
 
-with p the surface point, s_i the world length of texel i, n the shading normal, g a pilot estimate
-of the AO (the same filter without the AO term, at the widest bandwidth) and v its variance: the AO
-term keeps edges (a contact shadow) where the pilot shows a step larger than its noise.
+with p the surface point, s^2 = (s_i^-2 + s_j^-2) / 2 from the world length s of each texel, n the
+shading normal, g a pilot estimate of the AO (the same filter without the AO term, narrow) and v its
+variance: the AO term keeps edges (a contact shadow) where the pilot shows a step larger than its
+noise. All three factors are symmetric in i and j.
 
 Error and selection. The raw estimates y_j have independent errors of variance sigma_j^2 (the
 bake's standard error; each texel draws its own scrambled sample set). For candidate k,
@@ -873,7 +875,8 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         return [g if valid is None else np.where(valid, g, zero)]
 
     # The pilot (geometry only, narrow): what the AO term compares, and its variance.
-    Wg, Yg, Vg = _filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=min(r, PILOT_RADIUS), threads=threads)
+    Wg, Yg, Vg = _filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=min(r, PILOT_RADIUS),
+                         threads=threads)
     with np.errstate(invalid="ignore", divide="ignore"):
         G = P(np.where(Wg > 0, Yg / Wg, 0).astype(np.float32))
         vG = P(np.where(Wg > 0, Vg / (Wg * Wg), 0).astype(np.float32))
