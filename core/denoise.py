@@ -847,6 +847,8 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     if (guide.height, guide.width) != (h, w):
         raise ValueError(f"the guide is {guide.width} x {guide.height}, the map {w} x {h}")
     r = int(radius)
+    if r < 2:
+        raise ValueError(f"the window radius must be at least 2 texels, got {radius}")
     if neighbours not in ("surface", "image"):
         raise ValueError(f"neighbours must be 'surface' or 'image', got {neighbours!r}")
     use_halo = neighbours == "surface"

@@ -323,7 +323,17 @@ def test_a_mesh_without_uvs_is_refused_by_name():
         D.surface_guide(lid(LID), 16)
 
 
-def test_a_guide_of_another_resolution_is_refused():
+def test_a_guide_of_another_resolution_or_too_small_a_window_is_refused():
     g = D.surface_guide(plane(), 16)
     with pytest.raises(ValueError, match="16 x 16"):
         D.denoise(np.zeros((8, 8)), np.zeros((8, 8)), np.ones((8, 8), bool), g)
+    with pytest.raises(ValueError, match="at least 2"):
+        D.denoise(np.zeros((16, 16)), np.zeros((16, 16)), np.ones((16, 16), bool), g, radius=1)
+    with pytest.raises(ValueError, match="halo radius"):
+        D.denoise(np.zeros((16, 16)), np.zeros((16, 16)), np.ones((16, 16), bool), g, radius=4)
+
+
+def test_an_open_plane_comes_back_unchanged():
+    r = bake_ao(plane(), resolution=32, samples=SAMPLES, margin=0)
+    out, se, info = D.denoise(r.ao, r.stderr, r.mask, D.surface_guide(plane(), 32))
+    assert np.array_equal(out, r.ao) and np.all(se == 0) and np.all(info.choice == 0)
