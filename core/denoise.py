@@ -38,6 +38,10 @@ saves in noise is filtered less or not at all, and a texel with sigma_i = 0 (exa
 occluded: every sample and its neighbourhood agree) keeps its value and its zero error. The reported
 standard error is sqrt(V_k + B_k^2) of the chosen candidate.
 
+The same filter serves UDIM tiles together (:func:`udim_guide`, :func:`denoise_udim`: the tiles in
+one canvas at their UDIM places) and AO baked at face corners (:func:`denoise_vertices`: the sample
+points joined by the mesh's edges in place of an image window).
+
 Cost: one pass of the pilot, one of the candidates, one of the bias, each over half of the window's
 image offsets (the weights are symmetric), as numpy operations on bands of rows; no loop over
 texels. Measured (docs/denoise.md): 2.1-3.3 CPU seconds per megatexel with the guide, 39-60% of a
@@ -56,7 +60,7 @@ from .raster import TOUCH, prepare
 
 #: Window radius in texels: (2 r + 1)^2 image offsets.
 RADIUS = 3
-#: Candidate bandwidths, in texels of the centre texel's world size (0: the raw value).
+#: Candidate bandwidths, in texels of world size (the raw value is a candidate too).
 BANDWIDTHS = (1.25, 1.25 * math.sqrt(2), 2.5)
 #: Normal similarity: weight exp(-NORMAL_SHARPNESS (1 - n_i . n_j)).
 NORMAL_SHARPNESS = 40.0
