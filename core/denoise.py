@@ -786,9 +786,9 @@ def _candidates_and_bias(F, halo, weights, K, yp, vp, y, var, threads=1, bias=Tr
             part = np.zeros(h * w, np.float32)
             part[urec] = np.add.reduceat(ws[k] * np.take(Fk_flat, src), starts_)
             S[k][inner] += part.reshape(h, w)
-    out = [t[inner].copy() for t in tot]
-    Fk = [f[inner].copy() for f in Fp]
-    return out[0::3], out[1::3], out[2::3], Fk, (None if S is None else [t[inner].copy() for t in S])
+    out = [t[inner] for t in tot]  # views of the padded sums: no copies
+    Fk = [f[inner] for f in Fp]
+    return out[0::3], out[1::3], out[2::3], Fk, (None if S is None else [t[inner] for t in S])
 
 
 def _trusted_zeros(F, var, r=2):
@@ -798,17 +798,26 @@ def _trusted_zeros(F, var, r=2):
     edge beside a varying region may report 0 though its value is not exact. Zero stays zero only
     where the whole neighbourhood agrees."""
     h, w, R = F.h, F.w, F.r
-    vp = np.pad(var, R)
-    total = np.zeros((h, w), np.float32)
-    count = np.zeros((h, w), np.float32)
-    rows = slice(0, h)
+    wp = w + 2 * R
+    vp = np.pad(var, R).reshape(-1)
+    isl = F.island.reshape(-1)
+    # Only the covered texels whose error is 0 (a gather over their windows: usually few of them).
+    idx = np.flatnonzero((var == 0) & (F.island[R:R + h, R:R + w] >= 0))
+    pi = (idx // w + R) * wp + idx % w + R
+    total = np.zeros(len(idx), np.float32)
+    count = np.zeros(len(idx), np.float32)
+    own = isl[pi]
     for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
-            c, o = F.band(rows, dy, dx)
-            ok = (F.island[o] == F.island[c]) & (vp[o] > 0)
-            total += np.where(ok, vp[o], 0)
+            po = pi + dy * wp + dx
+            v = vp[po]
+            ok = (isl[po] == own) & (v > 0)
+            total += np.where(ok, v, 0)
             count += ok
-    return np.where((var == 0) & (count > 0), total / np.maximum(count, 1), var).astype(np.float32)
+    out = var.astype(np.float32, copy=True)
+    flat = out.reshape(-1)
+    flat[idx] = np.where(count > 0, total / np.maximum(count, 1), flat[idx])
+    return out
 
 
 def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, normal_sharpness=NORMAL_SHARPNESS,
