@@ -330,8 +330,9 @@ def _seam_maps(xy, mesh, pairs):
     """For every seam pair, both directions (host, other): the similarity of texel space that takes
     the host's chart to the other's across the shared edge, unfolded so that the host's interior
     maps away from the other's. Returns a dict of (n,) arrays: host, other triangles; h0, h1 (n, 2)
-    the edge in the host chart; inside (n, 2) a point of the host's interior; the map
-    z -> o0 + q (z - h0) or, where ``mirror``, o0 + q conj(z - h0) (complex numbers)."""
+    the edge in the host chart; hc (n, 2) the host's third corner; the map z -> o0 + q (z - h0) or,
+    where ``mirror`` (the charts have opposite orientations), o0 + q conj(z - h0) (complex numbers).
+    Edges shared by more than two triangles are no seams here (non-manifold: no unfolding)."""
     weld = np.unique(mesh.positions, axis=0, return_inverse=True)[1].reshape(-1)
     tA, kA, tB, kB = pairs.T
     host = np.concatenate([tA, tB])
