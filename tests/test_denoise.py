@@ -29,15 +29,16 @@ def lid(verts):
     return Mesh(verts, np.array([[0, i, i + 1] for i in range(1, len(verts) - 1)]), name="lid")
 
 
-def split_plane():
+def split_plane(mirrored=False):
     """The unit plane cut along x = 0.5 into two UV islands: the left half maps to u in [0, 0.5]
-    as is, the right half turned by 180 degrees into u in [0.5, 1]. The seam (x = 0.5) runs along
-    u = 0.5 on the left island and u = 1 (the image's border) on the right; at u = 0.5 the image
-    puts the left island's seam beside the right island's far edge (x = 1), far away on the surface."""
+    as is, the right half turned by 180 degrees into u in [0.5, 1] (``mirrored``: flipped in u
+    alone, a chart of the opposite orientation). The seam (x = 0.5) runs along u = 0.5 on the left
+    island and u = 1 (the image's border) on the right; at u = 0.5 the image puts the left island's
+    seam beside the right island's far edge (x = 1), far away on the surface."""
     P = np.array([[0, 0, 0], [.5, 0, 0], [1, 0, 0], [0, 1, 0], [.5, 1, 0], [1, 1, 0]], float)
     F = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]])
     UV = P[F][:, :, :2].copy()
-    UV[2:] = np.stack([1.5 - UV[2:, :, 0], 1.0 - UV[2:, :, 1]], -1)
+    UV[2:] = np.stack([1.5 - UV[2:, :, 0], UV[2:, :, 1] if mirrored else 1.0 - UV[2:, :, 1]], -1)
     return Mesh(P, F, UV, name="split")
 
 
@@ -92,15 +93,18 @@ def test_guide_of_a_plane_is_its_texel_centres():
     np.testing.assert_allclose(g.scale, math.sqrt(1 / (32 * 16)), rtol=1e-6)
 
 
-def test_guide_links_and_halo_cross_the_seam_to_the_texel_beside_on_the_surface():
-    g = D.surface_guide(split_plane(), W, radius=4)
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_guide_links_and_halo_cross_the_seam_to_the_texel_beside_on_the_surface(mirrored):
+    g = D.surface_guide(split_plane(mirrored), W, radius=4)
     assert sorted(np.unique(g.island)) == [0, 1]
-    # Every row of the seam is linked, left (i, W/2 - 1) to right (W - 1 - i, W - 1): one texel apart.
+    # Every row of the seam is linked, left (i, W/2 - 1) to right (W - 1 - i, W - 1), or (i, W - 1)
+    # when mirrored: one texel apart.
     rows, cols = np.divmod(g.links, W)
     swap = cols[:, 0] > cols[:, 1]
     rows[swap], cols[swap] = rows[swap][:, ::-1], cols[swap][:, ::-1]
     assert len(g.links) == W
-    assert np.all(cols[:, 0] == W // 2 - 1) and np.all(cols[:, 1] == W - 1) and np.all(rows[:, 1] == W - 1 - rows[:, 0])
+    other_row = rows[:, 0] if mirrored else W - 1 - rows[:, 0]
+    assert np.all(cols[:, 0] == W // 2 - 1) and np.all(cols[:, 1] == W - 1) and np.all(rows[:, 1] == other_row)
     p = g.position.reshape(-1, 3)
     np.testing.assert_allclose(np.linalg.norm(p[g.links[:, 0]] - p[g.links[:, 1]], axis=1), 1 / W, rtol=1e-5)
     # Halo: 4 texels on each side of the seam for every row, on both islands (the right island's
@@ -113,6 +117,10 @@ def test_guide_links_and_halo_cross_the_seam_to_the_texel_beside_on_the_surface(
     src = p[g.halo_source[left]]
     np.testing.assert_allclose(src[:, 0], (g.halo_col[left] + 0.5) / W, atol=1e-6)
     np.testing.assert_allclose(src[:, 1], (g.halo_row[left] + 0.5) / W, atol=1e-6)
+    # The right island's halo, beyond u = 1, stands in for the left half: x = 0.5 - (col - W + 0.5) / W.
+    src, row = p[g.halo_source[~left]], g.halo_row[~left]
+    np.testing.assert_allclose(src[:, 0], 0.5 - (g.halo_col[~left] - W + 0.5) / W, atol=1e-6)
+    np.testing.assert_allclose(src[:, 1], (row + 0.5) / W if mirrored else 1.0 - (row + 0.5) / W, atol=1e-6)
 
 
 def test_guide_welds_vertices_split_at_the_same_position():
