@@ -83,8 +83,6 @@ PILOT_RADIUS = 1
 #: reference: 1.02-1.04); 1.25: 0.95 and 0.95; 1.5: 0.91 and 0.92. With radius 4 (a Gaussian of
 #: 2.5 texels cut less) factor 1 fell short, 1.09 and 1.10, and took 1.5. No factor is needed here.
 BIAS_SCALE = 1.0
-#: How far (texels) from a triangle the centres of the texels it covers may lie: sqrt(2) / 2.
-COVER_DISTANCE = 0.7072
 #: Texel pairs per chunk of the rasteriser of texel centres (bounds its memory).
 _CHUNK_PAIRS = 1 << 22
 #: Rows per band of the filter: bounds its working memory and orders its float32 additions (a
@@ -144,17 +142,21 @@ def _ranges(lo, hi):
     return item, value
 
 
-def _point_triangle(qx, qy, a, b, c):
-    """Distance (texels) from points q to triangles (a, b, c) (each (n, 2)), and the barycentrics
-    (n, 3) of the nearest point of each triangle."""
-    corners = (a, b, c)
-    # Barycentrics of q itself.
+def _barycentrics(qx, qy, a, b, c):
+    """Barycentrics (n, 3) of points q in triangles (a, b, c) (each (n, 2))."""
     e1, e2 = b - a, c - a
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
     dx, dy = qx - a[:, 0], qy - a[:, 1]
     b1 = (dx * e2[:, 1] - dy * e2[:, 0]) / det
     b2 = (e1[:, 0] * dy - e1[:, 1] * dx) / det
-    bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+    return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+
+
+def _point_triangle(qx, qy, a, b, c):
+    """Distance (texels) from points q to triangles (a, b, c) (each (n, 2)), and the barycentrics
+    (n, 3) of the nearest point of each triangle."""
+    corners = (a, b, c)
+    bary = _barycentrics(qx, qy, a, b, c)
     inside = (bary >= 0).all(axis=1)
     best = np.where(inside, 0.0, np.inf)
     out = bary.copy()
@@ -174,21 +176,22 @@ def _point_triangle(qx, qy, a, b, c):
     return best, out
 
 
-def _nearest_triangles(xy, edges, tri_ids, width, height, reach):
+def _nearest_triangles(xy, edges, tri_ids, width, height):
     """Texels whose square overlaps triangles ``tri_ids`` of ``xy`` (T, 3, 2) with positive area (as
     the bake's rasteriser covers them): for every such texel the nearest of those triangles to its
     centre (ties: the lowest triangle index), as (texel flat index, triangle, distance from the
-    centre, barycentrics (n, 3) of the nearest point). ``reach`` (texels) bounds the bounding boxes
-    searched (a covered texel's centre is within sqrt(2) / 2 of its triangle).
+    centre, barycentrics (n, 3) of the nearest point).
 
-    ``edges`` (T, 3, 3) are the triangles' edge functions in texels (core.raster.UVTriangles.edges):
-    their least value at a centre is its signed distance inside, which sorts the pairs of each
-    triangle's bounding box cheaply: a centre inside some triangle takes the lowest such triangle
-    (distance 0), and the exact distance to a triangle's edges is computed only for the centres that
-    lie inside none (the islands' borders).
+    The texels of each triangle's bounding box are tested for overlap by separating axes: the box's
+    own (the enumeration itself) and the triangle's edge normals (``edges`` (T, 3, 3), the edge
+    functions in texels of core.raster.UVTriangles: the square's corner farthest inside an edge is
+    half |a| + |b| beyond its centre). Their least value at the centre is its signed distance
+    inside: a centre inside some triangle takes the lowest such triangle (distance 0), and the
+    exact distance to a triangle is computed only for the centres inside none (islands' borders).
     """
-    lo = np.floor(xy[tri_ids].min(axis=1) - reach - 0.5).astype(np.int64) + 1
-    hi = np.floor(xy[tri_ids].max(axis=1) + reach - 0.5).astype(np.int64) + 1
+    # Columns j whose square overlaps (x0, x1) by more than TOUCH: x0 - 1 + TOUCH < j < x1 - TOUCH.
+    lo = np.floor(xy[tri_ids].min(axis=1) - 1.0 + TOUCH).astype(np.int64) + 1
+    hi = np.ceil(xy[tri_ids].max(axis=1) - TOUCH).astype(np.int64)
     lo = np.clip(lo, 0, [width, height])
     hi = np.clip(hi, 0, [width, height])
     nx, ny = np.maximum(hi[:, 0] - lo[:, 0], 0), np.maximum(hi[:, 1] - lo[:, 1], 0)
@@ -198,28 +201,24 @@ def _nearest_triangles(xy, edges, tri_ids, width, height, reach):
     inside_t, inside_k, near_t, near_k = [], [], [], []
     ecols = [np.ascontiguousarray(edges.reshape(len(edges), 9)[:, i]) for i in range(9)]
     half = [0.5 * (np.abs(edges[:, j, 0]) + np.abs(edges[:, j, 1])) for j in range(3)]
-    blo, bhi = xy.min(axis=1).T.copy(), xy.max(axis=1).T.copy()
     while start < len(tri_ids):
         stop = int(np.searchsorted(ends, (ends[start - 1] if start else 0) + _CHUNK_PAIRS, side="right"))
         stop = max(stop, start + 1)
         sel = np.arange(start, stop)
         item, k = _ranges(np.zeros(len(sel), np.int64), count[sel])
         item = sel[item]
-        col = lo[item, 0] + k % nx[item]
-        row = lo[item, 1] + k // nx[item]
+        q, r = np.divmod(k, nx[item])
+        col = lo[item, 0] + r
+        row = lo[item, 1] + q
         t = tri_ids[item]
         cx, cy = col + 0.5, row + 0.5
-        m = None
-        # The texel's square overlaps the triangle with positive area (the bake's coverage): no
-        # separating axis among the square's (bounding boxes) and the triangle's edge normals (the
-        # square's corner farthest inside each edge is half |a| + |b| beyond its centre).
-        over = (cx > np.take(blo[0], t) - 0.5 + TOUCH) & (cx < np.take(bhi[0], t) + 0.5 - TOUCH)
-        over &= (cy > np.take(blo[1], t) - 0.5 + TOUCH) & (cy < np.take(bhi[1], t) + 0.5 - TOUCH)
+        m, over = None, None
         for j in range(3):  # column by column (numpy's gathers of (n, 3, 3) rows are slower)
             v = np.take(ecols[3 * j], t) * cx
             v += np.take(ecols[3 * j + 1], t) * cy
             v += np.take(ecols[3 * j + 2], t)
-            over &= v + np.take(half[j], t) > TOUCH
+            o = v + np.take(half[j], t) > TOUCH
+            over = o if over is None else over & o
             m = v if m is None else np.minimum(m, v, out=m)
         texel = row * width + col
         ins = m >= 0
@@ -235,25 +234,24 @@ def _nearest_triangles(xy, edges, tri_ids, width, height, reach):
     first = np.ones(len(texel), bool)
     first[1:] = texel[1:] != texel[:-1]
     texel, tri = texel[first], tri[first]
-    dist = np.zeros(len(texel))
-    # Centres inside no triangle: the nearest triangle within reach.
+    row, col = np.divmod(texel, width)
+    dist, bary = _point_triangle(col + 0.5, row + 0.5, xy[tri, 0], xy[tri, 1], xy[tri, 2])
+    # Centres inside no triangle: the nearest of the triangles that overlap their square.
     nt, nk = np.concatenate(near_t), np.concatenate(near_k)
     keep = ~np.isin(nt, texel)
     nt, nk = nt[keep], nk[keep]
     row, col = np.divmod(nt, width)
-    nd, _ = _point_triangle(col + 0.5, row + 0.5, xy[nk, 0], xy[nk, 1], xy[nk, 2])
+    nd, nb = _point_triangle(col + 0.5, row + 0.5, xy[nk, 0], xy[nk, 1], xy[nk, 2])
     order = np.lexsort((nk, nd, nt))
-    nt, nk, nd = nt[order], nk[order], nd[order]
+    nt, nk, nd, nb = nt[order], nk[order], nd[order], nb[order]
     first = np.ones(len(nt), bool)
     first[1:] = nt[1:] != nt[:-1]
     texel = np.concatenate([texel, nt[first]])
     tri = np.concatenate([tri, nk[first]])
     dist = np.concatenate([dist, nd[first]])
+    bary = np.concatenate([bary, nb[first]])
     order = np.argsort(texel, kind="stable")
-    texel, tri, dist = texel[order], tri[order], dist[order]
-    row, col = np.divmod(texel, width)
-    _, bary = _point_triangle(col + 0.5, row + 0.5, xy[tri, 0], xy[tri, 1], xy[tri, 2])
-    return texel, tri, dist, bary
+    return texel[order], tri[order], dist[order], bary[order]
 
 
 def _components(n, a, b):
@@ -399,7 +397,7 @@ def surface_guide(mesh, resolution, radius=RADIUS):
                  - (xy[:, 1, 1] - xy[:, 0, 1]) * (xy[:, 2, 0] - xy[:, 0, 0]))
     tscale = np.sqrt(mesh.areas / np.where(det > 0, det / 2.0, 1.0))
     if len(ids):
-        texel, tri, _, bary = _nearest_triangles(xy, tris.edges, ids, w, h, COVER_DISTANCE)
+        texel, tri, _, bary = _nearest_triangles(xy, tris.edges, ids, w, h)
         P = mesh.positions[mesh.triangles[tri]]
         N = mesh.normals[tri]
         covered[texel] = True
