@@ -44,7 +44,7 @@ points joined by the mesh's edges in place of an image window).
 
 Cost: one pass of the pilot, one of the candidates, one of the bias, each over half of the window's
 image offsets (the weights are symmetric), as numpy operations on bands of rows; no loop over
-texels. Measured (docs/denoise.md): 2.2-2.8 CPU seconds per megatexel with the guide, 40-50% of a
+texels. Measured (docs/denoise.md): 1.6-2.2 CPU seconds per megatexel with the guide, 30-45% of a
 64-sample bake.
 """
 
