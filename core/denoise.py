@@ -21,11 +21,13 @@ the same island; across a UV seam (a mesh edge shared in 3D, split in UV) the te
 island's border are replaced by the texels of the other side (a *halo*: the other island's chart
 unfolded across the seam edge by the similarity that maps the edge onto itself). Weights are
 
-    w_ij = exp(-|p_i - p_j|^2 / (2 (h s_i)^2)) * exp(-beta (1 - n_i . n_j)) * exp(-(g_i - g_j)^2 / (2 kappa^2 (v_i + v_j) + eps))
+    w_ij = exp(-|p_i - p_j|^2 / (2 h^2 s^2)) * exp(-beta (1 - n_i . n_j))
+           * exp(-max(0, (g_i - g_j)^2 / (2 kappa^2 (v_i + v_j)) - flat))
 
-with p the surface point, s_i the world length of texel i, n the shading normal, g a pilot estimate
-of the AO (the same filter without the AO term, at the widest bandwidth) and v its variance: the AO
-term keeps edges (a contact shadow) where the pilot shows a step larger than its noise.
+with p the surface point, s^2 = (s_i^-2 + s_j^-2) / 2 from the world length s of each texel, n the
+shading normal, g a pilot estimate of the AO (the same filter without the AO term, narrow) and v its
+variance: the AO term keeps edges (a contact shadow) where the pilot shows a step larger than its
+noise. All three factors are symmetric in i and j.
 
 Error and selection. The raw estimates y_j have independent errors of variance sigma_j^2 (the
 bake's standard error; each texel draws its own scrambled sample set). For candidate k,
@@ -36,22 +38,31 @@ saves in noise is filtered less or not at all, and a texel with sigma_i = 0 (exa
 occluded: every sample and its neighbourhood agree) keeps its value and its zero error. The reported
 standard error is sqrt(V_k + B_k^2) of the chosen candidate.
 
-Cost: one pass of the pilot, one of the candidates, one of the bias, each over the (2r+1)^2 image
-offsets of the window, as whole-image numpy operations on bands of rows; no loop over texels.
+The same filter serves UDIM tiles together (:func:`udim_guide`, :func:`denoise_udim`: the tiles in
+one canvas at their UDIM places) and AO baked at face corners (:func:`denoise_vertices`: the sample
+points joined by the mesh's edges in place of an image window).
+
+Cost: one pass of the pilot, one of the candidates, one of the bias, each over half of the window's
+image offsets (the weights are symmetric), as numpy operations on bands of rows; no loop over
+texels. Measured (docs/denoise.md): 1.6-2.2 CPU seconds per megatexel with the guide, 30-45% of a
+64-sample bake.
 """
 
+import copy
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from .raster import prepare
+from .errors import MeshError
+from .raster import TOUCH, prepare
 
 #: Window radius in texels: (2 r + 1)^2 image offsets.
 RADIUS = 3
-#: Candidate bandwidths, in texels of the centre texel's world size (0: the raw value).
-BANDWIDTHS = (1.25, 1.25 * math.sqrt(2), 2.5)
+#: Candidate bandwidths, in texels of world size (the raw value is a candidate too). A third between
+#: them (1.77) changed neither RMSE nor z on the exact scenes and Suzanne, and cost a third more.
+BANDWIDTHS = (1.25, 2.5)
 #: Normal similarity: weight exp(-NORMAL_SHARPNESS (1 - n_i . n_j)).
 NORMAL_SHARPNESS = 40.0
 #: The AO term's scale kappa, in standard deviations of the pilot's difference, and how far (in units
@@ -62,8 +73,9 @@ RANGE_SIGMAS = 2.0
 RANGE_FLAT = 3.0
 #: Bandwidth (texels) of the pilot whose differences the AO term compares: narrow, so steps stay steep.
 PILOT_BANDWIDTH = 1.0
-#: Its window radius (its weight at 3 texels would be exp(-4.5) = 0.011).
-PILOT_RADIUS = 2
+#: Its window radius: 3 x 3 (weights 0.61 beside, 0.37 diagonally; 5 x 5 was dearer and no better:
+#: RMSE on the exact scenes 0.0132 and 0.0106 against 0.0127 and 0.0105).
+PILOT_RADIUS = 1
 #: Factor on the double-smoothing bias estimate. S (S y) - S y is exact for a Gaussian kernel on a
 #: locally quadratic AO; where edge-stopping weights and the window cut the kernel it may fall short.
 #: Measured (z sd on the exact scenes at 64^2, 16 samples, six seeds; box on a plane, polygon over a
@@ -71,12 +83,10 @@ PILOT_RADIUS = 2
 #: reference: 1.02-1.04); 1.25: 0.95 and 0.95; 1.5: 0.91 and 0.92. With radius 4 (a Gaussian of
 #: 2.5 texels cut less) factor 1 fell short, 1.09 and 1.10, and took 1.5. No factor is needed here.
 BIAS_SCALE = 1.0
-#: Texels whose centre lies within this many texels of a triangle belong to it (a covered texel's
-#: square overlaps the triangle, so its centre is within sqrt(2) / 2 of it).
-COVER_DISTANCE = 0.7072
 #: Texel pairs per chunk of the rasteriser of texel centres (bounds its memory).
 _CHUNK_PAIRS = 1 << 22
-#: Rows per band of the filter (bounds its working memory; the result does not depend on it).
+#: Rows per band of the filter: bounds its working memory and orders its float32 additions (a
+#: constant, so that the result is the same bits for any number of threads).
 BAND_ROWS = 64
 
 
@@ -86,7 +96,7 @@ BAND_ROWS = 64
 class SurfaceGuide:
     """Per texel of a (H, W) map: where on the surface its centre lies, and its seam links.
 
-    covered : (H, W) bool, texels whose centre lies within COVER_DISTANCE texels of a triangle.
+    covered : (H, W) bool, texels whose square a UV triangle overlaps with positive area (the bake's mask).
     triangle : (H, W) int32, the nearest triangle (-1 where not covered).
     position, normal : (H, W, 3) float32, the surface point at the centre (the nearest point of the
         triangle) and its unit shading normal.
@@ -132,17 +142,21 @@ def _ranges(lo, hi):
     return item, value
 
 
-def _point_triangle(qx, qy, a, b, c):
-    """Distance (texels) from points q to triangles (a, b, c) (each (n, 2)), and the barycentrics
-    (n, 3) of the nearest point of each triangle."""
-    corners = (a, b, c)
-    # Barycentrics of q itself.
+def _barycentrics(qx, qy, a, b, c):
+    """Barycentrics (n, 3) of points q in triangles (a, b, c) (each (n, 2))."""
     e1, e2 = b - a, c - a
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
     dx, dy = qx - a[:, 0], qy - a[:, 1]
     b1 = (dx * e2[:, 1] - dy * e2[:, 0]) / det
     b2 = (e1[:, 0] * dy - e1[:, 1] * dx) / det
-    bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+    return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+
+
+def _point_triangle(qx, qy, a, b, c):
+    """Distance (texels) from points q to triangles (a, b, c) (each (n, 2)), and the barycentrics
+    (n, 3) of the nearest point of each triangle."""
+    corners = (a, b, c)
+    bary = _barycentrics(qx, qy, a, b, c)
     inside = (bary >= 0).all(axis=1)
     best = np.where(inside, 0.0, np.inf)
     out = bary.copy()
@@ -162,41 +176,82 @@ def _point_triangle(qx, qy, a, b, c):
     return best, out
 
 
-def _nearest_triangles(xy, tri_ids, width, height, reach):
-    """Texel centres within ``reach`` texels of triangles ``tri_ids`` of ``xy`` (T, 3, 2): for every
-    such texel the nearest of them (ties: the lowest triangle index), as (texel flat index, triangle,
-    distance, barycentrics (n, 3))."""
-    parts = []
-    lo = np.floor(xy[tri_ids].min(axis=1) - reach - 0.5).astype(np.int64) + 1
-    hi = np.floor(xy[tri_ids].max(axis=1) + reach - 0.5).astype(np.int64) + 1
+def _nearest_triangles(xy, edges, tri_ids, width, height):
+    """Texels whose square overlaps triangles ``tri_ids`` of ``xy`` (T, 3, 2) with positive area (as
+    the bake's rasteriser covers them): for every such texel the nearest of those triangles to its
+    centre (ties: the lowest triangle index), as (texel flat index, triangle, distance from the
+    centre, barycentrics (n, 3) of the nearest point).
+
+    The texels of each triangle's bounding box are tested for overlap by separating axes: the box's
+    own (the enumeration itself) and the triangle's edge normals (``edges`` (T, 3, 3), the edge
+    functions in texels of core.raster.UVTriangles: the square's corner farthest inside an edge is
+    half |a| + |b| beyond its centre). Their least value at the centre is its signed distance
+    inside: a centre inside some triangle takes the lowest such triangle (distance 0), and the
+    exact distance to a triangle is computed only for the centres inside none (islands' borders).
+    """
+    # Columns j whose square overlaps (x0, x1) by more than TOUCH: x0 - 1 + TOUCH < j < x1 - TOUCH.
+    lo = np.floor(xy[tri_ids].min(axis=1) - 1.0 + TOUCH).astype(np.int64) + 1
+    hi = np.ceil(xy[tri_ids].max(axis=1) - TOUCH).astype(np.int64)
     lo = np.clip(lo, 0, [width, height])
     hi = np.clip(hi, 0, [width, height])
     nx, ny = np.maximum(hi[:, 0] - lo[:, 0], 0), np.maximum(hi[:, 1] - lo[:, 1], 0)
     count = nx * ny
     ends = np.cumsum(count)
     start = 0
+    inside_t, inside_k, near_t, near_k = [], [], [], []
+    ecols = [np.ascontiguousarray(edges.reshape(len(edges), 9)[:, i]) for i in range(9)]
+    half = [0.5 * (np.abs(edges[:, j, 0]) + np.abs(edges[:, j, 1])) for j in range(3)]
     while start < len(tri_ids):
         stop = int(np.searchsorted(ends, (ends[start - 1] if start else 0) + _CHUNK_PAIRS, side="right"))
         stop = max(stop, start + 1)
         sel = np.arange(start, stop)
         item, k = _ranges(np.zeros(len(sel), np.int64), count[sel])
         item = sel[item]
-        col = lo[item, 0] + k % nx[item]
-        row = lo[item, 1] + k // nx[item]
+        q, r = np.divmod(k, nx[item])
+        col = lo[item, 0] + r
+        row = lo[item, 1] + q
         t = tri_ids[item]
-        d, bary = _point_triangle(col + 0.5, row + 0.5, xy[t, 0], xy[t, 1], xy[t, 2])
-        keep = d <= reach
-        parts.append((row[keep] * width + col[keep], t[keep], d[keep], bary[keep]))
+        cx, cy = col + 0.5, row + 0.5
+        m, over = None, None
+        for j in range(3):  # column by column (numpy's gathers of (n, 3, 3) rows are slower)
+            v = np.take(ecols[3 * j], t) * cx
+            v += np.take(ecols[3 * j + 1], t) * cy
+            v += np.take(ecols[3 * j + 2], t)
+            o = v + np.take(half[j], t) > TOUCH
+            over = o if over is None else over & o
+            m = v if m is None else np.minimum(m, v, out=m)
+        texel = row * width + col
+        ins = m >= 0
+        inside_t.append(texel[ins])
+        inside_k.append(t[ins])
+        near = ~ins & over
+        near_t.append(texel[near])
+        near_k.append(t[near])
         start = stop
-    texel = np.concatenate([p[0] for p in parts])
-    tri = np.concatenate([p[1] for p in parts])
-    dist = np.concatenate([p[2] for p in parts])
-    bary = np.concatenate([p[3] for p in parts])
-    order = np.lexsort((tri, dist, texel))
-    texel, tri, dist, bary = texel[order], tri[order], dist[order], bary[order]
+    texel, tri = np.concatenate(inside_t), np.concatenate(inside_k)
+    order = np.lexsort((tri, texel))
+    texel, tri = texel[order], tri[order]
     first = np.ones(len(texel), bool)
     first[1:] = texel[1:] != texel[:-1]
-    return texel[first], tri[first], dist[first], bary[first]
+    texel, tri = texel[first], tri[first]
+    row, col = np.divmod(texel, width)
+    dist, bary = _point_triangle(col + 0.5, row + 0.5, xy[tri, 0], xy[tri, 1], xy[tri, 2])
+    # Centres inside no triangle: the nearest of the triangles that overlap their square.
+    nt, nk = np.concatenate(near_t), np.concatenate(near_k)
+    keep = ~np.isin(nt, texel)
+    nt, nk = nt[keep], nk[keep]
+    row, col = np.divmod(nt, width)
+    nd, nb = _point_triangle(col + 0.5, row + 0.5, xy[nk, 0], xy[nk, 1], xy[nk, 2])
+    order = np.lexsort((nk, nd, nt))
+    nt, nk, nd, nb = nt[order], nk[order], nd[order], nb[order]
+    first = np.ones(len(nt), bool)
+    first[1:] = nt[1:] != nt[:-1]
+    texel = np.concatenate([texel, nt[first]])
+    tri = np.concatenate([tri, nk[first]])
+    dist = np.concatenate([dist, nd[first]])
+    bary = np.concatenate([bary, nb[first]])
+    order = np.argsort(texel, kind="stable")
+    return texel[order], tri[order], dist[order], bary[order]
 
 
 def _components(n, a, b):
@@ -274,8 +329,9 @@ def _seam_maps(xy, mesh, pairs):
     """For every seam pair, both directions (host, other): the similarity of texel space that takes
     the host's chart to the other's across the shared edge, unfolded so that the host's interior
     maps away from the other's. Returns a dict of (n,) arrays: host, other triangles; h0, h1 (n, 2)
-    the edge in the host chart; inside (n, 2) a point of the host's interior; the map
-    z -> o0 + q (z - h0) or, where ``mirror``, o0 + q conj(z - h0) (complex numbers)."""
+    the edge in the host chart; hc (n, 2) the host's third corner; the map z -> o0 + q (z - h0) or,
+    where ``mirror`` (the charts have opposite orientations), o0 + q conj(z - h0) (complex numbers).
+    Edges shared by more than two triangles are no seams here (non-manifold: no unfolding)."""
     weld = np.unique(mesh.positions, axis=0, return_inverse=True)[1].reshape(-1)
     tA, kA, tB, kB = pairs.T
     host = np.concatenate([tA, tB])
@@ -322,6 +378,8 @@ def surface_guide(mesh, resolution, radius=RADIUS):
     -------
     SurfaceGuide
     """
+    if mesh.uvs is None:
+        raise MeshError(f"mesh {mesh.name!r} has no UVs: the denoiser's guide needs the UV map the bake used")
     w, h = _resolution(resolution)
     tris = prepare(mesh, w, h)
     xy = tris.corners
@@ -339,7 +397,7 @@ def surface_guide(mesh, resolution, radius=RADIUS):
                  - (xy[:, 1, 1] - xy[:, 0, 1]) * (xy[:, 2, 0] - xy[:, 0, 0]))
     tscale = np.sqrt(mesh.areas / np.where(det > 0, det / 2.0, 1.0))
     if len(ids):
-        texel, tri, _, bary = _nearest_triangles(xy, ids, w, h, COVER_DISTANCE)
+        texel, tri, _, bary = _nearest_triangles(xy, tris.edges, ids, w, h)
         P = mesh.positions[mesh.triangles[tri]]
         N = mesh.normals[tri]
         covered[texel] = True
@@ -464,13 +522,14 @@ class _Features:
 
     def direct(self, c, o):
         """Neighbours in the image window: on the centre's island, squared surface distance (in
-        texels of the centre) and normals' cosine."""
+        texels, the mean of both texels' squared inverse sizes) and normals' cosine; all symmetric in the pair."""
         valid = (self.island[o] == self.island[c]) & (self.island[c] >= 0)
         d2 = np.zeros(valid.shape, np.float32)
         for k in range(3):
             t = self.p[k][o] - self.p[k][c]
             d2 += t * t
-        d2 *= self.inv_s2[c]
+        d2 *= self.inv_s2[c] + self.inv_s2[o]  # symmetric: the mean of both texels' scales, times 2
+        d2 *= np.float32(0.5)
         dot = self.n[0][o] * self.n[0][c] + self.n[1][o] * self.n[1][c] + self.n[2][o] * self.n[2][c]
         return valid, d2, dot
 
@@ -495,24 +554,28 @@ def _offsets(r):
 
 
 def _halo_pairs(guide, mask, r, F):
-    """Per window offset: (receiver flat index, source flat index, squared distance, cosine) of the
-    halo entries that stand in for the receiver's neighbour at that offset (the receiver on the
-    halo's island, both covered)."""
+    """The halo entries that stand in for a texel's neighbours in its window (the receiver on the
+    halo's island, both covered), every window offset at once, sorted by receiver (offsets in window
+    order within one): (receiver flat index, source flat index, squared distance, cosine, Chebyshev
+    length of the offset)."""
     h, w = guide.height, guide.width
     isl = np.where(mask, guide.island, -1).reshape(-1)
     keep = mask.reshape(-1)[guide.halo_source]
     ty, tx = guide.halo_row[keep], guide.halo_col[keep]
     hisl, hsrc = guide.halo_island[keep], guide.halo_source[keep]
-    out = []
+    recs, srcs, lens = [], [], []
     for dy, dx in _offsets(r):
         ry, rx = ty - dy, tx - dx
         ok = (ry >= 0) & (ry < h) & (rx >= 0) & (rx < w)
         rec = np.where(ok, ry * w + rx, 0)
         ok &= isl[rec] == hisl
-        if ok.any():
-            rec_, src_ = rec[ok], hsrc[ok]
-            out.append(((dy, dx), rec_, src_) + F.pairs(rec_, src_))
-    return out
+        recs.append(rec[ok])
+        srcs.append(hsrc[ok])
+        lens.append(np.full(int(ok.sum()), max(abs(dy), abs(dx)), np.int8))
+    rec, src, cheb = np.concatenate(recs), np.concatenate(srcs), np.concatenate(lens)
+    order = np.argsort(rec, kind="stable")
+    rec, src, cheb = rec[order], src[order], cheb[order]
+    return (rec, src) + F.pairs(rec, src) + (cheb,)
 
 
 def _filter(F, halo, weights, gathers, radius=None, threads=1):
@@ -522,26 +585,34 @@ def _filter(F, halo, weights, gathers, radius=None, threads=1):
     image (``c``, ``o`` index padded images; for halo pairs ``valid`` is None and ``c``, ``o`` are
     flat indices of the unpadded image); ``gathers`` is a list of (candidate, padded array, power):
     each accumulates sum_j w_ij^power x_j (x None: the weights alone) over the offsets within
-    ``radius`` (default: the features' radius). Bands of rows are the outer loop and offsets the
-    inner, so a band's accumulators stay in cache; bands go to ``threads`` threads (numpy releases
-    the GIL in its loops); each texel adds its neighbours in the same order whatever the bands.
+    ``radius`` (default: the features' radius).
+
+    The weights in the image are symmetric (w_ij = w_ji), so each pair of texels is weighed once,
+    at the offsets of one half-plane, and adds to both its texels: half the weights' work. Bands of
+    rows are the outer loop and offsets the inner, so a band's accumulators (its rows and the
+    ``radius`` rows either side that its pairs reach) stay in cache; bands go to ``threads`` threads
+    (numpy releases the GIL in its loops) and are added into the image in their order, so the result
+    does not depend on the threads.
     """
     h, w, r = F.h, F.w, F.r
     rad = r if radius is None else radius
-    out = [np.zeros((h, w), np.float32) for _ in gathers]
     flat = [None if x is None else x[r:r + h, r:r + w].reshape(-1) for _, x, _ in gathers]
     rows_covered = np.flatnonzero((F.island[r:r + h, r:r + w] >= 0).any(axis=1))
-    offsets = _offsets(rad)
+    half = [(0, 0)] + [(dy, dx) for dy, dx in _offsets(rad) if dy > 0 or (dy == 0 and dx > 0)]
 
     def band(y0):
         rows = slice(y0, min(h, y0 + BAND_ROWS))
+        n = rows.stop - rows.start
         if not np.any((rows_covered >= rows.start) & (rows_covered < rows.stop)):
-            return
-        for dy, dx in offsets:
+            return None
+        loc = [np.zeros((n + 2 * rad, w + 2 * rad), np.float32) for _ in gathers]
+        lc = (slice(rad, rad + n), slice(rad, rad + w))
+        for dy, dx in half:
             c, o = F.band(rows, dy, dx)
             ws = weights(*F.direct(c, o), c, o)
+            lo = (slice(rad + dy, rad + dy + n), slice(rad + dx, rad + dx + w))
             sq = {}
-            for acc, (k, x, power) in zip(out, gathers):
+            for acc, (k, x, power) in zip(loc, gathers):
                 if power == 1:
                     g = ws[k]
                 else:
@@ -549,25 +620,176 @@ def _filter(F, halo, weights, gathers, radius=None, threads=1):
                         sq[k] = ws[k] * ws[k]
                     g = sq[k]
                 if x is None:
-                    acc[rows] += g
+                    acc[lc] += g
+                    if dy or dx:
+                        acc[lo] += g
                 else:
-                    acc[rows] += g * x[o]
+                    acc[lc] += g * x[o]
+                    if dy or dx:
+                        acc[lo] += g * x[c]
+        return loc
 
-    starts = range(0, h, BAND_ROWS)
-    if threads > 1 and len(starts) > 1:
-        with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(band, starts))
-    else:
-        for y0 in starts:
-            band(y0)
-    for (dy, dx), rec, src, d2, dot in halo:
-        if max(abs(dy), abs(dx)) > rad:
-            continue
-        ws = weights(None, d2, dot, rec, src)
-        for acc, fx, (k, x, power) in zip(out, flat, gathers):
-            g = ws[k] if power == 1 else ws[k] * ws[k]
-            acc.reshape(-1)[rec] += g if fx is None else g * np.take(fx, src)
+    total = [np.zeros((h + 2 * rad, w + 2 * rad), np.float32) for _ in gathers]
+    starts = list(range(0, h, BAND_ROWS))
+    pool = ThreadPoolExecutor(threads) if threads > 1 and len(starts) > 1 else None
+    try:
+        for y0, loc in zip(starts, pool.map(band, starts) if pool else map(band, starts)):
+            if loc is not None:
+                for t, l in zip(total, loc):
+                    t[y0:y0 + len(l)] += l
+    finally:
+        if pool:
+            pool.shutdown()
+    out = [t[rad:rad + h, rad:rad + w].copy() for t in total]
+    if halo and len(halo[0]):
+        rec, src, d2, dot, cheb = halo
+        if rad < F.r:
+            sel = cheb <= rad
+            rec, src, d2, dot = rec[sel], src[sel], d2[sel], dot[sel]
+        if len(rec):
+            # Each receiver's halo terms summed in their order (reduceat over the sorted receivers),
+            # then added once.
+            starts = np.flatnonzero(np.r_[True, rec[1:] != rec[:-1]])
+            urec = rec[starts]
+            ws = weights(None, d2, dot, rec, src)
+            for acc, fx, (k, x, power) in zip(out, flat, gathers):
+                g = ws[k] if power == 1 else ws[k] * ws[k]
+                v = g if fx is None else g * np.take(fx, src)
+                acc.reshape(-1)[urec] += np.add.reduceat(v, starts)
     return out
+
+
+def _candidates_and_bias(F, halo, weights, K, yp, vp, y, var, threads=1, bias=True):
+    """The candidates' sums and their bias pass in one sweep over the bands, with each band's weights
+    kept between the two (the same weights serve both): W_k, Y_k, V_k (sum w, w y, w^2 sigma^2),
+    F_k = Y_k / W_k (y where W_k = 0) and S_k = sum w F_k (None without ``bias``), each (H, W).
+
+    With symmetric weights at the offsets of a half-plane (dy >= 0), a band's pairs reach the
+    ``radius`` rows below it only, so once a band's sums are added, every row above its last is
+    final: the bias pass of a band runs as soon as the next band's sums are in. Halo terms (whose
+    sources may be anywhere) are added before the bands (sums) and after them (bias). Bands go to
+    ``threads`` threads a few at a time and are added in their order: the same bits for any count.
+    """
+    h, w, r = F.h, F.w, F.r
+    half = [(0, 0)] + [(dy, dx) for dy, dx in _offsets(r) if dy > 0 or (dy == 0 and dx > 0)]
+    rows_covered = np.flatnonzero((F.island[r:r + h, r:r + w] >= 0).any(axis=1))
+    tot = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(3 * K)]  # W, Y, V per candidate
+    S = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(K)] if bias else None
+    Fp = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(K)]
+    inner = (slice(r, r + h), slice(r, r + w))
+    yf, vf = yp[inner].reshape(-1), vp[inner].reshape(-1)
+
+    hal = None
+    if halo and len(halo[0]):
+        rec, src, d2, dot, _ = halo
+        starts = np.flatnonzero(np.r_[True, rec[1:] != rec[:-1]])
+        urec = rec[starts]
+        ws = weights(None, d2, dot, rec, src)
+        ys, vs = np.take(yf, src), np.take(vf, src)
+        for k in range(K):
+            for j, v in enumerate((ws[k], ws[k] * ys, ws[k] * ws[k] * vs)):
+                part = np.zeros(h * w, np.float32)  # (a padded image's inner block is no flat view)
+                part[urec] = np.add.reduceat(v, starts)
+                tot[3 * k + j][inner] += part.reshape(h, w)
+        hal = (src, starts, urec, ws)
+
+    def sums(y0):
+        rows = slice(y0, min(h, y0 + BAND_ROWS))
+        n = rows.stop - rows.start
+        if not np.any((rows_covered >= rows.start) & (rows_covered < rows.stop)):
+            return None, None
+        loc = [np.zeros((n + 2 * r, w + 2 * r), np.float32) for _ in range(3 * K)]
+        lc = (slice(r, r + n), slice(r, r + w))
+        cache = []
+        for dy, dx in half:
+            c, o = F.band(rows, dy, dx)
+            ws = weights(*F.direct(c, o), c, o)
+            cache.append(ws)
+            lo = (slice(r + dy, r + dy + n), slice(r + dx, r + dx + w))
+            for k in range(K):
+                g = ws[k]
+                g2 = g * g
+                for j, (gg, x) in enumerate(((g, None), (g, yp), (g2, vp))):
+                    acc = loc[3 * k + j]
+                    if x is None:
+                        acc[lc] += gg
+                        if dy or dx:
+                            acc[lo] += gg
+                    else:
+                        acc[lc] += gg * x[o]
+                        if dy or dx:
+                            acc[lo] += gg * x[c]
+        return loc, cache
+
+    def smooth(y0, cache):
+        rows = slice(y0, min(h, y0 + BAND_ROWS))
+        n = rows.stop - rows.start
+        loc = [np.zeros((n + 2 * r, w + 2 * r), np.float32) for _ in range(K)]
+        lc = (slice(r, r + n), slice(r, r + w))
+        for (dy, dx), ws in zip(half, cache):
+            c, o = F.band(rows, dy, dx)
+            lo = (slice(r + dy, r + dy + n), slice(r + dx, r + dx + w))
+            for k in range(K):
+                loc[k][lc] += ws[k] * Fp[k][o]
+                if dy or dx:
+                    loc[k][lo] += ws[k] * Fp[k][c]
+        return loc
+
+    done = [0]  # rows whose F_k are final
+
+    def finalize(upto):
+        a, b = done[0], min(h, upto)
+        if b <= a:
+            return
+        for k in range(K):
+            W_, Y_ = tot[3 * k][r + a:r + b, r:r + w], tot[3 * k + 1][r + a:r + b, r:r + w]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                Fp[k][r + a:r + b, r:r + w] = np.where(W_ > 0, Y_ / W_, y[a:b])
+        done[0] = b
+
+    def add_smooth(y0, loc):
+        for t, l in zip(S, loc):
+            t[y0:y0 + len(l)] += l
+
+    starts = list(range(0, h, BAND_ROWS))
+    pool = ThreadPoolExecutor(threads) if threads > 1 and len(starts) > 1 else None
+    try:
+        ahead = max(1, threads)
+        futures = {}
+
+        def submit(i):
+            if i < len(starts) and i not in futures:
+                futures[i] = pool.submit(sums, starts[i]) if pool else None
+
+        for i in range(ahead):
+            submit(i)
+        previous = None
+        for i, y0 in enumerate(starts):
+            loc, cache = futures.pop(i).result() if pool else sums(y0)
+            submit(i + ahead)
+            if loc is not None:
+                for t, l in zip(tot, loc):
+                    t[y0:y0 + len(l)] += l
+            finalize(y0 + BAND_ROWS)
+            if bias and previous is not None and previous[1] is not None:
+                add_smooth(previous[0], smooth(*previous))
+            previous = (y0, cache)
+        finalize(h)
+        if bias and previous is not None and previous[1] is not None:
+            add_smooth(previous[0], smooth(*previous))
+    finally:
+        if pool:
+            pool.shutdown()
+    if bias and hal is not None:
+        src, starts_, urec, ws = hal
+        for k in range(K):
+            Fk_flat = Fp[k][inner].reshape(-1)
+            part = np.zeros(h * w, np.float32)
+            part[urec] = np.add.reduceat(ws[k] * np.take(Fk_flat, src), starts_)
+            S[k][inner] += part.reshape(h, w)
+    out = [t[inner] for t in tot]  # views of the padded sums: no copies
+    Fk = [f[inner] for f in Fp]
+    return out[0::3], out[1::3], out[2::3], Fk, (None if S is None else [t[inner] for t in S])
 
 
 def _trusted_zeros(F, var, r=2):
@@ -577,17 +799,26 @@ def _trusted_zeros(F, var, r=2):
     edge beside a varying region may report 0 though its value is not exact. Zero stays zero only
     where the whole neighbourhood agrees."""
     h, w, R = F.h, F.w, F.r
-    vp = np.pad(var, R)
-    total = np.zeros((h, w), np.float32)
-    count = np.zeros((h, w), np.float32)
-    rows = slice(0, h)
+    wp = w + 2 * R
+    vp = np.pad(var, R).reshape(-1)
+    isl = F.island.reshape(-1)
+    # Only the covered texels whose error is 0 (a gather over their windows: usually few of them).
+    idx = np.flatnonzero((var == 0) & (F.island[R:R + h, R:R + w] >= 0))
+    pi = (idx // w + R) * wp + idx % w + R
+    total = np.zeros(len(idx), np.float32)
+    count = np.zeros(len(idx), np.float32)
+    own = isl[pi]
     for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
-            c, o = F.band(rows, dy, dx)
-            ok = (F.island[o] == F.island[c]) & (vp[o] > 0)
-            total += np.where(ok, vp[o], 0)
+            po = pi + dy * wp + dx
+            v = vp[po]
+            ok = (isl[po] == own) & (v > 0)
+            total += np.where(ok, v, 0)
             count += ok
-    return np.where((var == 0) & (count > 0), total / np.maximum(count, 1), var).astype(np.float32)
+    out = var.astype(np.float32, copy=True)
+    flat = out.reshape(-1)
+    flat[idx] = np.where(count > 0, total / np.maximum(count, 1), flat[idx])
+    return out
 
 
 def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, normal_sharpness=NORMAL_SHARPNESS,
@@ -612,7 +843,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     margin : re-dilate this many texels around the covered ones (as the bake does); 0: texels outside
         the mask keep their input value.
     threads : bands of rows filtered at the same time (numpy releases the GIL in its loops); the
-        result does not depend on it.
+        result does not depend on it (bands are added in their order).
     neighbours : 'surface' (the filter); 'image' only for the tests that break it on purpose: the
         image window's texels whatever their island, by image distance, nothing across seams.
     use_error, use_bias : off only in the tests that break the filter on purpose: without the error
@@ -622,14 +853,16 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     Returns
     -------
     (ao, stderr, info): (H, W) float32 denoised AO in [0, 1] and its standard error (0 outside the
-    mask), and a :class:`DenoiseInfo`. Deterministic: no randomness, and each texel depends only on
-    the texels within a few window radii (and their halo), never on the bands.
+    mask), and a :class:`DenoiseInfo`. Deterministic: no randomness, the same bits for any
+    ``threads``; each texel depends only on the texels within a few window radii and their halo.
     """
     ao = np.asarray(ao)
     h, w = ao.shape
     if (guide.height, guide.width) != (h, w):
         raise ValueError(f"the guide is {guide.width} x {guide.height}, the map {w} x {h}")
     r = int(radius)
+    if r < 2:
+        raise ValueError(f"the window radius must be at least 2 texels, got {radius}")
     if neighbours not in ("surface", "image"):
         raise ValueError(f"neighbours must be 'surface' or 'image', got {neighbours!r}")
     use_halo = neighbours == "surface"
@@ -637,7 +870,7 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         raise ValueError(f"the window radius {r} exceeds the guide's halo radius {guide.halo_radius}")
     mask = np.asarray(mask, bool) & guide.covered
     F = _Features(guide, mask, r, image=not use_halo)
-    halo = _halo_pairs(guide, mask, r, F) if use_halo else []
+    halo = _halo_pairs(guide, mask, r, F) if use_halo else ()
     y = np.where(mask, ao, 0).astype(np.float32)
     var = np.where(mask, np.asarray(stderr, np.float32) ** 2, 0).astype(np.float32)
     exact = var == 0
@@ -658,7 +891,8 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         return [g if valid is None else np.where(valid, g, zero)]
 
     # The pilot (geometry only, narrow): what the AO term compares, and its variance.
-    Wg, Yg, Vg = _filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=min(r, PILOT_RADIUS), threads=threads)
+    Wg, Yg, Vg = _filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=min(r, PILOT_RADIUS),
+                         threads=threads)
     with np.errstate(invalid="ignore", divide="ignore"):
         G = P(np.where(Wg > 0, Yg / Wg, 0).astype(np.float32))
         vG = P(np.where(Wg > 0, Vg / (Wg * Wg), 0).astype(np.float32))
@@ -689,14 +923,11 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         return out[::-1]
 
     # The candidates F_k = S_k y, their variance, then their bias S_k F_k - F_k (same weights).
-    sums = _filter(F, halo, candidates, [(k, x, p) for k in range(K) for x, p in ((None, 1), (yp, 1), (vp, 2))],
-                   threads=threads)
-    Wk, Yk, Vk = sums[0::3], sums[1::3], sums[2::3]
+    Wk, Yk, Vk, Fk, Sk = _candidates_and_bias(F, halo, candidates, K, yp, vp, y, var, threads=threads,
+                                              bias=bool(use_bias))
     with np.errstate(invalid="ignore", divide="ignore"):
-        Fk = [np.where(Wk[k] > 0, Yk[k] / Wk[k], y).astype(np.float32) for k in range(K)]
         Vark = [np.where(Wk[k] > 0, Vk[k] / (Wk[k] * Wk[k]), var).astype(np.float32) for k in range(K)]
     if use_bias:
-        Sk = _filter(F, halo, candidates, [(k, P(Fk[k]), 1) for k in range(K)], threads=threads)
         with np.errstate(invalid="ignore", divide="ignore"):
             Bk = [(np.float32(bias_scale) * np.where(Wk[k] > 0, Sk[k] / Wk[k] - Fk[k], 0)).astype(np.float32)
                   for k in range(K)]
@@ -731,4 +962,192 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     return res, se, info
 
 
-__all__ = ["surface_guide", "SurfaceGuide", "denoise", "DenoiseInfo", "BANDWIDTHS", "RADIUS"]
+# --- colour attributes (values at vertices) -------------------------------------------------------
+
+#: Candidate bandwidths of the vertex filter, in lengths of the edges around each sample point.
+VERTEX_BANDWIDTHS = (1.0, 1.4, 2.0)
+
+
+def _two_ring(a, b, n):
+    """The pairs (sorted by first, then second; both directions; no self pair) of points joined by
+    one or two of the pairs (a, b) (both directions already, sorted by a)."""
+    count = np.bincount(a, minlength=n)
+    start = np.concatenate([[0], np.cumsum(count)])
+    reps = count[b]
+    first = np.repeat(a, reps)
+    offs = np.arange(int(reps.sum())) - np.repeat(np.cumsum(reps) - reps, reps)
+    third = b[np.repeat(start[b], reps) + offs]
+    aa, cc = np.concatenate([a, first]), np.concatenate([b, third])
+    keep = aa != cc
+    pair = np.unique(np.stack([aa[keep], cc[keep]], axis=1), axis=0)
+    return pair[:, 0], pair[:, 1]
+
+
+def denoise_vertices(mesh, ao, stderr, unit, corners=None, *, bandwidths=VERTEX_BANDWIDTHS,
+                     normal_sharpness=NORMAL_SHARPNESS, range_sigmas=RANGE_SIGMAS, range_flat=RANGE_FLAT,
+                     use_error=True, use_bias=True):
+    """Denoise AO baked at face corners (:func:`core.bake_vertex_ao`) over the mesh's vertex
+    neighbours: the same filter as :func:`denoise`, with the sample points joined by the mesh's edges
+    (up to two edges away) in place of an image window.
+
+    Parameters
+    ----------
+    mesh : the baked core.Mesh; ao, stderr, unit : per corner, as :class:`core.VertexBakeResult`
+        holds them; corners : the (C, 2) corners baked (None: every triangle corner).
+    bandwidths : candidate widths in lengths of the edges around each point (their mean).
+    The others as :func:`denoise`.
+
+    Returns
+    -------
+    (ao, stderr, info) per corner (float32), info a :class:`DenoiseInfo` per corner.
+    """
+    from .vertices import all_corners, unit_pairs
+
+    corners = all_corners(mesh) if corners is None else np.asarray(corners, np.int64)
+    unit = np.asarray(unit, np.int64)
+    n = int(unit.max()) + 1 if len(unit) else 0
+    _, first = np.unique(unit, return_index=True)
+    tri, k = corners[first, 0], corners[first, 1]
+    vert = mesh.triangles[tri, k]
+    p = mesh.positions[vert]
+    nrm = mesh.normals[tri, k]
+    y = np.asarray(ao, np.float64)[first]
+    var = np.asarray(stderr, np.float64)[first] ** 2
+    a1, b1 = unit_pairs(mesh, vert)
+    d1 = np.linalg.norm(p[a1] - p[b1], axis=1)
+    apart = d1 > 0
+    length = np.bincount(a1[apart], d1[apart], minlength=n) / np.maximum(np.bincount(a1[apart], minlength=n), 1)
+    length = np.where(length > 0, length, 1.0)
+    beta = float(normal_sharpness)
+
+    def geometry(a, b):
+        d2 = np.sum((p[a] - p[b]) ** 2, axis=1) / (length[a] * length[b])
+        return d2, np.sum(nrm[a] * nrm[b], axis=1)
+
+    def sums(a, w, x):
+        return np.bincount(a, w * x, minlength=n)
+
+    a2, b2 = _two_ring(a1, b1, n)
+    exact = var == 0
+    if use_error and len(a2):
+        # Trusted zeros, as _trusted_zeros: the bake pools a point's error over its vertex's 1-ring
+        # only, so all 16 samples of 7 points may agree where the AO is 0.97; a zero is trusted
+        # where the 2-ring agrees too.
+        nz = var[b2] > 0
+        cnt = np.bincount(a2[nz], minlength=n)
+        mean = np.bincount(a2[nz], var[b2][nz], minlength=n) / np.maximum(cnt, 1)
+        var = np.where(exact & (cnt > 0), mean, var)
+        exact &= var == 0
+    # Pilot: geometry only, the 1-ring, the narrowest bandwidth.
+    d2, dot = geometry(a1, b1)
+    g = np.exp(-(d2 * (0.5 / bandwidths[0] ** 2) + beta * (1.0 - dot)))
+    Wg = 1.0 + np.bincount(a1, g, minlength=n)
+    G = (y + sums(a1, g, y[b1])) / Wg
+    vG = (var + sums(a1, g * g, var[b1])) / Wg ** 2
+    # Candidates over the 2-ring.
+    d2, dot = geometry(a2, b2)
+    rng = np.maximum((G[a2] - G[b2]) ** 2 / (2 * range_sigmas ** 2 * (vG[a2] + vG[b2]) + 1e-12) - range_flat, 0.0)
+    base = beta * (1.0 - dot) + rng
+    F, V, B = [], [], []
+    for h in bandwidths:
+        w = np.exp(-(d2 * (0.5 / h ** 2) + base))
+        W = 1.0 + np.bincount(a2, w, minlength=n)
+        f = (y + sums(a2, w, y[b2])) / W
+        F.append(f)
+        V.append((var + sums(a2, w * w, var[b2])) / W ** 2)
+        B.append((f + sums(a2, w, f[b2])) / W - f if use_bias else np.zeros(n))
+    if use_error:
+        best, choice = var.copy(), np.zeros(n, np.int8)
+        for i in range(len(bandwidths)):
+            m = V[i] + B[i] ** 2
+            take = m < best
+            best = np.where(take, m, best)
+            choice[take] = i + 1
+        choice[exact] = 0
+    else:
+        choice = np.full(n, len(bandwidths), np.int8)
+    out, vo, bo = y.copy(), var.copy(), np.zeros(n)
+    for i in range(len(bandwidths)):
+        take = choice == i + 1
+        out[take], vo[take], bo[take] = F[i][take], V[i][take], B[i][take]
+    se = np.sqrt(vo + bo * bo)
+    info = DenoiseInfo(choice=choice[unit], variance=vo[unit].astype(np.float32), bias=bo[unit].astype(np.float32),
+                       bandwidths=tuple(float(b) for b in bandwidths))
+    return np.clip(out, 0.0, 1.0)[unit].astype(np.float32), se[unit].astype(np.float32), info
+
+
+# --- UDIM ----------------------------------------------------------------------------------------
+
+def udim_canvas(tiles):
+    """The layout of UDIM ``tiles`` (numbers) in one image: (u0, v0, nu, nv), the least tile
+    column and row and how many tile columns and rows the tiles span. Tiles keep their places in
+    UDIM space, so texels of neighbouring tiles stay neighbours and triangles that cross a tile's
+    border are whole."""
+    from .udim import tile_origin
+
+    origins = np.array([tile_origin(t) for t in tiles])
+    u0, v0 = origins.min(axis=0)
+    nu, nv = origins.max(axis=0) - (u0, v0) + 1
+    return int(u0), int(v0), int(nu), int(nv)
+
+
+def udim_guide(mesh, tiles, resolution, radius=RADIUS):
+    """:func:`surface_guide` of UDIM ``tiles`` (each ``resolution``, as :func:`core.bake_udim`
+    bakes them) laid out in one image (:func:`udim_canvas`): seams between tiles are linked as seams
+    within one."""
+    w, h = _resolution(resolution)
+    u0, v0, nu, nv = udim_canvas(tiles)
+    if mesh.uvs is None:
+        raise MeshError(f"mesh {mesh.name!r} has no UVs: the denoiser's guide needs the UV map the bake used")
+    canvas = copy.copy(mesh)
+    canvas.uvs = (mesh.uvs - np.array([u0, v0], np.float64)) / np.array([nu, nv], np.float64)
+    return surface_guide(canvas, (nu * w, nv * h), radius=radius)
+
+
+def denoise_udim(tile_maps, guide, margin=0, **kw):
+    """Denoise UDIM tiles together, across the seams between them.
+
+    Parameters
+    ----------
+    tile_maps : {tile: (ao, stderr, mask)} (H, W) each, as :func:`core.bake_udim`'s results hold them.
+    guide : :func:`udim_guide` of the same tiles and resolution.
+    margin : re-dilate this many texels per tile (as the bake does), 0: outside texels keep their value.
+    kw : :func:`denoise`'s other arguments.
+
+    Returns
+    -------
+    {tile: (ao, stderr, info)} as :func:`denoise` returns them, one per tile.
+    """
+    from .margin import dilate
+    from .udim import tile_origin
+
+    tiles = sorted(tile_maps)
+    u0, v0, nu, nv = udim_canvas(tiles)
+    h, w = np.asarray(tile_maps[tiles[0]][0]).shape
+    if (guide.height, guide.width) != (nv * h, nu * w):
+        raise ValueError(f"the guide is {guide.width} x {guide.height}, the tiles' canvas {nu * w} x {nv * h}")
+    ao = np.zeros((nv * h, nu * w), np.float32)
+    se = np.zeros_like(ao)
+    mask = np.zeros(ao.shape, bool)
+    blocks = {}
+    for t in tiles:
+        tu, tv = tile_origin(t)
+        b = (slice((tv - v0) * h, (tv - v0 + 1) * h), slice((tu - u0) * w, (tu - u0 + 1) * w))
+        blocks[t] = b
+        a, s, m = (np.asarray(x) for x in tile_maps[t])
+        ao[b], se[b], mask[b] = a, s, m
+    out, err, info = denoise(ao, se, mask, guide, margin=0, **kw)
+    result = {}
+    for t in tiles:
+        b = blocks[t]
+        a = np.where(mask[b], out[b], np.asarray(tile_maps[t][0], np.float32)).astype(np.float32)
+        if margin:
+            dilate(a, mask[b], int(margin), out=a)
+        part = DenoiseInfo(choice=info.choice[b].copy(), variance=info.variance[b].copy(), bias=info.bias[b].copy(),
+                           bandwidths=info.bandwidths)
+        result[t] = (a, err[b].copy(), part)
+    return result
+
+
+__all__ = ["surface_guide", "SurfaceGuide", "denoise", "DenoiseInfo", "BANDWIDTHS", "RADIUS", "udim_canvas",
+           "udim_guide", "denoise_udim", "denoise_vertices", "VERTEX_BANDWIDTHS"]

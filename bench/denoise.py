@@ -1,0 +1,289 @@
+"""Bench section: mc_ao's surface-space denoiser against raw bakes and Open Image Denoise.
+
+On the bench's Suzanne scene (bench/data/scene_suzanne.npz: Suzanne with smart-project UVs over a
+plane and two blocks, as the add-on extracts it), one noisy bake at --samples is denoised by
+core.denoise and by Open Image Denoise (pyoidn: RT, RT with the surface normals as an auxiliary
+image, RTLightmap; each on the bake's image with its 16-texel margin) and compared with a converged
+reference of its own seed that no filter touched: RMSE over the covered texels, over island-border
+texels (covered texels with an uncovered 8-neighbour), and across UV seams (mean |difference| of the
+texel pairs the guide links, against the reference's own), plus the denoiser's z = error / reported
+error. Times: CPU seconds of this process; the cost check is the denoiser (guide + filter) against a
+64-sample bake at --cost-resolution, on the same cores.
+
+Self-contained (core, numpy, pyoidn if installed):
+
+    python bench/denoise.py [--resolution 256] [--samples 16] [--reference-samples 1024]
+                            [--cost-resolution 1024] [--json out.json] [--reference-cache DIR]
+                            [--picture docs/denoise.png] [--equal-error]
+"""
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from core import Mesh, bake_ao  # noqa: E402
+from core import denoise as D  # noqa: E402
+
+SCENE = ROOT / "bench" / "data" / "scene_suzanne.npz"
+
+
+def load_scene(path=SCENE):
+    z = np.load(path)
+    target = Mesh(z["P"], z["F"], z["UV"], z["N"], name="Suzanne")
+    occ = [Mesh(z[f"O{i}P"], z[f"O{i}F"], name=f"occluder{i}") for i in range(int(z["occluders"]))]
+    return target, occ, float(z["distance"])
+
+
+class Clock:
+    """Wall and CPU seconds of a block."""
+
+    def __enter__(self):
+        self.w, self.c = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc):
+        self.wall, self.cpu = time.perf_counter() - self.w, time.process_time() - self.c
+
+
+def border(mask):
+    """Covered texels with an uncovered 8-neighbour (or on the image's edge)."""
+    p = np.pad(mask, 1)
+    out = np.zeros_like(mask)
+    h, w = mask.shape
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            out |= ~p[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+    return out & mask
+
+
+def oidn_filters():
+    try:
+        import pyoidn
+    except Exception as e:  # not installed: the table says so
+        return {}, f"pyoidn not available ({e})"
+
+    def run(ao, filter_type, normal=None):
+        rgb = np.ascontiguousarray(np.repeat(ao[..., None], 3, axis=2).astype(np.float32))
+        kw = {"filter_type": filter_type}
+        if normal is not None:  # RT takes normals only beside an albedo: a white one
+            kw["normal"] = np.ascontiguousarray(normal.astype(np.float32))
+            kw["albedo"] = np.ones_like(rgb)
+        else:
+            kw["hdr"] = filter_type == "RTLightmap"
+        if filter_type == "RTLightmap":
+            kw.pop("hdr", None)
+        return pyoidn.denoise(rgb, **kw)[..., 0]
+
+    return {
+        "OIDN RT": lambda ao, g: run(ao, "RT"),
+        "OIDN RT + normals": lambda ao, g: run(ao, "RT", g.normal),
+        "OIDN RTLightmap": lambda ao, g: run(ao, "RTLightmap"),
+    }, getattr(pyoidn, "__version__", "")
+
+
+class _Ref:
+    def __init__(self, z):
+        self.ao, self.stderr, self.mask = z["ao"], z["stderr"], z["mask"]
+
+
+def picture(path, maps, ref, mask, crop=None):
+    """A PNG: the maps side by side (top), their |error| against the reference x 5 (bottom), on the
+    covered texels (grey elsewhere); row 0 of the maps is v = 0, as core.imageio writes it."""
+    from core.imageio import write_image
+
+    h, w = ref.shape
+    rows, cols = crop or (slice(0, h), slice(0, w))
+    gap = 4
+    tiles = []
+    for img in maps:
+        top = np.where(mask, img, 0.25)[rows, cols]
+        err = np.where(mask, np.minimum(5 * np.abs(img - ref), 1.0), 0.25)[rows, cols]
+        tiles.append(np.concatenate([err, np.full((gap, top.shape[1]), 1.0), top], axis=0))  # bottom row first
+    out = tiles[0]
+    for t in tiles[1:]:
+        out = np.concatenate([out, np.full((out.shape[0], gap), 1.0), t], axis=1)
+    write_image(path, out.astype(np.float32), bits=8)
+
+
+def compare(res, samples, ref_samples, seed=1, threads=2, cache=None, picture_path=None):
+    target, occ, dist = load_scene()
+    path = None if cache is None else Path(cache) / f"denoise_reference_{res}_{ref_samples}_{seed}.npz"
+    if path is not None and path.exists():
+        ref = _Ref(np.load(path))
+    else:
+        ref = bake_ao(target, occ, resolution=res, samples=ref_samples, max_distance=dist, seed=10_000 + seed,
+                      threads=threads)
+        if path is not None:
+            np.savez(path, ao=ref.ao, stderr=ref.stderr, mask=ref.mask)
+    with Clock() as tb:
+        raw = bake_ao(target, occ, resolution=res, samples=samples, max_distance=dist, seed=seed, threads=threads)
+    with Clock() as t8:
+        raw8 = bake_ao(target, occ, resolution=res, samples=8 * samples, max_distance=dist, seed=seed + 1,
+                       threads=threads)
+    mask = raw.mask & ref.mask
+    edge = border(raw.mask) & mask
+    with Clock() as tg:
+        guide = D.surface_guide(target, res)
+    with Clock() as td:
+        dn, dn_se, info = D.denoise(raw.ao, raw.stderr, raw.mask, guide, margin=16)
+    a, b = guide.links[:, 0], guide.links[:, 1]
+    keep = mask.reshape(-1)[a] & mask.reshape(-1)[b]
+    a, b = a[keep], b[keep]
+
+    def metrics(img):
+        e = (img - ref.ao)[mask]
+        f = img.reshape(-1)
+        return {"rmse": float(np.sqrt(np.mean(e ** 2))),
+                "border_rmse": float(np.sqrt(np.mean(((img - ref.ao)[edge]) ** 2))),
+                "seam_mean_abs_diff": float(np.mean(np.abs(f[a] - f[b])))}
+
+    rows = {f"raw {samples}": dict(metrics(raw.ao), cpu=tb.cpu),
+            f"raw {8 * samples}": dict(metrics(raw8.ao), cpu=t8.cpu),
+            f"mc_ao denoise ({samples})": dict(metrics(dn), cpu=tb.cpu + tg.cpu + td.cpu)}
+    filters, version = oidn_filters()
+    shown = [raw.ao, dn]
+    for name, f in filters.items():
+        with Clock() as t:
+            out = f(raw.ao, guide)
+        rows[f"{name} ({samples})"] = dict(metrics(out), cpu=tb.cpu + t.cpu)
+        if name == "OIDN RTLightmap":
+            shown.append(out)
+    if picture_path is not None:
+        picture(picture_path, shown + [ref.ao], ref.ao, mask)
+    r = ref.ao.reshape(-1)
+    seam_ref = float(np.mean(np.abs(r[a] - r[b])))
+    sel = mask & (dn_se > 0)
+    z = (dn - ref.ao)[sel] / np.sqrt(dn_se[sel].astype(np.float64) ** 2 + ref.stderr[sel].astype(np.float64) ** 2)
+    return {"resolution": res, "samples": samples, "reference_samples": ref_samples, "covered": int(mask.sum()),
+            "border_texels": int(edge.sum()), "seam_pairs": int(len(a)), "seam_reference": seam_ref,
+            "reference_rmse_floor": float(np.sqrt(np.mean(ref.stderr[mask].astype(np.float64) ** 2))),
+            "z_sd": float(z.std()), "z_mean": float(z.mean()), "z_over_4": float(np.mean(np.abs(z) > 4)),
+            "choice": np.bincount(info.choice[raw.mask], minlength=len(info.bandwidths) + 1).tolist(),
+            "guide_cpu": tg.cpu, "denoise_cpu": td.cpu, "bake_cpu": tb.cpu, "oidn": version, "rows": rows}
+
+
+def cost(res, threads=2):
+    """CPU seconds of the denoiser (guide + filter) against a 64-sample bake of the same map."""
+    target, occ, dist = load_scene()
+    with Clock() as tb:
+        raw = bake_ao(target, occ, resolution=res, samples=64, max_distance=dist, seed=3, threads=threads)
+    with Clock() as tg:
+        guide = D.surface_guide(target, res)
+    with Clock() as td:
+        D.denoise(raw.ao, raw.stderr, raw.mask, guide)
+    mt = res * res / 1e6
+    return {"resolution": res, "bake64_cpu": tb.cpu, "bake64_wall": tb.wall, "guide_cpu": tg.cpu,
+            "denoise_cpu": td.cpu, "denoise_wall": td.wall, "ratio_cpu": (tg.cpu + td.cpu) / tb.cpu,
+            "cpu_per_megatexel": (tg.cpu + td.cpu) / mt}
+
+
+def equal_error(res, ref_samples, seed=1, threads=2, cache=None, raw_samples=(32, 64, 128, 256),
+                dn_samples=(8, 16, 32)):
+    """RMSE and CPU seconds of raw bakes and of denoised ones at several sample counts (same scene,
+    reference as compare's): the CPU time at which each reaches raw 128's RMSE, by interpolation in
+    log-log between the counts that bracket it."""
+    target, occ, dist = load_scene()
+    path = None if cache is None else Path(cache) / f"denoise_reference_{res}_{ref_samples}_{seed}.npz"
+    if path is not None and path.exists():
+        ref = _Ref(np.load(path))
+    else:
+        ref = bake_ao(target, occ, resolution=res, samples=ref_samples, max_distance=dist, seed=10_000 + seed,
+                      threads=threads)
+    with Clock() as tg:
+        guide = D.surface_guide(target, res)
+    rows = []
+    for kind, counts in (("raw", raw_samples), ("denoised", dn_samples)):
+        for n in counts:
+            with Clock() as tb:
+                r = bake_ao(target, occ, resolution=res, samples=n, max_distance=dist, seed=seed + n, threads=threads)
+            cpu, img = tb.cpu, r.ao
+            if kind == "denoised":
+                with Clock() as td:
+                    img = D.denoise(r.ao, r.stderr, r.mask, guide, threads=threads)[0]
+                cpu += tg.cpu + td.cpu
+            m = r.mask & ref.mask
+            rows.append({"kind": kind, "samples": n, "cpu": cpu,
+                         "rmse": float(np.sqrt(np.mean((img - ref.ao)[m].astype(np.float64) ** 2)))})
+    goal = next(x["rmse"] for x in rows if x["kind"] == "raw" and x["samples"] == 128)
+
+    def time_at(kind):
+        pts = sorted((x["rmse"], x["cpu"]) for x in rows if x["kind"] == kind)
+        for (e0, t0), (e1, t1) in zip(pts, pts[1:]):
+            if e0 <= goal <= e1:
+                f = (math.log(goal) - math.log(e0)) / (math.log(e1) - math.log(e0))
+                return math.exp(math.log(t0) + f * (math.log(t1) - math.log(t0)))
+        return None
+
+    t_raw, t_dn = time_at("raw"), time_at("denoised")
+    return {"resolution": res, "rows": rows, "goal_rmse": goal, "raw_cpu_at_goal": t_raw, "denoised_cpu_at_goal": t_dn,
+            "ratio": (t_dn / t_raw) if t_raw and t_dn else None}
+
+
+def table(c):
+    lines = [f"Suzanne scene {c['resolution']}^2, {c['covered']} covered texels ({c['border_texels']} on island "
+             f"borders, {c['seam_pairs']} texel pairs across UV seams); reference {c['reference_samples']} samples "
+             f"(its own RMSE about {c['reference_rmse_floor']:.4f}); seam |diff| of the reference "
+             f"{c['seam_reference']:.4f}.",
+             "",
+             "| map | RMSE | border RMSE | seam mean abs diff | CPU s (bake + filter) |",
+             "|---|---|---|---|---|"]
+    for name, m in c["rows"].items():
+        lines.append(f"| {name} | {m['rmse']:.4f} | {m['border_rmse']:.4f} | {m['seam_mean_abs_diff']:.4f} | "
+                     f"{m['cpu']:.2f} |")
+    lines += ["", f"mc_ao denoise: z sd {c['z_sd']:.3f}, mean {c['z_mean']:+.3f}, "
+                  f"|z| > 4 on {100 * c['z_over_4']:.2f}% "
+                  f"(z against the reference, both errors); candidates taken (raw, then by bandwidth) {c['choice']}; "
+                  f"guide {c['guide_cpu']:.2f} s + filter {c['denoise_cpu']:.2f} s CPU against the bake's "
+                  f"{c['bake_cpu']:.2f} s."]
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--resolution", type=int, default=256)
+    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--reference-samples", type=int, default=1024)
+    ap.add_argument("--cost-resolution", type=int, default=0, help="also measure the cost at this size (0: skip)")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--reference-cache", type=Path, default=None, help="folder to keep the reference bake in")
+    ap.add_argument("--equal-error", action="store_true",
+                    help="also: CPU time to reach raw 128's RMSE, raw against denoised")
+    ap.add_argument("--picture", type=Path, default=None,
+                    help="PNG: raw, mc_ao denoised, OIDN RTLightmap, reference; |error| x 5 below")
+    a = ap.parse_args(argv)
+    out = {"compare": compare(a.resolution, a.samples, a.reference_samples, threads=a.threads,
+                              cache=a.reference_cache, picture_path=a.picture)}
+    print(table(out["compare"]))
+    if a.cost_resolution:
+        c = cost(a.cost_resolution, threads=a.threads)
+        out["cost"] = c
+        print(f"\nCost at {c['resolution']}^2: guide {c['guide_cpu']:.2f} + filter {c['denoise_cpu']:.2f} CPU s "
+              f"= {100 * c['ratio_cpu']:.0f}% of a 64-sample bake ({c['bake64_cpu']:.2f} CPU s); "
+              f"{c['cpu_per_megatexel']:.2f} CPU s per megatexel.")
+    if a.equal_error:
+        e = equal_error(a.resolution, a.reference_samples, threads=a.threads, cache=a.reference_cache)
+        out["equal_error"] = e
+        print(f"\nEqual error at {e['resolution']}^2 (raw 128's RMSE {e['goal_rmse']:.4f}):")
+        print("| map | samples | RMSE | CPU s |\n|---|---|---|---|")
+        for x in e["rows"]:
+            print(f"| {x['kind']} | {x['samples']} | {x['rmse']:.4f} | {x['cpu']:.2f} |")
+        fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
+        print(f"CPU s to reach it: raw {fmt(e['raw_cpu_at_goal'])}, denoised {fmt(e['denoised_cpu_at_goal'])}"
+              f" (ratio {fmt(e['ratio'])})")
+    if a.json:
+        a.json.write_text(json.dumps(out, indent=1))
+    return out
+
+
+if __name__ == "__main__":
+    main()
