@@ -161,6 +161,25 @@ def _overlap(tri, tu, tv):
 UdimResult = BakeResult
 
 
+def _denoise_tiles(target, resolution, results, margin):
+    """Denoise the tiles' maps together (:func:`core.denoise.denoise_udim`: across the seams between
+    tiles too), keeping each tile's raw map (margin dilated) in ``raw_ao`` and ``raw_stderr``."""
+    from . import denoise as _denoise
+    from .margin import dilate
+
+    tiles = sorted(results)
+    guide = _denoise.udim_guide(target, tiles, resolution)
+    out = _denoise.denoise_udim({t: (results[t].ao, results[t].stderr, results[t].mask) for t in tiles}, guide,
+                                margin=margin)
+    for t in tiles:
+        r = results[t]
+        r.raw_ao, r.raw_stderr = r.ao, r.stderr
+        if margin > 0:
+            r.raw_ao = dilate(r.raw_ao.copy(), r.mask, margin)
+        r.ao, r.stderr = out[t][0], out[t][1]
+        r.metadata.update(denoise=True, margin=margin)
+
+
 def shifted(mesh, tile):
     """``mesh`` with its UVs moved by minus tile ``tile``'s origin (the tile's square onto [0, 1])."""
     du, dv = tile_origin(tile)
@@ -187,6 +206,13 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
     """
     if not isinstance(target, Mesh):
         raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
+    # Denoised across the tiles' seams once every tile is baked (each tile alone would stop at its border).
+    denoise = bool(kwargs.pop("denoise", False))
+    if denoise and kwargs.get("replicates", 2) < 2:
+        raise SettingsError("denoise needs replicates >= 2: the filter weighs each texel by its standard error, "
+                            "which one replicate only bounds")
+    margin = kwargs.get("margin", 16)
+    tile_kwargs = dict(kwargs, margin=0) if denoise else kwargs
     coverage = covered_tiles(target, resolution)
     todo = coverage.tiles if tiles is None else check_tiles(tiles)
     weight = np.array([coverage.area.get(t, 0.0) for t in todo]) + 1e-12
@@ -203,7 +229,9 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
 
         results[tile] = bake_ao(shifted(target, tile), occluders, resolution, samples, seed=tile_seed(seed, tile),
                                 progress=tile_progress, cancel=cancel,
-                                on_tile=None if on_tile is None else tile_block, empty_ok=True, **kwargs)
+                                on_tile=None if on_tile is None else tile_block, empty_ok=True, **tile_kwargs)
+    if denoise and results:
+        _denoise_tiles(target, resolution, results, margin)
     report = {}
     for r in results.values():
         for key, value in r.report.items():

@@ -177,7 +177,7 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
                    max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
                    ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None,
                    chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False, workers=1, ground=None,
-                   quantity="ao"):
+                   quantity="ao", denoise=False):
     """Bake ambient occlusion at the face corners of ``target`` (Cycles' colour-attribute bake).
 
     Parameters
@@ -194,6 +194,10 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
         (its vertex and the vertices that share an edge with it: :class:`Neighbours`), as a
         texel's is pooled over the texels around it.
     ground, quantity : as for :func:`core.bake_ao` ('auto': the target's lowest point).
+    denoise : filter the corners' estimates over the mesh (:func:`core.denoise.denoise_vertices`: the
+        points up to two edges away, each weighed by its error): ``ao`` and ``stderr`` the denoised
+        values and their error, ``raw_ao`` and ``raw_stderr`` the estimates before it (needs
+        ``replicates`` >= 2).
     The other parameters are those of :func:`core.bake_ao`; progress is reported per chunk of
     rays and ``on_rays`` batches name the sample point (``texels``) of each ray.
 
@@ -211,6 +215,9 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
                                     ground=ground, quantity=quantity)
     if bent_normals and s.quantity != "ao":
         raise SettingsError(f"bent normals come with quantity='ao' only, not {s.quantity!r}: bake them in an AO bake")
+    if denoise and s.replicates < 2:
+        raise SettingsError("denoise needs replicates >= 2: the filter weighs each point by its standard error, "
+                            "which one replicate only bounds")
     workers = _workers.check_workers(workers)
     occluders = list(occluders or ())
     pro = Prologue(target, occluders, s, cancel, uvs=False)
@@ -258,8 +265,15 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     if fallback is not None:
         report.setdefault("warnings", []).append(
             f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
-    return BakeResult(ao=ao[unit], mask=np.ones(len(unit), bool), stderr=se[unit], samples=count[unit], unit=unit,
-                      rays=rays, seconds=time.perf_counter() - t_start, trace_seconds=trace_s,
+    out_ao, out_se, raw_ao, raw_se = ao[unit], se[unit], None, None
+    if denoise:
+        from . import denoise as _denoise
+
+        raw_ao, raw_se = out_ao, out_se
+        out_ao, out_se, _ = _denoise.denoise_vertices(pro.target, raw_ao, raw_se, unit, corners)
+        metadata["denoise"] = True
+    return BakeResult(ao=out_ao, mask=np.ones(len(unit), bool), stderr=out_se, samples=count[unit], unit=unit,
+                      raw_ao=raw_ao, raw_stderr=raw_se, rays=rays, seconds=time.perf_counter() - t_start, trace_seconds=trace_s,
                       threads=s.threads, trace_cpu_seconds=trace_cpu, metadata=metadata,
                       report=report, bent=None if bent is None else bent[unit])
 

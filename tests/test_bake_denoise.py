@@ -45,3 +45,20 @@ def test_udim_tiles_are_denoised_each():
 def test_one_replicate_is_refused_with_denoise():
     with pytest.raises(SettingsError, match="denoise needs replicates"):
         bake_ao(plane(), resolution=8, samples=8, replicates=1, denoise=True)
+
+
+def test_vertex_bakes_are_denoised_over_the_mesh_and_keep_the_raw_values():
+    from core import bake_vertex_ao
+
+    n = 8
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    P = np.stack([x, y, np.zeros_like(x)], -1).reshape(-1, 3)
+    i = np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]
+    F = np.concatenate([np.stack([i, i + 1, i + n + 2], -1).reshape(-1, 3),
+                        np.stack([i, i + n + 2, i + n + 1], -1).reshape(-1, 3)])
+    grid = Mesh(P, F, name="grid")
+    raw = bake_vertex_ao(grid, [lid()], samples=16, seed=2, threads=1)
+    r = bake_vertex_ao(grid, [lid()], samples=16, seed=2, threads=1, denoise=True)
+    assert np.array_equal(r.raw_ao, raw.ao) and np.array_equal(r.raw_stderr, raw.stderr)
+    want, want_se, _ = D.denoise_vertices(grid, raw.ao, raw.stderr, raw.unit)
+    assert np.allclose(r.ao, want) and not np.array_equal(r.ao, raw.ao)

@@ -12,9 +12,9 @@ error. Times: CPU seconds of this process; the cost check is the denoiser (guide
 
 Self-contained (core, numpy, pyoidn if installed):
 
-    python bench/denoise.py [--resolution 256] [--samples 16] [--reference-samples 1024]
-                            [--cost-resolution 1024] [--json out.json] [--reference-cache DIR]
-                            [--picture docs/denoise.png] [--equal-error]
+    .venv/bin/python -m bench.sections.denoise [--resolution 256] [--samples 16] [--reference-samples 1024]
+                                             [--cost-resolution 1024] [--json out.json] [--reference-cache DIR]
+                                             [--picture docs/denoise.png] [--equal-error]
 """
 
 import argparse
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
