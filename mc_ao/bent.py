@@ -112,6 +112,10 @@ def write_files(rgb, files, metadata):
     except OSError as exc:
         return written, [(f.path, exc) for f in files]
     for f in files:
+        problem = jobs.kind_problem(f.path)
+        if problem is not None:
+            failures.append((f.path, corelink.load("errors").FileWriteError(problem)))
+            continue
         try:
             if jobs.oiio_available():
                 corelink.load("imageio").write_image(f.path, rgb, bits=f.bits, metadata=metadata)

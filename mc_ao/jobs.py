@@ -399,8 +399,30 @@ def write_outputs(result, files, metadata=None):
             return [f.path, f.stderr_path]
 
     for f in files:
+        problem = kind_problem(f.path, f.stderr_path)
+        if problem is not None:
+            failures.append((f.path, corelink.load("errors").FileWriteError(problem)))
+            continue
         try:
             written.extend(write(f))
         except (core.McAoError, OSError, RuntimeError) as exc:
             failures.append((f.path, exc))
     return written, failures
+
+
+def kind_problem(*paths):
+    """The first of ``paths`` (None ones skipped) that holds a file of another kind than a bake writes
+    there, as a message; None when every one may be written (mc_ao.filecheck.replace_problem)."""
+    from . import filecheck
+
+    for path in paths:
+        problem = path and filecheck.replace_problem(path)
+        if problem:
+            return problem
+    return None
+
+
+def planned_kind_problems(files):
+    """Every planned file (``{image name: [OutputFile]}``) that would replace a file of another kind:
+    checked before baking, so that the bake is not spent on files that cannot be written."""
+    return [p for entry in files.values() for f in entry for p in [kind_problem(f.path, f.stderr_path)] if p]

@@ -249,6 +249,13 @@ class BakeSession:
                     targets.check_images(job, self.settings)
                 except images.ImageError as exc:
                     raise images.ImageError(f"{job.object_name}: {exc}") from None
+            if self.output_dir is not None:
+                files = targets.output_files(self.settings, self.output_dir, planned,
+                                             [(self.settings.file_format, self.settings.file_bits)],
+                                             stderr=self.settings.error_map)
+                problems = jobs.planned_kind_problems(files)
+                if problems:
+                    raise OutputError("; ".join(problems) + "; nothing was baked")
         except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
             self.report({"ERROR"}, str(exc))
             return False

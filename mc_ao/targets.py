@@ -156,6 +156,10 @@ def write_files(job, result, files, metadata, settings):
         positions, sizes, verts, ao = vertex_colors.ply_data(result, data, settings.attribute_domain)
         meta = dict(result.metadata, **meta, content="ao")
         for f in files[job.image_name]:
+            problem = jobs.kind_problem(f.path)
+            if problem is not None:
+                failures.append((f.path, corelink.load("errors").FileWriteError(problem)))
+                continue
             try:
                 jobs.make_output_folder(os.path.dirname(f.path))
                 plyio.write_ply(f.path, positions, sizes, verts, ao, meta)

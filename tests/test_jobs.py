@@ -155,3 +155,20 @@ def test_image_names_fit_blenders_limit_and_stay_apart(limit):
     long_template = BakeSettings(image_name="{object}_" + "t" * 300)
     assert len(long_template.image_name_for("Cube", limit).encode()) <= limit
     assert BakeSettings(image_name="{object}&{object}").image_name_for("é" * 100, limit).count("&") == 1
+
+
+def test_a_file_of_another_kind_is_not_written_over_at_write_time(tmp_path):
+    """Files found only after the bake (UDIM tiles) get the planning's check where they are written."""
+    import types
+
+    pytest.importorskip("OpenImageIO")
+    result = types.SimpleNamespace(ao=np.full((2, 2), 0.5, np.float32), stderr=np.zeros((2, 2), np.float32),
+                                   metadata={})
+    blend = tmp_path / "Ground_AO.1001.png"
+    blend.write_bytes(b"BLENDER-v402 somebody's scene")
+    fine = tmp_path / "Ground_AO.1002.png"
+    files = [jobs.OutputFile(str(blend), "PNG", 8), jobs.OutputFile(str(fine), "PNG", 8)]
+    written, failures = jobs.write_outputs(result, files)
+    assert written == [str(fine)] and [p for p, _ in failures] == [str(blend)]
+    assert "is a .blend file, not a PNG image" in str(failures[0][1])
+    assert blend.read_bytes() == b"BLENDER-v402 somebody's scene"
