@@ -84,7 +84,7 @@ if __name__ == "__main__":
 
 
 def test_a_library_baked_by_the_previous_version_is_not_baked_again(tmp_path):
-    """tests/data/previous_library: a manifest, its .blend file and the output the previous version
+    """tests/data/previous_library: a manifest, its .blend file and, in baked/, the output the previous version
     baked from them (its task summary and files). The new code finds every task done."""
     import shutil
     import subprocess
@@ -96,9 +96,9 @@ def test_a_library_baked_by_the_previous_version_is_not_baked_again(tmp_path):
     shutil.copytree(ROOT / "tests" / "data" / "previous_library", library)
     for name, mtime_ns in json.loads((library / "mtimes.json").read_text()).items():
         os.utime(library / name, ns=(mtime_ns, mtime_ns))  # as it was when baked: part of the fingerprint
-    files = {p: p.read_bytes() for p in (library / "out").rglob("*") if p.is_file()}
+    files = {p: p.read_bytes() for p in (library / "baked").rglob("*") if p.is_file()}
     proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "bake_batch.py"), str(library / "manifest.toml"),
-                           "--output", str(library / "out"), "--blender", "bpy"],
+                           "--output", str(library / "baked"), "--blender", "bpy"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "0 baked, 1 already done, 0 failed" in proc.stdout, proc.stdout
