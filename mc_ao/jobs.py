@@ -2,7 +2,7 @@
 
 - :class:`BakeRun`: the bake's jobs, one after another, on a worker thread that reports through a
   queue of messages (the operator's modal and the script's loop read the same messages).
-- :func:`check_settings`: every bake setting against the core's limits, before any work.
+- :func:`check_settings`: every bake setting against its mc_ao.schema entry, before any work.
 - :func:`output_files`: where each job's files go. File names come from the jobs' image names (which
   come from object names, chosen by whoever made the .blend file) through
   :func:`core.filenames.unique_file_stems` (one safe, distinct stem per image, also where names
@@ -17,7 +17,6 @@
 """
 
 import importlib.util
-import math
 import os
 import queue
 import threading
@@ -27,15 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import corelink
-from .settings import BENT_SPACES, DISTRIBUTIONS, DOMAINS, FILE_FORMATS, OCCLUDERS, SOURCES, TARGETS
+from . import corelink, schema
+from .settings import FILE_FORMATS
 
 # The image file formats of the Format setting (PLY is a colour-attribute bake's own, chosen by its target).
 IMAGE_FORMATS = tuple(f for f in FILE_FORMATS if f != "PLY")
-
-# The most threads a bake may ask for: far above any machine's cores, far below what would exhaust
-# the process starting them.
-MAX_THREADS = 1024
 
 # Bakes in flight (operators.is_running() and unregister() read it).
 RUNS = set()
@@ -152,72 +147,11 @@ def empty_bake_problem(result):
 def check_settings(settings):
     """Problems with ``settings`` (a BakeSettings) as ``[(field, message), ...]``; empty when it can bake.
 
-    The limits are the core's (core.settings.MAX_SAMPLES, MAX_RESOLUTION; the seed's is the largest
-    the core's random streams take, MAX_SEED), checked before anything is baked so that a bad value
-    costs nothing. Messages say what is allowed, not the field's name:
-    the caller names the field its own way (``--samples``, the Samples property).
+    Every setting against its mc_ao.schema entry (the core's limits, read from core.settings), checked
+    before anything is baked so that a bad value costs nothing. Messages say what is allowed, not the
+    field's name: the caller names the field its own way (``--samples``, the Samples property).
     """
-    bake = corelink.load("settings")
-    problems = []
-
-    def integer(field, lo, hi=None, what=""):
-        value = getattr(settings, field)
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            problems.append((field, f"must be a whole number, not {value!r}"))
-        elif value < lo or (hi is not None and value > hi):
-            span = f"at least {lo}" if hi is None else f"from {lo} to {hi}"
-            problems.append((field, f"must be {span}{what}, not {value}"))
-
-    integer("samples", 1, bake.MAX_SAMPLES)
-    integer("min_samples", 1, bake.MAX_SAMPLES)
-    integer("resolution", 1, bake.MAX_RESOLUTION)
-    integer("height", 0, bake.MAX_RESOLUTION, " (0 = as wide as high)")
-    integer("margin", 0, bake.MAX_RESOLUTION)
-    integer("seed", 0, max_seed())
-    integer("threads", 0, MAX_THREADS, " (0 = every core)")
-    target_error = _number(settings.target_error)
-    if not (target_error is not None and math.isfinite(target_error) and target_error >= 0):
-        problems.append(("target_error", f"must be a finite number >= 0 (0 = adaptive sampling off), "
-                                         f"not {settings.target_error!r}"))
-    max_distance = _number(settings.max_distance)
-    if not (max_distance is not None and max_distance >= 0):  # NaN fails too; inf means unlimited
-        problems.append(("max_distance", f"must be a distance >= 0 (0 or inf = unlimited), "
-                                         f"not {settings.max_distance!r}"))
-    # Selected to Active: the core's own rule for these (core.highpoly), checked for every bake so that
-    # a bad value is refused before the mode is switched on too.
-    extrusion = _number(getattr(settings, "cage_extrusion", 0.0))
-    if not (extrusion is not None and math.isfinite(extrusion) and extrusion >= 0):
-        problems.append(("cage_extrusion", f"must be a finite distance >= 0, not {settings.cage_extrusion!r}"))
-    ray_distance = _number(getattr(settings, "max_ray_distance", 0.0))
-    if not (ray_distance is not None and ray_distance >= 0):
-        problems.append(("max_ray_distance", f"must be a distance >= 0 (0 = no limit), "
-                                             f"not {settings.max_ray_distance!r}"))
-    for field, allowed in (("source", SOURCES), ("distribution", DISTRIBUTIONS), ("occluders", OCCLUDERS),
-                           ("file_format", IMAGE_FORMATS), ("target", TARGETS), ("attribute_domain", DOMAINS),
-                           ("bent_space", BENT_SPACES)):
-        if getattr(settings, field) not in allowed:
-            problems.append((field, f"must be one of {', '.join(allowed)}, not {getattr(settings, field)!r}"))
-    if settings.target == "VERTEX_COLORS" and not str(settings.attribute_name).strip():
-        problems.append(("attribute_name", "must name the color attribute to bake into, not be empty"))
-    if settings.target == "VERTEX_COLORS" and settings.error_map:
-        problems.append(("error_map", "is for image textures: a color-attribute bake has no image to hold the "
-                                      "standard error; turn it off (adaptive sampling still uses the error)"))
-    return problems
-
-
-def max_seed():
-    """The largest seed: the core's MAX_SEED where it has one, else 2**64 - 1 (its random streams
-    take the seed as one uint64 word; a larger one raised OverflowError deep in the bake)."""
-    return getattr(corelink.load("settings"), "MAX_SEED", (1 << 64) - 1)
-
-
-def _number(value):
-    if isinstance(value, bool):
-        return None
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return None
+    return schema.problems(settings)
 
 
 def settings_record(settings):

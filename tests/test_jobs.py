@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao
-from core.bake import MAX_RESOLUTION, MAX_SAMPLES
+from core.settings import MAX_RESOLUTION, MAX_SAMPLES
 from mc_ao import jobs
 from mc_ao.settings import BakeSettings
 
@@ -45,7 +45,7 @@ def test_the_defaults_pass_the_checks():
     ("max_distance", -1.0, "must be a distance >= 0 (0 or inf = unlimited), not -1.0"),
     ("max_distance", math.nan, "must be a distance >= 0 (0 or inf = unlimited), not nan"),
     ("max_distance", -math.inf, "must be a distance >= 0 (0 or inf = unlimited), not -inf"),
-    ("source", "SOBOLISH", "must be one of SOBOL, STRATIFIED, INDEPENDENT, HALTON, not 'SOBOLISH'"),
+    ("source", "SOBOLISH", "must be one of SOBOL, HALTON, STRATIFIED, INDEPENDENT, not 'SOBOLISH'"),
     ("file_format", "JPEG", "must be one of PNG, OPEN_EXR, TIFF, not 'JPEG'"),
 ])
 def test_each_bad_setting_is_named(field, value, message):

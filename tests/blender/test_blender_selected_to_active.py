@@ -343,7 +343,7 @@ def test_settings_are_checked_before_baking(bpy, scene, capfd):
     assert jobs.check_settings(BakeSettings(cage_extrusion=-1.0)) == [
         ("cage_extrusion", "must be a finite distance >= 0, not -1.0")]
     assert jobs.check_settings(BakeSettings(max_ray_distance=float("nan"))) == [
-        ("max_ray_distance", "must be a distance >= 0 (0 = no limit), not nan")]
+        ("max_ray_distance", "must be a distance >= 0 (0 or inf = unlimited), not nan")]
     props = bpy.context.scene.mc_ao.bl_rna.properties
     assert props["cage_extrusion"].hard_min == props["max_ray_distance"].hard_min == 0.0
     # Cycles' names, so that users know them.
