@@ -745,7 +745,7 @@ def run(argv, in_blender, summary):
     summary.settings = record = jobs.settings_record(settings)
     if args.match_suffix:  # the summary's record only: file metadata holds plain values
         summary.settings = dict(record, match_suffix=list(args.match_suffix))
-    return bake(plan, files, settings, record, args, summary)
+    return bake(plan, files, settings, args, summary)
 
 
 def planned_paths(files):
@@ -765,15 +765,10 @@ def s2a_record(job, result=None):
             "missed_texels": int(report.get("missed_texels", 0))}
 
 
-def s2a_metadata(job):
-    """What a Selected to Active job adds to its files' metadata: the high-poly objects and the cage."""
-    if not job.selected_to_active:
-        return {}
-    return {"highpoly": ", ".join(h.name for h in job.highpoly), "cage": job.cage.name if job.cage is not None else ""}
-
-
-def bake(plan, files, settings, record, args, summary):
+def bake(plan, files, settings, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
+    import bpy
+
     from . import baking, interrupts, jobs, selected_to_active, targets
 
     progress = Progress(enabled=not args.quiet)
@@ -812,12 +807,11 @@ def bake(plan, files, settings, record, args, summary):
                 with interrupts.held_off():  # a Ctrl-C now: this object's files all written, then the cancel
                     progress.end()
                     job = plan[i]
+                    metadata = jobs.file_metadata(settings, job, bpy.data.filepath)
                     if targets.custom(settings) or settings.bent_normals:  # issue 14: tiles, PLY, bent normals
-                        written, errors = targets.write_files(job, result, files, dict(record, object=job.object_name),
-                                                              settings)
+                        written, errors = targets.write_files(job, result, files, metadata, settings)
                     else:
-                        written, errors = jobs.write_outputs(result, files[job.image_name],
-                                                             dict(record, object=job.object_name, **s2a_metadata(job)))
+                        written, errors = jobs.write_outputs(result, files[job.image_name], metadata)
                     if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
                         errors = attribute_errors(job, result, settings)
                     for note in baking.input_notes(result):

@@ -191,6 +191,18 @@ def settings_record(settings):
     return record
 
 
+def file_metadata(settings, job, blend_path):
+    """What every file of ``job`` carries, whoever writes it (the operator, the script, the batch): the
+    settings record, the object, the .blend file's name, and a Selected to Active bake's high-poly
+    objects and cage. One dict for all three, so that they write the same bytes."""
+    metadata = dict(settings_record(settings), object=job.object_name,
+                    blend=os.path.basename(os.fspath(blend_path or "")))
+    if getattr(job, "selected_to_active", False):
+        metadata.update(highpoly=", ".join(h.name for h in job.highpoly),
+                        cage=job.cage.name if job.cage is not None else "")
+    return metadata
+
+
 # -- files -----------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)

@@ -456,8 +456,7 @@ class BakeSession:
 
     def _save(self, job, result):
         """Write the finished job's file into the output folder; report where, or why not."""
-        metadata = dict(jobs.settings_record(self.settings), object=job.object_name,
-                        blend=bpy.path.basename(bpy.data.filepath))
+        metadata = jobs.file_metadata(self.settings, job, bpy.data.filepath)
         try:
             files = self._output_files()[job.image_name]
             written, failures = jobs.write_outputs(result, files, metadata)

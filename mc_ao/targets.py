@@ -264,8 +264,7 @@ def _save(session, job, result):
     from . import jobs
 
     settings = session.settings
-    metadata = dict(jobs.settings_record(settings), object=job.object_name,
-                    blend=bpy.path.basename(bpy.data.filepath))
+    metadata = jobs.file_metadata(settings, job, bpy.data.filepath)
     try:
         files = output_files(settings, session.output_dir, session.run.jobs,
                              [(settings.file_format, settings.file_bits)], stderr=settings.error_map)
@@ -354,9 +353,8 @@ def save_bent(session, job, result, saved_ao):
     name = bent_name(job, settings)
     files = output_files(settings, session.output_dir, session.run.jobs,
                          [(settings.file_format, settings.file_bits)])[name]
-    metadata = dict(result.metadata, **jobs.settings_record(settings), object=job.object_name,
-                    content="bent_normal", bent_space=settings.bent_space.lower(),
-                    blend=bpy.path.basename(bpy.data.filepath))
+    metadata = dict(result.metadata, **jobs.file_metadata(settings, job, bpy.data.filepath),
+                    content="bent_normal", bent_space=settings.bent_space.lower())
     written, failures = bent.write_files(bent.encoded(result, settings), files, metadata)
     for path, exc in failures:
         session.file_errors += 1
