@@ -72,7 +72,7 @@ import time
 import traceback
 from pathlib import Path
 
-from . import corelink, schema
+from . import corelink, filecheck, schema
 from .terminal import EscapingStream, escape
 
 # --format choice -> Blender's file format name (mc_ao.settings.FILE_FORMATS)
@@ -542,7 +542,7 @@ def check_save(args, input_blend):
                                        replaces=("a .blend file",))
     if problem is not None:
         raise UsageError(f"--save {str(save)!r}: {problem}; nothing was baked")
-    problem = jobs.folder_problem(save.parent if str(save.parent) else ".")
+    problem = filecheck.folder_problem(save.parent if str(save.parent) else ".")
     if problem is not None:
         raise UsageError(f"cannot save {str(save)!r}: {problem}; nothing was baked")
 
@@ -605,12 +605,12 @@ def check_paths(args, summary):
     atomicfile = corelink.load("atomicfile")
     from . import jobs
 
-    problem = jobs.folder_problem(args.output)
+    problem = filecheck.folder_problem(args.output)
     if problem is not None:
         raise UsageError(f"cannot write to the output folder '{args.output}': {problem}; nothing was baked")
     if args.summary_json is not None:
         path = args.summary_json
-        problem = summary.problem() or jobs.folder_problem(path.parent)
+        problem = summary.problem() or filecheck.folder_problem(path.parent)
         if problem is None and atomicfile.read_only(path):
             problem = "it is read-only"
         if problem is not None:
@@ -719,20 +719,20 @@ def run(argv, in_blender, summary):
     if not jobs.oiio_available():
         print("bake_ao: no OpenImageIO in this Python; writing files with Blender's image writer", file=sys.stderr)
 
-    from . import targets
+    from . import outputs
 
     check_save(args, bpy.data.filepath)
     try:
         if settings.use_selected_to_active:
             plan = plan_selected_to_active(bpy, args, settings)
         else:
-            objects = pick_objects(bpy, args.objects, baking, needs_uvs=targets.needs_uvs(settings))
+            objects = pick_objects(bpy, args.objects, baking, needs_uvs=baking.needs_uvs(settings))
             plan = baking.plan(
                 bpy.context.evaluated_depsgraph_get(), objects, settings,
                 selected=objects, view_layer=bpy.context.view_layer,
             )
         formats = [(FORMATS[f], BITS[args.bits] if args.bits else None) for f in args.format]
-        files = targets.output_files(settings, str(args.output), plan, formats, stderr=args.stderr)
+        files = outputs.output_files(settings, str(args.output), plan, formats, stderr=args.stderr)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
     problems = jobs.planned_kind_problems(files)
@@ -769,7 +769,7 @@ def bake(plan, files, settings, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
     import bpy
 
-    from . import baking, interrupts, jobs, selected_to_active, targets
+    from . import baking, interrupts, jobs, outputs
 
     progress = Progress(enabled=not args.quiet)
     run = jobs.BakeRun(plan, settings, args.threads or None, live=False)
@@ -808,8 +808,8 @@ def bake(plan, files, settings, args, summary):
                     progress.end()
                     job = plan[i]
                     metadata = jobs.file_metadata(settings, job, bpy.data.filepath)
-                    if targets.custom(settings) or settings.bent_normals:  # issue 14: tiles, PLY, bent normals
-                        written, errors = targets.write_files(job, result, files, metadata, settings)
+                    if outputs.custom(settings) or settings.bent_normals:  # tiles, PLY, bent normals
+                        written, errors = outputs.write_files(job, result, files, metadata, settings)
                     else:
                         written, errors = jobs.write_outputs(result, files[job.image_name], metadata)
                     if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
@@ -818,7 +818,7 @@ def bake(plan, files, settings, args, summary):
                         print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
                     if job.selected_to_active:
                         print(f"bake_ao: {escape(job.object_name)}: from {', '.join(escape(h.name) for h in job.highpoly)}"
-                              f"{selected_to_active.miss_summary(result)}", file=sys.stderr)
+                              f"{baking.miss_summary(result)}", file=sys.stderr)
                     per_texel, rate = baking.throughput(result)
                     if errors:
                         failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,

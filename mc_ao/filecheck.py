@@ -16,7 +16,7 @@ import json
 import os
 import struct
 
-__all__ = ["file_kind", "output_problem", "replace_problem", "check_blend_complete", "same_file", "BlendFileError",
+__all__ = ["file_kind", "folder_problem", "output_problem", "replace_problem", "check_blend_complete", "same_file", "BlendFileError",
            "KIND_OF_EXTENSION"]
 
 _ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
@@ -121,6 +121,29 @@ def replace_problem(path):
         return None
     return (f"{os.fspath(path)!r} is {found}, not {expected}: it was left as it is; move it away, or choose "
             "another folder or name")
+
+
+def folder_problem(folder):
+    """Why files cannot be written into ``folder``, or None when they can.
+
+    A folder that does not exist yet is fine where it can be created (it is created before the
+    first file is written): what counts is its nearest existing ancestor, which must be a folder
+    that this process may write. Checked before a bake, so that a typo in the folder does not
+    cost the bake; a write can still fail later (a full disk), and then the existing file is
+    left as it was.
+    """
+    path = os.path.abspath(folder)
+    existing = path
+    while not os.path.exists(existing):
+        parent = os.path.dirname(existing)
+        if parent == existing:
+            break
+        existing = parent
+    if not os.path.isdir(existing):
+        return "it is a file, not a folder" if existing == path else f"{existing!r} is a file, not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return "it is not writable" if existing == path else f"{existing!r} is not writable"
+    return None
 
 
 # -- .blend files -------------------------------------------------------------------------------------

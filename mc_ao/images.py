@@ -6,7 +6,6 @@ import bpy
 import numpy as np
 
 from . import corelink
-from .jobs import folder_problem as output_dir_problem  # noqa: F401 (the operator checks its folder)
 
 
 class ImageError(ValueError):

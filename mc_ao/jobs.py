@@ -176,7 +176,8 @@ def settings_record(settings):
         "resolution": f"{w}x{h}",
         "occluders": settings.occluders.lower(),
         "uv_map": settings.uv_map,
-        # Issue 14, recorded only when on (a plain bake's record is as before).
+        # UDIM tiles, colour attributes, bent normals: recorded only when on (a plain bake's record
+        # stays as it was, so that its files still count as done).
         **({"udim": True} if settings.use_udim else {}),
         **({"target": "vertex_colors", "attribute": settings.attribute_name,
             "domain": settings.attribute_domain.lower()} if settings.target == "VERTEX_COLORS" else {}),
@@ -265,29 +266,6 @@ def output_files(folder, image_names, formats, stderr=False):
             files.append(OutputFile(path, file_format, bits, stderr_path))
         plan[name] = files
     return plan
-
-
-def folder_problem(folder):
-    """Why files cannot be written into ``folder``, or None when they can.
-
-    A folder that does not exist yet is fine where it can be created (it is created before the
-    first file is written): what counts is its nearest existing ancestor, which must be a folder
-    that this process may write. Checked before a bake, so that a typo in the folder does not
-    cost the bake; a write can still fail later (a full disk), and then the existing file is
-    left as it was.
-    """
-    path = os.path.abspath(folder)
-    existing = path
-    while not os.path.exists(existing):
-        parent = os.path.dirname(existing)
-        if parent == existing:
-            break
-        existing = parent
-    if not os.path.isdir(existing):
-        return "it is a file, not a folder" if existing == path else f"{existing!r} is a file, not a folder"
-    if not os.access(existing, os.W_OK | os.X_OK):
-        return "it is not writable" if existing == path else f"{existing!r} is not writable"
-    return None
 
 
 def oiio_available():

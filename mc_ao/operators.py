@@ -35,7 +35,7 @@ import traceback
 import bpy
 import numpy as np
 
-from . import baking, corelink, images, jobs, selected_to_active, targets
+from . import baking, corelink, filecheck, images, jobs, outputs, selected_to_active
 from .extract import ExtractError
 from .jobs import BakeRun
 from .properties import resolve_threads
@@ -68,7 +68,7 @@ def _output_dir(settings):
             "which is not saved yet; save it or choose an absolute folder"
         )
     folder = bpy.path.abspath(settings.output_dir)
-    problem = images.output_dir_problem(folder)
+    problem = filecheck.folder_problem(folder)
     if problem is not None:
         raise OutputError(f"Cannot save into the output folder {folder!r}: {problem}; nothing was baked")
     return folder
@@ -137,7 +137,7 @@ def summary(job, result):
     sources = f" from {', '.join(h.name for h in job.highpoly)}" if getattr(job, "highpoly", None) else ""
     return (
         f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r} in {result.seconds:.2f} s, "
-        f"{per_texel:.0f} samples per texel, {rate:.2f} M rays/s{selected_to_active.miss_summary(result)}"
+        f"{per_texel:.0f} samples per texel, {rate:.2f} M rays/s{baking.miss_summary(result)}"
     )
 
 
@@ -216,7 +216,7 @@ class BakeSession:
             return False
         selected = list(context.selected_objects)
         to_active = self.settings.use_selected_to_active
-        needs_uvs = targets.needs_uvs(self.settings)
+        needs_uvs = baking.needs_uvs(self.settings)
         if to_active:
             # Selected to Active: the active object from the other selected ones (their cage aside).
             active, cage = context.active_object, selected_to_active.cage_of(self.settings)
@@ -246,11 +246,11 @@ class BakeSession:
                 )
             for job in planned:
                 try:
-                    targets.check_images(job, self.settings)
+                    outputs.check_images(job, self.settings)
                 except images.ImageError as exc:
                     raise images.ImageError(f"{job.object_name}: {exc}") from None
             if self.output_dir is not None:
-                files = targets.output_files(self.settings, self.output_dir, planned,
+                files = outputs.output_files(self.settings, self.output_dir, planned,
                                              [(self.settings.file_format, self.settings.file_bits)],
                                              stderr=self.settings.error_map)
                 problems = jobs.planned_kind_problems(files)
@@ -269,7 +269,7 @@ class BakeSession:
                 self._warn(f"{job.object_name}: {note}")
         w, h = self.settings.size
         # UDIM tiles and colour attributes are written when their object's bake finishes.
-        self.live = live and w * h <= LIVE_MAX_TEXELS and not targets.custom(self.settings)
+        self.live = live and w * h <= LIVE_MAX_TEXELS and not outputs.custom(self.settings)
         self.errors = 0  # objects whose bake failed
         self.file_errors = 0  # files not saved (their objects are baked)
         self.finished = []
@@ -389,8 +389,10 @@ class BakeSession:
 
     def _finish_job(self, context, i, result):
         """A job's result into its image for good, its file saved; its warnings, then its summary."""
-        if targets.custom(self.settings):  # colour attributes, UDIM tiles (issue 14)
-            return targets.finish_job(self, context, i, result)
+        if outputs.custom(self.settings):  # colour attributes, UDIM tiles
+            outputs.finish_job(self, context, i, result)
+            _redraw(context)
+            return
         job = self.run.jobs[i]
         self.pending.discard(i)
         self.buffers.pop(i, None)
@@ -403,14 +405,14 @@ class BakeSession:
             return
         self.finished.append(i)
         self.results.append(result)
-        if not targets.finish_bent(self, i, result):  # "<object>_BentNormal" beside the AO (issue 14)
+        if not outputs.finish_bent(self, i, result):  # "<object>_BentNormal" beside the AO
             self.unsummarised_errors += 1
         saved = {}
         if self.output_dir is not None:
             saved = self._save(job, result)
             if not saved:  # reported as an error; counted in the summary, which comes after it
                 self.unsummarised_errors += 1
-            targets.save_bent(self, job, result, saved.get("ao"))
+            outputs.save_bent(self, job, result, saved.get("ao"))
         self._keep(job, job.image_name, result.ao, saved.get("ao"))
         if self.settings.error_map:
             self._error_map(job, result, saved.get("stderr"))
@@ -480,7 +482,7 @@ class BakeSession:
     def _output_files(self):
         """image name -> its OutputFile list, over all of this bake's jobs (distinct, safe names)."""
         if getattr(self, "_files", None) is None:
-            self._files = targets.output_files(  # the AO images' files, and the bent-normal images'
+            self._files = outputs.output_files(  # the AO images' files, and the bent-normal images'
                 self.settings, self.output_dir, self.run.jobs,
                 [(self.settings.file_format, self.settings.file_bits)], stderr=self.settings.error_map,
             )

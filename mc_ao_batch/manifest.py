@@ -44,7 +44,7 @@ _RUNNER_OPTIONS = {"output", "summary_json", "quiet", "blend"}
 # thread count): left out of a task's fingerprint.
 _NO_EFFECT = {"threads", "quiet", "output", "summary_json", "blend"}
 _ENTRY_KEYS = {"blend"}
-# bake_ao.py options a batch task cannot take, and why (issue 14: one --save path for every task
+# bake_ao.py options a batch task cannot take, and why (one --save path for every task
 # would have each task replace the last one's file).
 _NOT_IN_BATCH = {
     "save": "every task would save its .blend file to that one path; a batch of --target vertex-colors "

@@ -123,9 +123,11 @@ def test_the_properties_limits_are_the_cores(bpy, addon):
 
 
 def test_every_schema_setting_is_a_property_with_its_default(bpy, addon):
+    from blender_helpers import clean_scene
     from mc_ao import schema
     from mc_ao.settings import BakeSettings
 
+    clean_scene(bpy)  # every setting back to its default
     rna = bpy.types.Scene.bl_rna.properties["mc_ao"].fixed_type.properties
     for setting in schema.SETTINGS:
         prop = rna[setting.name]

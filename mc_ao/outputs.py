@@ -1,72 +1,24 @@
-"""What issue 14 adds to a bake, in one place for the operator and scripts/bake_ao.py.
+"""The outputs of a finished bake, by kind, for the operator and the script: which images a job
+needs (:func:`check_images`), where its files go (:func:`output_files`: AO, standard error, bent
+normals, a colour-attribute bake's PLY) and writing them (:func:`write_files`: per UDIM tile too), the
+summary line of a bake that is not a plain image (:func:`summary`), and for the operator the end of
+such a job in Blender (:func:`finish_job`: colour attribute or tiled images, saved, linked) and the
+bent-normal image beside a plain one (:func:`finish_bent`, :func:`save_bent`).
 
-- which objects can be baked (a colour-attribute bake needs no UV map), what each job carries
-  (face corners, tangent frames), the checks before baking (an attribute of another type or domain,
-  a tiled image of another size), the core call (:func:`run`: core.bake_vertex_ao, core.bake_udim,
-  or core.bake_ao with bent normals);
-- the files of a finished job (:func:`write_files`: per UDIM tile, the bent-normal map, the PLY of a
-  colour-attribute bake) and its summary line;
-- for the operator, the end of a job that is not a plain image (:func:`finish_job`) and the
-  bent-normal image beside a plain one (:func:`finish_bent`).
-
-Importing it needs no bpy; the functions that touch Blender data import it.
+Importing it needs no bpy; the functions that touch Blender data import it. It imports nothing above
+it (mc_ao.operators, mc_ao.cli call it).
 """
 
 import os
 
 from . import corelink
+from .baking import id_name_max_bytes, input_notes, throughput
 from .extract import ExtractError
-
-
-def needs_uvs(settings):
-    """Whether the bake's targets need a UV map (all but a colour-attribute bake)."""
-    return not settings.vertex_colors
 
 
 def custom(settings):
     """Whether a job's end differs from a plain image bake's (handled here, not by the operator)."""
     return settings.vertex_colors or settings.use_udim
-
-
-def extra_for(settings):
-    """The ``extra`` callable for a target's extract.object_arrays, or None."""
-    from . import bent, vertex_colors
-
-    parts = []
-    if settings.vertex_colors:
-        parts.append(vertex_colors.corner_data)
-    elif settings.bent_normals:
-        parts.append(bent.frames_data(settings))
-    if not parts:
-        return None
-
-    def extra(mesh, arrays):
-        out = {}
-        for part in parts:
-            out.update(part(mesh, arrays))
-        return out
-
-    return extra
-
-
-def check_plan(jobs_, settings, objects):
-    """Raise ExtractError (naming the objects) for what stops a bake before it starts: two targets
-    sharing one mesh for a colour-attribute bake (one attribute cannot hold both), an attribute of
-    another type or domain, modifiers that change the face corners; ``objects``: name -> object."""
-    from . import vertex_colors
-
-    if settings.vertex_colors:
-        owners = {}
-        for job in jobs_:
-            mesh = objects[job.object_name].data
-            other = owners.get(mesh.name)
-            if other is not None:
-                raise ExtractError(
-                    f"{other} and {job.object_name} share the mesh {mesh.name!r}: its color attribute can "
-                    "hold the bake of only one of them; bake them one at a time, or make the mesh single-user"
-                )
-            owners[mesh.name] = job.object_name
-            vertex_colors.check_object(objects[job.object_name], settings, job.target.extra)
 
 
 def check_images(job, settings):
@@ -87,37 +39,11 @@ def check_images(job, settings):
 
 
 def bent_name(job, settings):
-    from .baking import id_name_max_bytes
-
     return settings.bent_image_name_for(job.object_name, id_name_max_bytes())
 
 
 def stderr_name(job, settings):
-    from .baking import id_name_max_bytes
-
     return settings.stderr_image_name_for(job.object_name, id_name_max_bytes())
-
-
-def run(job, settings, threads, progress=None, cancel=None, on_tile=None):
-    """The core's bake of ``job`` for settings that are not a plain image bake (Job.run's)."""
-    core = corelink.load()
-
-    def mesh(arrays, uvs=True):
-        return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
-                         normals=arrays.normals, name=arrays.name)
-
-    kw = settings.bake_kwargs(threads)
-    occluders = [mesh(o) for o in job.occluders]
-    if settings.vertex_colors:
-        for key in ("resolution", "margin", "bent_normals"):
-            kw.pop(key, None)
-        return core.bake_vertex_ao(mesh(job.target, uvs=False), occluders, corners=job.target.extra["corners"],
-                                   progress=progress, cancel=cancel, **kw)
-    if settings.bent_normals:
-        kw["bent_space"] = (job.target.extra or {}).get("bent_space")
-    if settings.use_udim:
-        return core.bake_udim(mesh(job.target), occluders, progress=progress, cancel=cancel, **kw)
-    return core.bake_ao(mesh(job.target), occluders, progress=progress, cancel=cancel, on_tile=on_tile, **kw)
 
 
 # -- files --------------------------------------------------------------------------------------
@@ -187,8 +113,6 @@ def write_files(job, result, files, metadata, settings):
 
 def summary(job, result, settings):
     """The summary line of a job that is not a plain image (None for a plain one)."""
-    from .baking import throughput
-
     per, rate = throughput(result)
     if settings.vertex_colors:
         domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
@@ -212,7 +136,7 @@ def finish_job(session, context, i, result):
     result (attribute, tiled images), save its files, report its notes and summary."""
     import bpy
 
-    from . import baking, images, udim, vertex_colors
+    from . import images, udim, vertex_colors
 
     job = session.run.jobs[i]
     settings = session.settings
@@ -249,10 +173,7 @@ def finish_job(session, context, i, result):
             session.unsummarised_errors += 1
         elif settings.use_udim and settings.link_to_file:
             _link_udim(session, job, result)
-    from .operators import _redraw
-
-    _redraw(context)
-    for note in baking.input_notes(result):
+    for note in input_notes(result):
         session._warn(f"{job.object_name}: {note}")
     session._summarise(summary(job, result, settings))
 
