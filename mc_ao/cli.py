@@ -808,10 +808,8 @@ def bake(plan, files, settings, args, summary):
                     progress.end()
                     job = plan[i]
                     metadata = jobs.file_metadata(settings, job, bpy.data.filepath)
-                    if outputs.custom(settings) or settings.bent_normals:  # tiles, PLY, bent normals
-                        written, errors = outputs.write_files(job, result, files, metadata, settings)
-                    else:
-                        written, errors = jobs.write_outputs(result, files[job.image_name], metadata)
+                    # every kind: the image and its standard error, UDIM tiles, bent normals, PLY
+                    written, errors = outputs.write_files(job, result, files, metadata, settings)
                     if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
                         errors = attribute_errors(job, result, settings)
                     for note in baking.input_notes(result):

@@ -67,10 +67,11 @@ def output_files(settings, folder, jobs_, formats, stderr=False):
 
 
 def write_files(job, result, files, metadata, settings):
-    """Write a finished job's files; ``(written, failures)`` as mc_ao.jobs.write_outputs.
+    """Write a finished job's files, every kind; ``(written, failures)`` as mc_ao.jobs.write_outputs.
 
-    ``files``: output_files()'s dict. UDIM: each tile to ``<name>.<tile>.<ext>``; bent normals to
-    the "<object>_BentNormal" files; a colour-attribute bake to its PLY file.
+    ``files``: output_files()'s dict. The AO image (and its standard error) to its files; UDIM: each
+    tile to ``<name>.<tile>.<ext>``; bent normals to the "<object>_BentNormal" files; a
+    colour-attribute bake to its PLY file.
     """
     from . import bent, jobs, udim, vertex_colors
 
