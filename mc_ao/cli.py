@@ -765,76 +765,88 @@ def s2a_record(job, result=None):
             "missed_texels": int(report.get("missed_texels", 0))}
 
 
+class ScriptRun:
+    """The script's handler of a bake's messages (mc_ao.jobs.dispatch): progress on stderr, each finished
+    object's files written (Ctrl-C held off meanwhile), its outcome into the summary and the table."""
+
+    def __init__(self, plan, files, settings, args, summary, run):
+        import bpy
+
+        self.plan, self.files, self.settings, self.args, self.summary, self.run = plan, files, settings, args, summary, run
+        self.blend = bpy.data.filepath
+        self.progress = Progress(enabled=not args.quiet)
+        self.rows, self.failures, self.done = [], 0, set()
+
+    def begin(self, i):
+        if i < len(self.plan):
+            name = escape(self.plan[i].object_name)
+            print(f"bake_ao: [{i + 1}/{len(self.plan)}] baking {name}", flush=True)
+            self.progress.begin(f"[{i + 1}/{len(self.plan)}] {name}")
+
+    def on_progress(self, i, fraction):
+        self.progress.update(fraction)
+
+    def on_done(self, i, result):
+        from . import baking, interrupts, jobs, outputs
+
+        job, settings = self.plan[i], self.settings
+        with interrupts.held_off():  # a Ctrl-C now: this object's files all written, then the cancel
+            self.progress.end()
+            metadata = jobs.file_metadata(settings, job, self.blend)
+            # every kind: the image and its standard error, UDIM tiles, bent normals, PLY
+            written, errors = outputs.write_files(job, result, self.files, metadata, settings)
+            if settings.vertex_colors and getattr(self.args, "save", None) is not None and not errors:
+                errors = attribute_errors(job, result, settings)
+            for note in baking.input_notes(result):
+                print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
+            if job.selected_to_active:
+                print(f"bake_ao: {escape(job.object_name)}: from {', '.join(escape(h.name) for h in job.highpoly)}"
+                      f"{baking.miss_summary(result)}", file=sys.stderr)
+            per_texel, rate = baking.throughput(result)
+            if errors:
+                self._failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
+                             result=result)
+            else:
+                self.done.add(i)
+                self.summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
+                                 **s2a_record(job, result))
+                self.rows.append((escape(job.object_name), size_text(result, settings), f"{result.seconds:.2f}",
+                                  f"{per_texel:.0f}", f"{rate:.2f}", escape(", ".join(written))))
+        self.begin(i + 1)
+
+    def on_failed(self, i, error):
+        self._failed(i, [error])
+        self.begin(i + 1)
+
+    def on_crashed(self, i, exc, trace):
+        print(trace, file=sys.stderr, end="")
+        self._failed(i, [f"bake failed ({type(exc).__name__}: {exc}); the traceback is above"])
+        self.begin(i + 1)
+
+    def _failed(self, i, errors, seconds=None, files=(), rays=0, per_texel=0.0, result=None):
+        self.progress.end()
+        self.failures += 1
+        self.done.add(i)
+        for error in errors:
+            print(f"bake_ao: {escape(self.plan[i].object_name)}: {escape(error)}", file=sys.stderr)
+        if seconds is None:
+            seconds = time.monotonic() - self.run.started.get(i, time.monotonic())
+        self.summary.add(self.plan[i].object_name, "failed", seconds, rays, per_texel, files,
+                         "; ".join(map(str, errors)), **s2a_record(self.plan[i], result))
+
+
 def bake(plan, files, settings, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
-    import bpy
+    from . import jobs
 
-    from . import baking, interrupts, jobs, outputs
-
-    progress = Progress(enabled=not args.quiet)
     run = jobs.BakeRun(plan, settings, args.threads or None, live=False)
-    rows, failures, done = [], 0, set()
-    width, height = settings.size
-
-    def begin(i):
-        print(f"bake_ao: [{i + 1}/{len(plan)}] baking {escape(plan[i].object_name)}", flush=True)
-        progress.begin(f"[{i + 1}/{len(plan)}] {escape(plan[i].object_name)}")
-
-    def failed(i, errors, seconds=None, files=(), rays=0, per_texel=0.0, result=None):
-        nonlocal failures
-        progress.end()
-        failures += 1
-        done.add(i)
-        for error in errors:
-            print(f"bake_ao: {escape(plan[i].object_name)}: {escape(error)}", file=sys.stderr)
-        if seconds is None:
-            seconds = time.monotonic() - run.started.get(i, time.monotonic())
-        summary.add(plan[i].object_name, "failed", seconds, rays, per_texel, files, "; ".join(map(str, errors)),
-                    **s2a_record(plan[i], result))
-
-    begin(0)
+    handler = ScriptRun(plan, files, settings, args, summary, run)
+    progress, done = handler.progress, handler.done
+    handler.begin(0)
     run.start()
     try:
-        while True:
-            kind, *rest = run.next_message()
-            if kind == "end":
-                break
-            i = rest[0]
-            if kind == "progress":
-                progress.update(rest[1])
-            elif kind == "done":
-                result = rest[1]
-                with interrupts.held_off():  # a Ctrl-C now: this object's files all written, then the cancel
-                    progress.end()
-                    job = plan[i]
-                    metadata = jobs.file_metadata(settings, job, bpy.data.filepath)
-                    # every kind: the image and its standard error, UDIM tiles, bent normals, PLY
-                    written, errors = outputs.write_files(job, result, files, metadata, settings)
-                    if settings.vertex_colors and getattr(args, "save", None) is not None and not errors:
-                        errors = attribute_errors(job, result, settings)
-                    for note in baking.input_notes(result):
-                        print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
-                    if job.selected_to_active:
-                        print(f"bake_ao: {escape(job.object_name)}: from {', '.join(escape(h.name) for h in job.highpoly)}"
-                              f"{baking.miss_summary(result)}", file=sys.stderr)
-                    per_texel, rate = baking.throughput(result)
-                    if errors:
-                        failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
-                               result=result)
-                    else:
-                        done.add(i)
-                        summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
-                                    **s2a_record(job, result))
-                        rows.append((escape(job.object_name), size_text(result, settings), f"{result.seconds:.2f}",
-                                     f"{per_texel:.0f}", f"{rate:.2f}", escape(", ".join(written))))
-            elif kind == "error":
-                failed(i, [rest[1]])
-            elif kind == "crash":
-                exc, trace = rest[1], rest[2]
-                print(trace, file=sys.stderr, end="")
-                failed(i, [f"bake failed ({type(exc).__name__}: {exc}); the traceback is above"])
-            if kind in ("done", "error", "crash") and i + 1 < len(plan):
-                begin(i + 1)
+        while not jobs.dispatch(run.next_message(), handler):
+            pass
     except BaseException as exc:
         run.stop()  # a "cancelled" message comes only from here: the cancel is this Ctrl-C's
         progress.end()
@@ -844,6 +856,7 @@ def bake(plan, files, settings, args, summary):
                 summary.add(job.object_name, "failed", error=f"not baked: {why}")
         raise
     run.stop()
+    rows, failures = handler.rows, handler.failures
     if getattr(args, "save", None) is not None and rows:
         import bpy
 

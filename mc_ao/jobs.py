@@ -142,6 +142,28 @@ def empty_bake_problem(result):
     return f"the bake covered no texel ({why}): nothing was written"
 
 
+#: BakeRun message kind -> the handler method dispatch() calls with the message's other items.
+HANDLER_METHODS = {"progress": "on_progress", "tile": "on_tile", "done": "on_done", "error": "on_failed",
+                   "crash": "on_crashed", "cancelled": "on_cancelled"}
+
+
+def dispatch(message, handler):
+    """Hand one BakeRun message to ``handler``; True at the end of the run ("end").
+
+    The operator's modal session and the script's loop are both handlers: ``on_progress(i, fraction)``,
+    ``on_tile(i, rows, cols, block)``, ``on_done(i, result)``, ``on_failed(i, error)`` (the core refused
+    the object's input, or it baked nothing), ``on_crashed(i, exc, trace)``, ``on_cancelled(i)``; a
+    handler without a method ignores that kind.
+    """
+    kind, *args = message
+    if kind == "end":
+        return True
+    method = getattr(handler, HANDLER_METHODS[kind], None)
+    if method is not None:
+        method(*args)
+    return False
+
+
 # -- settings --------------------------------------------------------------------------------------
 
 def check_settings(settings):

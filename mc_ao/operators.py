@@ -339,35 +339,34 @@ class BakeSession:
     # -- the worker's messages -----------------------------------------------------------------
 
     def _handle(self, context, message):
-        """Apply one worker message; return True at the end of the run."""
-        kind, *args = message
-        if kind == "progress":
-            i, fraction = args
-            self.fraction = (i + fraction) / len(self.run.jobs)
-            context.window_manager.progress_update(self.fraction)
-        elif kind == "tile":
-            i, rows, cols, block = args
-            buffer = self._buffer(i)
-            if buffer is not None:
-                buffer[rows, cols] = images.rgba(block, buffer.shape[2])
-                self.pending.add(i)
-        elif kind == "done":
-            self._finish_job(context, *args)
-        elif kind == "error":
-            i, exc = args
-            self._failed(i)
-            self.report({"ERROR"}, f"{self.run.jobs[i].object_name}: {exc}")
-        elif kind == "crash":
-            i, exc, trace = args
-            self._failed(i)
-            print(f"mc_ao: the bake of {self.run.jobs[i].object_name} failed:\n{trace}", file=sys.stderr)
-            self.report(
-                {"ERROR"},
-                f"{self.run.jobs[i].object_name}: bake failed ({type(exc).__name__}: {exc}); see the console",
-            )
-        elif kind == "end":
-            return True
-        return False
+        """Apply one worker message (mc_ao.jobs.dispatch to the on_* methods); True at the end of the run."""
+        self._context = context
+        return jobs.dispatch(message, self)
+
+    def on_progress(self, i, fraction):
+        self.fraction = (i + fraction) / len(self.run.jobs)
+        self._context.window_manager.progress_update(self.fraction)
+
+    def on_tile(self, i, rows, cols, block):
+        buffer = self._buffer(i)
+        if buffer is not None:
+            buffer[rows, cols] = images.rgba(block, buffer.shape[2])
+            self.pending.add(i)
+
+    def on_done(self, i, result):
+        self._finish_job(self._context, i, result)
+
+    def on_failed(self, i, exc):
+        self._failed(i)
+        self.report({"ERROR"}, f"{self.run.jobs[i].object_name}: {exc}")
+
+    def on_crashed(self, i, exc, trace):
+        self._failed(i)
+        print(f"mc_ao: the bake of {self.run.jobs[i].object_name} failed:\n{trace}", file=sys.stderr)
+        self.report(
+            {"ERROR"},
+            f"{self.run.jobs[i].object_name}: bake failed ({type(exc).__name__}: {exc}); see the console",
+        )
 
     def _failed(self, i):
         self.errors += 1
