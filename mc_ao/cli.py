@@ -60,7 +60,7 @@ read back to its end marker before it replaces anything.
 Infinity, as Python's json module writes and reads it (and as the files' metadata records it).
 
 The bake is the add-on's: the same geometry gathering (modifiers applied, world space, corner
-normals, the chosen UV map), the same worker thread, file names and writers (mc_ao.jobs), the
+normals, the chosen UV map), the same worker thread, file names and writers (mc_ao.filewriter), the
 same core.
 """
 
@@ -453,7 +453,7 @@ def plan_selected_to_active(bpy, args, settings):
 def settings_from(args):
     """The BakeSettings of the arguments, after checking every value (UsageError lists what is wrong)."""
     imageio = corelink.load("imageio")
-    from . import jobs
+    from . import schema
     from .settings import BakeSettings
 
     width, height = args.resolution
@@ -466,7 +466,7 @@ def settings_from(args):
     )
     settings = BakeSettings(**values)
     problems = selected_to_active_problems(args)
-    for field, message in jobs.check_settings(settings):
+    for field, message in schema.problems(settings):
         if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
             message = f"--resolution must be at most {corelink.load('settings').MAX_RESOLUTION} a side, not {width}x{height}"
             if message not in problems:
@@ -524,7 +524,6 @@ def target_problems(args, settings):
 
 def check_save(args, input_blend):
     """--save may not replace the input .blend file unless --overwrite-input, and its folder must be writable."""
-    from . import jobs
 
     save = getattr(args, "save", None)
     if save is None:
@@ -569,7 +568,7 @@ def save_blend(bpy, path):
 
 
 def selected_to_active_problems(args):
-    """What is wrong with the Selected to Active options together (their values: jobs.check_settings)."""
+    """What is wrong with the Selected to Active options together (their values: schema.problems)."""
     problems = []
     on = args.selected_to_active or args.match_suffix
     if not on:
@@ -603,7 +602,6 @@ def selected_to_active_problems(args):
 def check_paths(args, summary):
     """The output folder and the summary's file can be written (before anything is baked)."""
     atomicfile = corelink.load("atomicfile")
-    from . import jobs
 
     problem = filecheck.folder_problem(args.output)
     if problem is not None:
@@ -709,14 +707,14 @@ def run(argv, in_blender, summary):
         except RuntimeError as exc:
             raise UsageError(f"cannot open {args.blend}: {exc}") from None
 
-    from . import baking, jobs
+    from . import baking, filewriter
     from .extract import ExtractError
 
     missing = corelink.missing_dependency()
     if missing is not None:
         raise UsageError(missing)
     core = corelink.load()
-    if not jobs.oiio_available():
+    if not filewriter.oiio_available():
         print("bake_ao: no OpenImageIO in this Python; writing files with Blender's image writer", file=sys.stderr)
 
     from . import outputs
@@ -735,14 +733,14 @@ def run(argv, in_blender, summary):
         files = outputs.output_files(settings, str(args.output), plan, formats, stderr=args.stderr)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
-    problems = jobs.planned_kind_problems(files)
+    problems = filewriter.planned_kind_problems(files)
     if problems:
         raise UsageError([f"{p}; nothing was baked" for p in problems])
     summary.outputs = [(f, "one of this run's files") for f in planned_paths(files)]
     if getattr(args, "save", None) is not None:
         summary.outputs.append((args.save, "the --save file"))
     check_paths(args, summary)  # again, now that the run's own files are known
-    summary.settings = record = jobs.settings_record(settings)
+    summary.settings = record = filewriter.settings_record(settings)
     if args.match_suffix:  # the summary's record only: file metadata holds plain values
         summary.settings = dict(record, match_suffix=list(args.match_suffix))
     return bake(plan, files, settings, args, summary)
@@ -766,7 +764,7 @@ def s2a_record(job, result=None):
 
 
 class ScriptRun:
-    """The script's handler of a bake's messages (mc_ao.jobs.dispatch): progress on stderr, each finished
+    """The script's handler of a bake's messages (mc_ao.bakerun.dispatch): progress on stderr, each finished
     object's files written (Ctrl-C held off meanwhile), its outcome into the summary and the table."""
 
     def __init__(self, plan, files, settings, args, summary, run):
@@ -787,12 +785,12 @@ class ScriptRun:
         self.progress.update(fraction)
 
     def on_done(self, i, result):
-        from . import baking, interrupts, jobs, outputs
+        from . import baking, filewriter, interrupts, outputs
 
         job, settings = self.plan[i], self.settings
         with interrupts.held_off():  # a Ctrl-C now: this object's files all written, then the cancel
             self.progress.end()
-            metadata = jobs.file_metadata(settings, job, self.blend)
+            metadata = filewriter.file_metadata(settings, job, self.blend)
             # every kind: the image and its standard error, UDIM tiles, bent normals, PLY
             written, errors = outputs.write_files(job, result, self.files, metadata, settings)
             if settings.vertex_colors and getattr(self.args, "save", None) is not None and not errors:
@@ -837,15 +835,15 @@ class ScriptRun:
 
 def bake(plan, files, settings, args, summary):
     """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
-    from . import jobs
+    from . import bakerun
 
-    run = jobs.BakeRun(plan, settings, args.threads or None, live=False)
+    run = bakerun.BakeRun(plan, settings, args.threads or None, live=False)
     handler = ScriptRun(plan, files, settings, args, summary, run)
     progress, done = handler.progress, handler.done
     handler.begin(0)
     run.start()
     try:
-        while not jobs.dispatch(run.next_message(), handler):
+        while not bakerun.dispatch(run.next_message(), handler):
             pass
     except BaseException as exc:
         run.stop()  # a "cancelled" message comes only from here: the cancel is this Ctrl-C's

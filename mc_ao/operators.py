@@ -35,14 +35,14 @@ import traceback
 import bpy
 import numpy as np
 
-from . import baking, corelink, filecheck, images, jobs, outputs, selected_to_active
+from . import bakerun, baking, corelink, filecheck, filewriter, images, outputs, schema, selected_to_active
 from .extract import ExtractError
-from .jobs import BakeRun
+from .bakerun import BakeRun
 from .properties import resolve_threads
 from .settings import BakeSettings
 
 # Bakes in flight, so that unregister() can stop their threads (BakeRun adds and removes itself).
-_RUNS = jobs.RUNS
+_RUNS = bakerun.RUNS
 # Sessions in flight, so that an undo can end them before it replaces the data they write to.
 _SESSIONS = set()
 # Seconds between two live updates of an image: writing a large image's pixels takes milliseconds.
@@ -205,7 +205,7 @@ class BakeSession:
             self.report({"ERROR"}, f"Cannot bake: {missing}")
             return False
         self.settings = BakeSettings.from_properties(context.scene.mc_ao)
-        problems = jobs.check_settings(self.settings)
+        problems = schema.problems(self.settings)
         if problems:
             # The properties' own limits keep most values in range; what gets past them (a script
             # setting a value, a limit of the core's) is refused here, before anything is baked.
@@ -253,7 +253,7 @@ class BakeSession:
                 files = outputs.output_files(self.settings, self.output_dir, planned,
                                              [(self.settings.file_format, self.settings.file_bits)],
                                              stderr=self.settings.error_map)
-                problems = jobs.planned_kind_problems(files)
+                problems = filewriter.planned_kind_problems(files)
                 if problems:
                     raise OutputError("; ".join(problems) + "; nothing was baked")
         except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
@@ -339,9 +339,9 @@ class BakeSession:
     # -- the worker's messages -----------------------------------------------------------------
 
     def _handle(self, context, message):
-        """Apply one worker message (mc_ao.jobs.dispatch to the on_* methods); True at the end of the run."""
+        """Apply one worker message (mc_ao.bakerun.dispatch to the on_* methods); True at the end of the run."""
         self._context = context
-        return jobs.dispatch(message, self)
+        return bakerun.dispatch(message, self)
 
     def on_progress(self, i, fraction):
         self.fraction = (i + fraction) / len(self.run.jobs)
@@ -457,10 +457,10 @@ class BakeSession:
 
     def _save(self, job, result):
         """Write the finished job's file into the output folder; report where, or why not."""
-        metadata = jobs.file_metadata(self.settings, job, bpy.data.filepath)
+        metadata = filewriter.file_metadata(self.settings, job, bpy.data.filepath)
         try:
             files = self._output_files()[job.image_name]
-            written, failures = jobs.write_outputs(result, files, metadata)
+            written, failures = filewriter.write_outputs(result, files, metadata)
         except corelink.load().McAoError as exc:  # a path that would leave the output folder
             written, failures = [], [(self.output_dir, exc)]
         for path, exc in failures:
@@ -472,7 +472,7 @@ class BakeSession:
                 f"(any file already there is unchanged): {why}",
             )
         if written:
-            self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
+            self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({filewriter.writer_name()})")
         if failures or not written:
             return {}
         f = files[0]

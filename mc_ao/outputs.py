@@ -50,30 +50,30 @@ def stderr_name(job, settings):
 
 def output_files(settings, folder, jobs_, formats, stderr=False):
     """{image name: [OutputFile]} for the AO images (and bent-normal images) of ``jobs_``: distinct,
-    safe names over all of them (mc_ao.jobs.output_files). A colour-attribute bake gets one PLY
+    safe names over all of them (mc_ao.filewriter.output_files). A colour-attribute bake gets one PLY
     file per object, named like its image would be."""
     from dataclasses import replace
 
-    from . import jobs
+    from . import filewriter
 
     names = [j.image_name for j in jobs_]
     if settings.vertex_colors:
-        return jobs.output_files(folder, names, [("PLY", None)])
+        return filewriter.output_files(folder, names, [("PLY", None)])
     bents = [bent_name(j, settings) for j in jobs_] if settings.bent_normals else []
-    plan = jobs.output_files(folder, names + bents, formats, stderr=stderr)
+    plan = filewriter.output_files(folder, names + bents, formats, stderr=stderr)
     for name in bents:
         plan[name] = [replace(f, stderr_path=None) for f in plan[name]]
     return plan
 
 
 def write_files(job, result, files, metadata, settings):
-    """Write a finished job's files, every kind; ``(written, failures)`` as mc_ao.jobs.write_outputs.
+    """Write a finished job's files, every kind; ``(written, failures)`` as mc_ao.filewriter.write_outputs.
 
     ``files``: output_files()'s dict. The AO image (and its standard error) to its files; UDIM: each
     tile to ``<name>.<tile>.<ext>``; bent normals to the "<object>_BentNormal" files; a
     colour-attribute bake to its PLY file.
     """
-    from . import bent, jobs, udim, vertex_colors
+    from . import bent, filewriter, udim, vertex_colors
 
     written, failures = [], []
     meta = dict(metadata)
@@ -83,12 +83,12 @@ def write_files(job, result, files, metadata, settings):
         positions, sizes, verts, ao = vertex_colors.ply_data(result, data, settings.attribute_domain)
         meta = dict(result.metadata, **meta, content="ao")
         for f in files[job.image_name]:
-            problem = jobs.kind_problem(f.path)
+            problem = filewriter.kind_problem(f.path)
             if problem is not None:
                 failures.append((f.path, corelink.load("errors").FileWriteError(problem)))
                 continue
             try:
-                jobs.make_output_folder(os.path.dirname(f.path))
+                filewriter.make_output_folder(os.path.dirname(f.path))
                 plyio.write_ply(f.path, positions, sizes, verts, ao, meta)
                 written.append(f.path)
             except (corelink.load().McAoError, OSError) as exc:
@@ -98,7 +98,7 @@ def write_files(job, result, files, metadata, settings):
     for tile, res in results.items():
         own = files[job.image_name] if tile is None else udim.tile_files(files[job.image_name], tile)
         tile_meta = meta if tile is None else dict(meta, udim_tile=tile)
-        w, f = jobs.write_outputs(res, own, tile_meta)
+        w, f = filewriter.write_outputs(res, own, tile_meta)
         written += w
         failures += f
         if settings.bent_normals:
@@ -183,10 +183,10 @@ def _save(session, job, result):
     """Write the job's files; report them; the written paths, or None after a failure (reported)."""
     import bpy
 
-    from . import jobs
+    from . import filewriter
 
     settings = session.settings
-    metadata = jobs.file_metadata(settings, job, bpy.data.filepath)
+    metadata = filewriter.file_metadata(settings, job, bpy.data.filepath)
     try:
         files = output_files(settings, session.output_dir, session.run.jobs,
                              [(settings.file_format, settings.file_bits)], stderr=settings.error_map)
@@ -201,7 +201,7 @@ def _save(session, job, result):
         session.report({"ERROR"}, f"{job.object_name}: the bake is in {where}, but its file was not saved "
                                   f"(any file already there is unchanged): {why}")
     if written:
-        session.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
+        session.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({filewriter.writer_name()})")
     return written if written and not failures else None
 
 
@@ -267,7 +267,7 @@ def save_bent(session, job, result, saved_ao):
     """With Save to File (plain images): write the bent-normal files; link the image to its file."""
     import bpy
 
-    from . import bent, images, jobs
+    from . import bent, filewriter, images
 
     settings = session.settings
     if not settings.bent_normals or result.bent is None or session.output_dir is None:
@@ -275,7 +275,7 @@ def save_bent(session, job, result, saved_ao):
     name = bent_name(job, settings)
     files = output_files(settings, session.output_dir, session.run.jobs,
                          [(settings.file_format, settings.file_bits)])[name]
-    metadata = dict(result.metadata, **jobs.file_metadata(settings, job, bpy.data.filepath),
+    metadata = dict(result.metadata, **filewriter.file_metadata(settings, job, bpy.data.filepath),
                     content="bent_normal", bent_space=settings.bent_space.lower())
     written, failures = bent.write_files(bent.encoded(result, settings), files, metadata)
     for path, exc in failures:
@@ -284,7 +284,7 @@ def save_bent(session, job, result, saved_ao):
         session.report({"ERROR"}, f"{job.object_name}: the bent normals are in image {name!r}, but their file was "
                                   f"not saved (any file already there is unchanged): {exc}")
     if written:
-        session.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
+        session.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({filewriter.writer_name()})")
         if settings.link_to_file and not failures:
             try:
                 images.use_file(bpy.data.images[name], written[0], relative=settings.output_dir.startswith("//"))

@@ -66,7 +66,7 @@ class _BakeSettingsMethods:
         their end would bake into one image. So the object's part is shortened instead and gets 8
         hex digits of a hash of the whole object name ("<start of name>-1a2b3c4d_AO"): the same
         object always gets the same image, different objects different ones. This is not a file
-        name: files get theirs from mc_ao.jobs.output_files().
+        name: files get theirs from mc_ao.filewriter.output_files().
         """
         template = (self.image_name or "{object}_AO") + suffix
         name = template.replace("{object}", object_name)

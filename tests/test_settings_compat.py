@@ -38,7 +38,7 @@ ENTRIES = [
 
 def records(folder):
     """For each entry: the task's args, fingerprint and the settings record its files carry."""
-    from mc_ao import jobs
+    from mc_ao import filewriter
     from mc_ao_batch.manifest import bake_parser, bake_script_module, plan
 
     blend = Path(folder) / "asset.blend"
@@ -54,7 +54,7 @@ def records(folder):
         module.default_formats(namespace)
         settings = module.settings_from(namespace)
         out.append({"entry": text, "args": task.args, "fingerprint": task.fingerprint,
-                    "record": jobs.settings_record(settings)})
+                    "record": filewriter.settings_record(settings)})
     return out
 
 

@@ -141,10 +141,10 @@ def bake_and_report(bpy, capfd):
                                                ("TIFF", "Ground_AO.tif")])
 def test_the_operator_on_a_full_disk_reports_the_error_not_saved(bpy, scene, disk, capfd, monkeypatch,
                                                                  file_format, name, writer):
-    from mc_ao import jobs
+    from mc_ao import filewriter
 
     if writer == "Blender":
-        monkeypatch.setattr(jobs, "oiio_available", lambda: False)
+        monkeypatch.setattr(filewriter, "oiio_available", lambda: False)
     noisy_scene(bpy, scene, disk, file_format)
     previous_files(disk, [name])
     fill(disk, 2 * PAGE)
@@ -164,10 +164,10 @@ def test_the_operator_on_a_full_disk_reports_the_error_not_saved(bpy, scene, dis
 
 @pytest.mark.parametrize("writer", ["OpenImageIO", "Blender"])
 def test_the_operator_does_not_replace_a_read_only_file(bpy, scene, tmp_path, capfd, monkeypatch, writer):
-    from mc_ao import jobs
+    from mc_ao import filewriter
 
     if writer == "Blender":
-        monkeypatch.setattr(jobs, "oiio_available", lambda: False)
+        monkeypatch.setattr(filewriter, "oiio_available", lambda: False)
     noisy_scene(bpy, scene, tmp_path, "PNG")
     path = tmp_path / "Ground_AO.png"
     path.write_bytes(old_file("x.png", "keep me"))
@@ -185,10 +185,10 @@ def test_the_operator_does_not_replace_a_read_only_file(bpy, scene, tmp_path, ca
 def test_saved_files_get_the_umask_or_keep_their_permissions(bpy, scene, tmp_path, capfd, monkeypatch, writer):
     """New files: 0o666 & ~umask (Blender's writer through a mkstemp file made them 0o600); replaced
     files: their own bits."""
-    from mc_ao import jobs
+    from mc_ao import filewriter
 
     if writer == "Blender":
-        monkeypatch.setattr(jobs, "oiio_available", lambda: False)
+        monkeypatch.setattr(filewriter, "oiio_available", lambda: False)
     noisy_scene(bpy, scene, tmp_path, "PNG")
     umask = os.umask(0o022)
     try:
