@@ -40,6 +40,7 @@ from .extract import ExtractError
 from .bakerun import BakeRun
 from .properties import resolve_threads
 from .settings import BakeSettings
+from .terminal import escape
 
 # Bakes in flight, so that unregister() can stop their threads (BakeRun adds and removes itself).
 _RUNS = bakerun.RUNS
@@ -189,7 +190,10 @@ class BakeSession:
         self.interrupted = False  # an undo stopped the worker; the session ends after it
 
     def report(self, kind, message):
-        """The operator's report, remembered: the last one of a bake is what the panel shows."""
+        """The operator's report, remembered: the last one of a bake is what the panel shows. Escaped
+        (mc_ao.terminal): the names in it may hold escape sequences or newlines, and Blender prints
+        reports to the terminal in the background."""
+        message = escape(message)
         self.last_report = (next(iter(kind)), message)
         self._report_to(kind, message)
 
