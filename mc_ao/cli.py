@@ -730,12 +730,9 @@ def run(argv, in_blender, summary):
                 selected=objects, view_layer=bpy.context.view_layer,
             )
         formats = [(FORMATS[f], BITS[args.bits] if args.bits else None) for f in args.format]
-        files = outputs.output_files(settings, str(args.output), plan, formats, stderr=args.stderr)
+        files = outputs.plan_files(settings, str(args.output), plan, formats, stderr=args.stderr)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
-    problems = filewriter.planned_kind_problems(files)
-    if problems:
-        raise UsageError([f"{p}; nothing was baked" for p in problems])
     summary.outputs = [(f, "one of this run's files") for f in planned_paths(files)]
     if getattr(args, "save", None) is not None:
         summary.outputs.append((args.save, "the --save file"))

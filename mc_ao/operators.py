@@ -253,13 +253,10 @@ class BakeSession:
                     outputs.check_images(job, self.settings)
                 except images.ImageError as exc:
                     raise images.ImageError(f"{job.object_name}: {exc}") from None
-            if self.output_dir is not None:
-                files = outputs.output_files(self.settings, self.output_dir, planned,
-                                             [(self.settings.file_format, self.settings.file_bits)],
-                                             stderr=self.settings.error_map)
-                problems = filewriter.planned_kind_problems(files)
-                if problems:
-                    raise OutputError("; ".join(problems) + "; nothing was baked")
+            if self.output_dir is not None:  # the files' paths, checked before anything is baked
+                outputs.plan_files(self.settings, self.output_dir, planned,
+                                   [(self.settings.file_format, self.settings.file_bits)],
+                                   stderr=self.settings.error_map)
         except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
             self.report({"ERROR"}, str(exc))
             return False

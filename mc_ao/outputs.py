@@ -66,6 +66,19 @@ def output_files(settings, folder, jobs_, formats, stderr=False):
     return plan
 
 
+def plan_files(settings, folder, jobs_, formats, stderr=False):
+    """output_files(), checked before anything is baked: a planned file that would replace an existing
+    file of another kind raises core.FileWriteError naming every such path (the operator and the
+    script both plan their files here)."""
+    from . import filewriter
+
+    files = output_files(settings, folder, jobs_, formats, stderr=stderr)
+    problems = filewriter.planned_kind_problems(files)
+    if problems:
+        raise corelink.load("errors").FileWriteError("; ".join(problems) + "; nothing was baked")
+    return files
+
+
 def write_files(job, result, files, metadata, settings):
     """Write a finished job's files, every kind; ``(written, failures)`` as mc_ao.filewriter.write_outputs.
 
