@@ -94,9 +94,16 @@ def output_problem(path, kind, inputs=(), outputs=(), replaces=()):
         if other and same_file(path, other):
             return f"it is also {what}"
     found = file_kind(path)
-    if found is not None and found not in replaces:
+    if found is not None and found not in replaces and not _empty_file(path):  # (mktemp's file: nothing to lose)
         return f"it is {found} already there, not {' or '.join(replaces) or 'a file this run writes'}"
     return None
+
+
+def _empty_file(path):
+    try:
+        return os.path.isfile(path) and os.path.getsize(path) == 0
+    except OSError:
+        return False
 
 
 #: What a file of each extension the bake writes holds (file_kind's words).
@@ -111,11 +118,8 @@ def replace_problem(path):
     expected = KIND_OF_EXTENSION.get(os.path.splitext(os.fspath(path))[1].lower())
     if expected is None:
         return None
-    try:
-        if os.path.isfile(path) and os.path.getsize(path) == 0:
-            return None
-    except OSError:
-        pass
+    if _empty_file(path):
+        return None
     found = file_kind(path)
     if found is None or found == expected:
         return None
