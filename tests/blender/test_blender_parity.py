@@ -12,6 +12,8 @@ from blender_helpers import ROOT, add_cube, add_plane, clean_scene, select_only
 pytestmark = pytest.mark.blender
 
 FILES = ["Block_AO.exr", "Block_AO.png", "Ground_AO.exr", "Ground_AO.png"]
+# with the error map and bent normals on
+MORE_FILES = ["Block_AO_stderr.exr", "Block_BentNormal.exr", "Ground_AO_stderr.exr", "Ground_BentNormal.exr"]
 
 
 @pytest.fixture
@@ -54,4 +56,26 @@ def test_the_operator_the_script_and_the_batch_write_the_same_bytes(bpy, scene_f
         operator_bytes = (by_operator / name).read_bytes()
         assert (by_script / name).read_bytes() == operator_bytes, f"{name}: the script's differs from the operator's"
         assert (by_batch / name).read_bytes() == operator_bytes, f"{name}: the batch's differs from the operator's"
+    clean_scene(bpy)
+
+
+def test_the_error_map_and_bent_normals_are_the_same_bytes_too(bpy, scene_file, tmp_path):
+    pytest.importorskip("OpenImageIO")
+    path, ground, block = scene_file
+    settings = bpy.context.scene.mc_ao
+    settings.resolution, settings.samples, settings.margin, settings.seed = 16, 8, 2, 3
+    settings.float_buffer = False
+    settings.error_map = settings.bent_normals = True
+    settings.save_to_file, settings.file_format = True, "OPEN_EXR"
+    by_operator = tmp_path / "operator"
+    settings.output_dir = str(by_operator)
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    by_script = tmp_path / "script"
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "bake_ao.py"), str(path), "--objects", "Ground",
+                           "Block", "--resolution", "16", "--samples", "8", "--margin", "2", "--seed", "3", "--format",
+                           "exr", "--stderr", "--bent-normals", "--threads", "2", "--quiet", "--output", str(by_script)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    for name in MORE_FILES + ["Block_AO.exr", "Ground_AO.exr"]:
+        assert (by_script / name).read_bytes() == (by_operator / name).read_bytes(), name
     clean_scene(bpy)
