@@ -1,6 +1,11 @@
-"""The operator, the script and the batch give the same files, byte for byte, for the same settings
-(OpenImageIO writes every file: where it is missing, Blender's own writer is the fallback of all three,
-and its files differ from OpenImageIO's in their headers and compression, not in their pixels)."""
+"""The operator, the script and the batch give the same files, byte for byte, for the same settings,
+where OpenImageIO writes them (Blender's official builds).
+
+Where this Python has no OpenImageIO module, all three fall back to Blender's own image writer
+(mc_ao.filewriter), and its files differ from OpenImageIO's (measured on bpy 5.0, 8 x 8 random AO):
+other bytes (headers, compression), no mc_ao metadata (so the batch cannot tell such a file is done
+and bakes it again), 8-bit PNG pixels equal, half EXR values up to 2.4e-4 apart (Blender rounds to
+half precision its own way, and writes RGBA instead of one channel)."""
 
 import subprocess
 import sys
