@@ -46,7 +46,12 @@ def unregister():
         while handler in handlers:
             handlers.remove(handler)
     for session in list(operators._SESSIONS):
-        session.abandon()
+        # Disabled mid-bake: the bake stops and, Blender's data being there, the images it had not
+        # finished are put back, as after Esc.
+        try:
+            session.finish(bpy.context, cancelled=True, why="(the add-on was disabled)")
+        except (AttributeError, ReferenceError, RuntimeError):
+            session.abandon()
     for run in list(operators._RUNS):
         run.stop()
     del bpy.types.Scene.mc_ao

@@ -102,9 +102,7 @@ class Job:
         Raises core.McAoError subclasses (core.BakeCancelled when ``cancel`` fires).
         """
         if settings.vertex_colors or settings.use_udim or settings.bent_normals:
-            from . import targets  # issue 14: colour attributes, UDIM tiles, bent normals
-
-            return targets.run(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile)
+            return _run_other(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile)
         core = corelink.load()
 
         def mesh(arrays):
@@ -149,7 +147,7 @@ _INPUT_NOTES = {
         "{n} triangles have no area in space and were skipped",
     ),
 }
-# The same for the reports of core.bake_udim and core.bake_vertex_ao (issue 14).
+# The same for the reports of core.bake_udim and core.bake_vertex_ao.
 _TARGET_NOTES = {
     # UDIM bakes: reported instead of uv_outside_triangles.
     "uv_outside_udim_triangles": (
@@ -162,6 +160,74 @@ _TARGET_NOTES = {
         "{n} face corners lie on triangles with no area; their normals stand in for the faces'",
     ),
 }
+
+
+def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None):
+    """The core's bake of ``job`` for a colour-attribute, UDIM or bent-normal bake (Job.run's)."""
+    core = corelink.load()
+
+    def mesh(arrays, uvs=True):
+        return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
+                         normals=arrays.normals, name=arrays.name)
+
+    kw = settings.bake_kwargs(threads)
+    occluders = [mesh(o) for o in job.occluders]
+    if settings.vertex_colors:
+        for key in ("resolution", "margin", "bent_normals"):
+            kw.pop(key, None)
+        return core.bake_vertex_ao(mesh(job.target, uvs=False), occluders, corners=job.target.extra["corners"],
+                                   progress=progress, cancel=cancel, **kw)
+    if settings.bent_normals:
+        kw["bent_space"] = (job.target.extra or {}).get("bent_space")
+    if settings.use_udim:
+        return core.bake_udim(mesh(job.target), occluders, progress=progress, cancel=cancel, **kw)
+    return core.bake_ao(mesh(job.target), occluders, progress=progress, cancel=cancel, on_tile=on_tile, **kw)
+
+
+def needs_uvs(settings):
+    """Whether the bake's targets need a UV map (all but a colour-attribute bake)."""
+    return not settings.vertex_colors
+
+
+def extra_for(settings):
+    """The ``extra`` callable for a target's extract.object_arrays, or None."""
+    from . import bent, vertex_colors
+
+    parts = []
+    if settings.vertex_colors:
+        parts.append(vertex_colors.corner_data)
+    elif settings.bent_normals:
+        parts.append(bent.frames_data(settings))
+    if not parts:
+        return None
+
+    def extra(mesh, arrays):
+        out = {}
+        for part in parts:
+            out.update(part(mesh, arrays))
+        return out
+
+    return extra
+
+
+def check_plan(jobs_, settings, objects):
+    """Raise ExtractError (naming the objects) for what stops a bake before it starts: two targets
+    sharing one mesh for a colour-attribute bake (one attribute cannot hold both), an attribute of
+    another type or domain, modifiers that change the face corners; ``objects``: name -> object."""
+    from . import vertex_colors
+
+    if settings.vertex_colors:
+        owners = {}
+        for job in jobs_:
+            mesh = objects[job.object_name].data
+            other = owners.get(mesh.name)
+            if other is not None:
+                raise ExtractError(
+                    f"{other} and {job.object_name} share the mesh {mesh.name!r}: its color attribute can "
+                    "hold the bake of only one of them; bake them one at a time, or make the mesh single-user"
+                )
+            owners[mesh.name] = job.object_name
+            vertex_colors.check_object(objects[job.object_name], settings, job.target.extra)
 
 
 def throughput(result):
@@ -184,12 +250,10 @@ def input_notes(result):
         n = report.get(key)
         if n:
             notes.append((one if n == 1 else several).format(n=n))
-    from .selected_to_active import miss_notes
-
     return notes + miss_notes(result)
 
 
-def _visible_geometry(depsgraph, view_layer):
+def visible_geometry(depsgraph, view_layer):
     """(original object name or None for an instance, MeshArrays) of everything visible in the view layer."""
     for inst in depsgraph.object_instances:
         obj = inst.object
@@ -261,24 +325,46 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
             image_names[name] = obj.name
 
     if settings.occluders == "VISIBLE":
-        pool = list(_visible_geometry(depsgraph, view_layer or depsgraph.view_layer))
+        pool = list(visible_geometry(depsgraph, view_layer or depsgraph.view_layer))
     elif settings.occluders == "SELECTED":
         pool = list(_selected_geometry(depsgraph, selected))
     else:
         pool = []
 
-    from . import targets as issue14
-
-    extra = issue14.extra_for(settings)
+    extra = extra_for(settings)
     jobs = []
     for obj in targets:
         target = object_arrays(
-            obj.evaluated_get(depsgraph), uv_map=settings.uv_map, with_uvs=issue14.needs_uvs(settings),
+            obj.evaluated_get(depsgraph), uv_map=settings.uv_map, with_uvs=needs_uvs(settings),
             with_normals=True, extra=extra,
         )
         if target is None:
             raise ExtractError(f"{obj.name} has no faces to bake")
         occluders = [arrays for key, arrays in pool if key != obj.name]
         jobs.append(Job(obj.name, settings.image_name_for(obj.name, max_bytes), target, occluders))
-    issue14.check_plan(jobs, settings, {obj.name: obj for obj in targets})
+    check_plan(jobs, settings, {obj.name: obj for obj in targets})
     return jobs
+
+
+def miss_summary(result):
+    """What the summary line says of a Selected to Active bake's matching rays: "; 312 of 65536
+    sample points missed the high-poly", "; no sample point missed the high-poly", or "" for another bake."""
+    report = getattr(result, "report", None) or {}
+    cast = report.get("matching_rays", 0)
+    if not cast:
+        return ""
+    missed = getattr(result, "missed", 0)
+    if not missed:
+        return "; no sample point missed the high-poly"
+    return f"; {missed} of {cast} sample points missed the high-poly"
+
+
+def miss_notes(result):
+    """Warnings of a Selected to Active bake (core.highpoly's report), as sentences; [] for another bake."""
+    report = getattr(result, "report", None) or {}
+    n = report.get("missed_texels", 0)
+    if not n:
+        return []
+    return [f"{n} texel{' finds' if n == 1 else 's find'} no high-poly surface along {'its' if n == 1 else 'their'} "
+            f"rays and {'is' if n == 1 else 'are'} left to the margin; a larger extrusion or max ray distance "
+            "reaches farther"]

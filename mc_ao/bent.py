@@ -98,22 +98,26 @@ def rgba(rgb, channels=4):
 
 
 def write_files(rgb, files, metadata):
-    """Write the RGB bent-normal map to each of ``files`` (mc_ao.jobs.OutputFile, no stderr):
-    ``(written, failures)`` as mc_ao.jobs.write_outputs. OpenImageIO where it exists, else Blender's
+    """Write the RGB bent-normal map to each of ``files`` (mc_ao.filewriter.OutputFile, no stderr):
+    ``(written, failures)`` as mc_ao.filewriter.write_outputs. OpenImageIO where it exists, else Blender's
     writer; atomic either way."""
-    from . import jobs
+    from . import filewriter
 
     written, failures = [], []
     if not files:
         return written, failures
     core = corelink.load()
     try:
-        jobs.make_output_folder(__import__("os").path.dirname(files[0].path))
+        filewriter.make_output_folder(__import__("os").path.dirname(files[0].path))
     except OSError as exc:
         return written, [(f.path, exc) for f in files]
     for f in files:
+        problem = filewriter.kind_problem(f.path)
+        if problem is not None:
+            failures.append((f.path, corelink.load("errors").FileWriteError(problem)))
+            continue
         try:
-            if jobs.oiio_available():
+            if filewriter.oiio_available():
                 corelink.load("imageio").write_image(f.path, rgb, bits=f.bits, metadata=metadata)
             else:
                 from . import images

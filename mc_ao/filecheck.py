@@ -6,7 +6,8 @@ is untrusted: a forgotten argument makes the next word the path (``--summary-jso
 run, or an existing file of another kind than the one about to be written; the kind is read from
 the file's first bytes (:func:`file_kind`), never guessed from its name.
 
-:func:`check_blend_complete` reads a .blend file to its end marker (``ENDB``): Blender can report a
+:func:`replace_problem` refuses to replace an existing file whose contents are not of the kind its
+extension says (what the bake writes there would destroy something else). :func:`check_blend_complete` reads a .blend file to its end marker (``ENDB``): Blender can report a
 save onto a full disk as done and leave a file cut short, whose header is intact.
 """
 
@@ -15,7 +16,8 @@ import json
 import os
 import struct
 
-__all__ = ["file_kind", "output_problem", "check_blend_complete", "same_file", "BlendFileError"]
+__all__ = ["file_kind", "folder_problem", "output_problem", "replace_problem", "check_blend_complete", "same_file", "BlendFileError",
+           "KIND_OF_EXTENSION"]
 
 _ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 _GZIP_MAGIC = b"\x1f\x8b"
@@ -92,8 +94,59 @@ def output_problem(path, kind, inputs=(), outputs=(), replaces=()):
         if other and same_file(path, other):
             return f"it is also {what}"
     found = file_kind(path)
-    if found is not None and found not in replaces:
+    if found is not None and found not in replaces and not _empty_file(path):  # (mktemp's file: nothing to lose)
         return f"it is {found} already there, not {' or '.join(replaces) or 'a file this run writes'}"
+    return None
+
+
+def _empty_file(path):
+    try:
+        return os.path.isfile(path) and os.path.getsize(path) == 0
+    except OSError:
+        return False
+
+
+#: What a file of each extension the bake writes holds (file_kind's words).
+KIND_OF_EXTENSION = {".png": "a PNG image", ".exr": "an EXR image", ".tif": "a TIFF image",
+                     ".tiff": "a TIFF image", ".ply": "a PLY mesh", ".blend": "a .blend file"}
+
+
+def replace_problem(path):
+    """Why the bake's file at ``path`` may not replace what is there (None when it may): an existing
+    file of another kind than the extension says (a .blend or notes saved as ``Ground_AO.png``). An
+    empty file, and a path of an extension not listed in :data:`KIND_OF_EXTENSION`, are not checked."""
+    expected = KIND_OF_EXTENSION.get(os.path.splitext(os.fspath(path))[1].lower())
+    if expected is None:
+        return None
+    if _empty_file(path):
+        return None
+    found = file_kind(path)
+    if found is None or found == expected:
+        return None
+    return (f"{os.fspath(path)!r} is {found}, not {expected}: it was left as it is; move it away, or choose "
+            "another folder or name")
+
+
+def folder_problem(folder):
+    """Why files cannot be written into ``folder``, or None when they can.
+
+    A folder that does not exist yet is fine where it can be created (it is created before the
+    first file is written): what counts is its nearest existing ancestor, which must be a folder
+    that this process may write. Checked before a bake, so that a typo in the folder does not
+    cost the bake; a write can still fail later (a full disk), and then the existing file is
+    left as it was.
+    """
+    path = os.path.abspath(folder)
+    existing = path
+    while not os.path.exists(existing):
+        parent = os.path.dirname(existing)
+        if parent == existing:
+            break
+        existing = parent
+    if not os.path.isdir(existing):
+        return "it is a file, not a folder" if existing == path else f"{existing!r} is a file, not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return "it is not writable" if existing == path else f"{existing!r} is not writable"
     return None
 
 

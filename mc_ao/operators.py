@@ -35,14 +35,15 @@ import traceback
 import bpy
 import numpy as np
 
-from . import baking, corelink, images, jobs, selected_to_active, targets
+from . import bakerun, baking, corelink, filecheck, filewriter, images, outputs, schema, selected_to_active
 from .extract import ExtractError
-from .jobs import BakeRun
+from .bakerun import BakeRun
 from .properties import resolve_threads
 from .settings import BakeSettings
+from .terminal import escape
 
 # Bakes in flight, so that unregister() can stop their threads (BakeRun adds and removes itself).
-_RUNS = jobs.RUNS
+_RUNS = bakerun.RUNS
 # Sessions in flight, so that an undo can end them before it replaces the data they write to.
 _SESSIONS = set()
 # Seconds between two live updates of an image: writing a large image's pixels takes milliseconds.
@@ -68,7 +69,7 @@ def _output_dir(settings):
             "which is not saved yet; save it or choose an absolute folder"
         )
     folder = bpy.path.abspath(settings.output_dir)
-    problem = images.output_dir_problem(folder)
+    problem = filecheck.folder_problem(folder)
     if problem is not None:
         raise OutputError(f"Cannot save into the output folder {folder!r}: {problem}; nothing was baked")
     return folder
@@ -137,7 +138,7 @@ def summary(job, result):
     sources = f" from {', '.join(h.name for h in job.highpoly)}" if getattr(job, "highpoly", None) else ""
     return (
         f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r} in {result.seconds:.2f} s, "
-        f"{per_texel:.0f} samples per texel, {rate:.2f} M rays/s{selected_to_active.miss_summary(result)}"
+        f"{per_texel:.0f} samples per texel, {rate:.2f} M rays/s{baking.miss_summary(result)}"
     )
 
 
@@ -189,7 +190,10 @@ class BakeSession:
         self.interrupted = False  # an undo stopped the worker; the session ends after it
 
     def report(self, kind, message):
-        """The operator's report, remembered: the last one of a bake is what the panel shows."""
+        """The operator's report, remembered: the last one of a bake is what the panel shows. Escaped
+        (mc_ao.terminal): the names in it may hold escape sequences or newlines, and Blender prints
+        reports to the terminal in the background."""
+        message = escape(message)
         self.last_report = (next(iter(kind)), message)
         self._report_to(kind, message)
 
@@ -205,7 +209,7 @@ class BakeSession:
             self.report({"ERROR"}, f"Cannot bake: {missing}")
             return False
         self.settings = BakeSettings.from_properties(context.scene.mc_ao)
-        problems = jobs.check_settings(self.settings)
+        problems = schema.problems(self.settings)
         if problems:
             # The properties' own limits keep most values in range; what gets past them (a script
             # setting a value, a limit of the core's) is refused here, before anything is baked.
@@ -216,7 +220,7 @@ class BakeSession:
             return False
         selected = list(context.selected_objects)
         to_active = self.settings.use_selected_to_active
-        needs_uvs = targets.needs_uvs(self.settings)
+        needs_uvs = baking.needs_uvs(self.settings)
         if to_active:
             # Selected to Active: the active object from the other selected ones (their cage aside).
             active, cage = context.active_object, selected_to_active.cage_of(self.settings)
@@ -246,9 +250,13 @@ class BakeSession:
                 )
             for job in planned:
                 try:
-                    targets.check_images(job, self.settings)
+                    outputs.check_images(job, self.settings)
                 except images.ImageError as exc:
                     raise images.ImageError(f"{job.object_name}: {exc}") from None
+            if self.output_dir is not None:  # the files' paths, checked before anything is baked
+                outputs.plan_files(self.settings, self.output_dir, planned,
+                                   [(self.settings.file_format, self.settings.file_bits)],
+                                   stderr=self.settings.error_map)
         except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
             self.report({"ERROR"}, str(exc))
             return False
@@ -262,7 +270,7 @@ class BakeSession:
                 self._warn(f"{job.object_name}: {note}")
         w, h = self.settings.size
         # UDIM tiles and colour attributes are written when their object's bake finishes.
-        self.live = live and w * h <= LIVE_MAX_TEXELS and not targets.custom(self.settings)
+        self.live = live and w * h <= LIVE_MAX_TEXELS and not outputs.custom(self.settings)
         self.errors = 0  # objects whose bake failed
         self.file_errors = 0  # files not saved (their objects are baked)
         self.finished = []
@@ -332,35 +340,34 @@ class BakeSession:
     # -- the worker's messages -----------------------------------------------------------------
 
     def _handle(self, context, message):
-        """Apply one worker message; return True at the end of the run."""
-        kind, *args = message
-        if kind == "progress":
-            i, fraction = args
-            self.fraction = (i + fraction) / len(self.run.jobs)
-            context.window_manager.progress_update(self.fraction)
-        elif kind == "tile":
-            i, rows, cols, block = args
-            buffer = self._buffer(i)
-            if buffer is not None:
-                buffer[rows, cols] = images.rgba(block, buffer.shape[2])
-                self.pending.add(i)
-        elif kind == "done":
-            self._finish_job(context, *args)
-        elif kind == "error":
-            i, exc = args
-            self._failed(i)
-            self.report({"ERROR"}, f"{self.run.jobs[i].object_name}: {exc}")
-        elif kind == "crash":
-            i, exc, trace = args
-            self._failed(i)
-            print(f"mc_ao: the bake of {self.run.jobs[i].object_name} failed:\n{trace}", file=sys.stderr)
-            self.report(
-                {"ERROR"},
-                f"{self.run.jobs[i].object_name}: bake failed ({type(exc).__name__}: {exc}); see the console",
-            )
-        elif kind == "end":
-            return True
-        return False
+        """Apply one worker message (mc_ao.bakerun.dispatch to the on_* methods); True at the end of the run."""
+        self._context = context
+        return bakerun.dispatch(message, self)
+
+    def on_progress(self, i, fraction):
+        self.fraction = (i + fraction) / len(self.run.jobs)
+        self._context.window_manager.progress_update(self.fraction)
+
+    def on_tile(self, i, rows, cols, block):
+        buffer = self._buffer(i)
+        if buffer is not None:
+            buffer[rows, cols] = images.rgba(block, buffer.shape[2])
+            self.pending.add(i)
+
+    def on_done(self, i, result):
+        self._finish_job(self._context, i, result)
+
+    def on_failed(self, i, exc):
+        self._failed(i)
+        self.report({"ERROR"}, f"{self.run.jobs[i].object_name}: {exc}")
+
+    def on_crashed(self, i, exc, trace):
+        self._failed(i)
+        print(f"mc_ao: the bake of {self.run.jobs[i].object_name} failed:\n{trace}", file=sys.stderr)
+        self.report(
+            {"ERROR"},
+            f"{self.run.jobs[i].object_name}: bake failed ({type(exc).__name__}: {exc}); see the console",
+        )
 
     def _failed(self, i):
         self.errors += 1
@@ -382,8 +389,10 @@ class BakeSession:
 
     def _finish_job(self, context, i, result):
         """A job's result into its image for good, its file saved; its warnings, then its summary."""
-        if targets.custom(self.settings):  # colour attributes, UDIM tiles (issue 14)
-            return targets.finish_job(self, context, i, result)
+        if outputs.custom(self.settings):  # colour attributes, UDIM tiles
+            outputs.finish_job(self, context, i, result)
+            _redraw(context)
+            return
         job = self.run.jobs[i]
         self.pending.discard(i)
         self.buffers.pop(i, None)
@@ -396,14 +405,14 @@ class BakeSession:
             return
         self.finished.append(i)
         self.results.append(result)
-        if not targets.finish_bent(self, i, result):  # "<object>_BentNormal" beside the AO (issue 14)
+        if not outputs.finish_bent(self, i, result):  # "<object>_BentNormal" beside the AO
             self.unsummarised_errors += 1
         saved = {}
         if self.output_dir is not None:
             saved = self._save(job, result)
             if not saved:  # reported as an error; counted in the summary, which comes after it
                 self.unsummarised_errors += 1
-            targets.save_bent(self, job, result, saved.get("ao"))
+            outputs.save_bent(self, job, result, saved.get("ao"))
         self._keep(job, job.image_name, result.ao, saved.get("ao"))
         if self.settings.error_map:
             self._error_map(job, result, saved.get("stderr"))
@@ -449,11 +458,10 @@ class BakeSession:
 
     def _save(self, job, result):
         """Write the finished job's file into the output folder; report where, or why not."""
-        metadata = dict(jobs.settings_record(self.settings), object=job.object_name,
-                        blend=bpy.path.basename(bpy.data.filepath))
+        metadata = filewriter.file_metadata(self.settings, job, bpy.data.filepath)
         try:
             files = self._output_files()[job.image_name]
-            written, failures = jobs.write_outputs(result, files, metadata)
+            written, failures = filewriter.write_outputs(result, files, metadata)
         except corelink.load().McAoError as exc:  # a path that would leave the output folder
             written, failures = [], [(self.output_dir, exc)]
         for path, exc in failures:
@@ -465,7 +473,7 @@ class BakeSession:
                 f"(any file already there is unchanged): {why}",
             )
         if written:
-            self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
+            self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({filewriter.writer_name()})")
         if failures or not written:
             return {}
         f = files[0]
@@ -474,7 +482,7 @@ class BakeSession:
     def _output_files(self):
         """image name -> its OutputFile list, over all of this bake's jobs (distinct, safe names)."""
         if getattr(self, "_files", None) is None:
-            self._files = targets.output_files(  # the AO images' files, and the bent-normal images'
+            self._files = outputs.output_files(  # the AO images' files, and the bent-normal images'
                 self.settings, self.output_dir, self.run.jobs,
                 [(self.settings.file_format, self.settings.file_bits)], stderr=self.settings.error_map,
             )

@@ -139,7 +139,7 @@ def draw_targets(layout, context):
 
 
 class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):
-    """Where the AO goes (Cycles' Target), UDIM tiles, bent normals (issue 14)."""
+    """Where the AO goes (Cycles' Target), UDIM tiles, bent normals."""
 
     bl_label = "Target"
     bl_parent_id = "VIEW3D_PT_mc_ao"

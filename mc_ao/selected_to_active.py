@@ -25,6 +25,7 @@ How Blender's objects become the core's input, as Cycles does it (``object_bake_
 
 import numpy as np
 
+from .baking import Job, visible_geometry, id_name_max_bytes, kind_of, skip_reason
 from .extract import GEOMETRY_TYPES, ExtractError, MeshArrays, object_arrays
 
 
@@ -62,8 +63,6 @@ def unsupported(settings):
 
 def why_not(selected, active, cage=None):
     """None when Selected to Active can bake the selection, else why not (for the poll, panel, report)."""
-    from .baking import kind_of, skip_reason
-
     if active is None:
         return "Selected to Active needs an active object: the low-poly to bake onto (select it last)"
     if active.type != "MESH":
@@ -139,8 +138,6 @@ def plan(depsgraph, active, selected, settings, *, view_layer=None, max_bytes=No
     """The Job of a Selected to Active bake: ``active`` (original object) from the other objects of
     ``selected``, with ``settings`` (mc_ao.settings.BakeSettings). Raises ExtractError naming the
     objects (no faces, a cage of another topology, high-poly objects without faces)."""
-    from .baking import Job, _visible_geometry, id_name_max_bytes
-
     cage = cage_of(settings)
     reason = why_not(selected, active, cage)
     if reason is not None:
@@ -172,7 +169,7 @@ def plan(depsgraph, active, selected, settings, *, view_layer=None, max_bytes=No
     occluders = []
     if settings.occluders == "VISIBLE":
         skip = {active.name, *(o.name for o in highs)} | ({cage.name} if cage is not None else set())
-        occluders = [arrays for key, arrays in _visible_geometry(depsgraph, view_layer or depsgraph.view_layer)
+        occluders = [arrays for key, arrays in visible_geometry(depsgraph, view_layer or depsgraph.view_layer)
                      if key not in skip]
     max_bytes = id_name_max_bytes() if max_bytes is None else max_bytes
     job = Job(active.name, settings.image_name_for(active.name, max_bytes), target, occluders)
@@ -184,28 +181,4 @@ def plan(depsgraph, active, selected, settings, *, view_layer=None, max_bytes=No
     return job
 
 
-def miss_summary(result):
-    """What the summary line says of a Selected to Active bake's matching rays: "; 312 of 65536
-    sample points missed the high-poly", "; no sample point missed the high-poly", or "" for another bake."""
-    report = getattr(result, "report", None) or {}
-    cast = report.get("matching_rays", 0)
-    if not cast:
-        return ""
-    missed = getattr(result, "missed", 0)
-    if not missed:
-        return "; no sample point missed the high-poly"
-    return f"; {missed} of {cast} sample points missed the high-poly"
-
-
-def miss_notes(result):
-    """Warnings of a Selected to Active bake (core.highpoly's report), as sentences; [] for another bake."""
-    report = getattr(result, "report", None) or {}
-    n = report.get("missed_texels", 0)
-    if not n:
-        return []
-    return [f"{n} texel{' finds' if n == 1 else 's find'} no high-poly surface along {'its' if n == 1 else 'their'} "
-            f"rays and {'is' if n == 1 else 'are'} left to the margin; a larger extrusion or max ray distance "
-            "reaches farther"]
-
-
-__all__ = ["high_objects", "cage_of", "why_not", "cage_arrays", "plan", "miss_summary", "miss_notes"]
+__all__ = ["high_objects", "cage_of", "why_not", "cage_arrays", "plan"]

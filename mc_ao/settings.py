@@ -1,18 +1,25 @@
-"""Bake settings as plain values (no bpy), shared by the operator (from scene.mc_ao) and scripts/bake_ao.py."""
+"""Bake settings as plain values (no bpy), shared by the operator (from scene.mc_ao), the script and
+the batch. The fields, their types and defaults are mc_ao.schema's settings, in its order."""
 
+import dataclasses
 import hashlib
-from dataclasses import dataclass, fields
 
-# RNA enum identifier -> core argument; the enum items in properties.py use these keys.
-SOURCES = {"SOBOL": "sobol", "STRATIFIED": "stratified", "INDEPENDENT": "independent", "HALTON": "halton"}
-DISTRIBUTIONS = {"COSINE": "cosine", "UNIFORM": "uniform"}
-OCCLUDERS = ("SELF", "SELECTED", "VISIBLE")
-# Bake targets, named as Cycles names them (scene.render.bake.target).
-TARGETS = ("IMAGE_TEXTURES", "VERTEX_COLORS")
-# Colour attribute domains a vertex bake writes (Cycles follows the attribute's own).
-DOMAINS = ("POINT", "CORNER")
-# Spaces of the bent-normal map.
-BENT_SPACES = ("TANGENT", "OBJECT")
+from .schema import BY_NAME, SETTINGS, unlimited
+
+_TYPES = {"int": int, "float": float, "distance": float, "bool": bool, "enum": str, "str": str, "object": str}
+
+
+def _identifiers(name):
+    return BY_NAME[name].identifiers
+
+
+# Enum identifiers (the scene properties' items; the core's names are their lower case).
+SOURCES = {i: i.lower() for i in _identifiers("source")}
+DISTRIBUTIONS = {i: i.lower() for i in _identifiers("distribution")}
+OCCLUDERS = _identifiers("occluders")
+TARGETS = _identifiers("target")  # named as Cycles names them (scene.render.bake.target)
+DOMAINS = _identifiers("attribute_domain")
+BENT_SPACES = _identifiers("bent_space")
 # file format -> (extension, bits for an 8-bit image, bits for a float image), as core.imageio takes them
 FILE_FORMATS = {
     "PNG": (".png", 8, 16),
@@ -22,47 +29,8 @@ FILE_FORMATS = {
 }
 
 
-@dataclass(frozen=True)
-class BakeSettings:
-    """Everything one bake needs besides the objects; field names match the scene.mc_ao properties."""
-
-    samples: int = 128
-    min_samples: int = 16
-    target_error: float = 0.0  # 95% CI half-width to stop a texel at; 0 = adaptive sampling off
-    resolution: int = 1024  # image width in pixels
-    height: int = 0  # image height in pixels; 0 = square
-    max_distance: float = 0.0  # in scene units; 0 = unlimited
-    source: str = "SOBOL"
-    distribution: str = "COSINE"
-    occluders: str = "VISIBLE"
-    uv_map: str = ""  # "" = the mesh's active render UV map
-    margin: int = 16
-    image_name: str = ""  # "" = "<object>_AO"; "{object}" in it is replaced by the object's name
-    float_buffer: bool = True
-    save_to_file: bool = False
-    file_format: str = "PNG"
-    output_dir: str = "//"
-    link_to_file: bool = True  # with save_to_file: the image loads from its saved file, not packed
-    seed: int = 0
-    threads: int = 0  # 0 = the add-on preferences' default (whose 0 = all cores)
-    ignore_backfaces: bool = False
-    # Issue 14: UDIM tiles, colour attributes, bent normals (appended; the defaults bake as before).
-    use_udim: bool = False  # bake every UDIM tile the UVs touch into one tiled image
-    target: str = "IMAGE_TEXTURES"  # or "VERTEX_COLORS": into a colour attribute, no UV map needed
-    attribute_name: str = "AO"  # the colour attribute of a VERTEX_COLORS bake, created if missing
-    attribute_domain: str = "POINT"  # "POINT" (mean of a vertex's corners, as Cycles) or "CORNER"
-    bent_normals: bool = False  # also bake "<object>_BentNormal" from the same rays
-    bent_space: str = "TANGENT"  # or "OBJECT"
-    error_map: bool = False  # also keep each texel's standard error: image "<image>_stderr", file "<stem>_stderr.exr"
-    # Selected to Active (mc_ao.selected_to_active), named as Cycles' bake settings: bake the selected
-    # objects onto the active one; extrusion and max ray distance in the active object's units (0 =
-    # no limit); a cage: the active object extruded without its Edge Split modifiers' splits (use_cage
-    # alone) or the object named cage_object.
-    use_selected_to_active: bool = False
-    cage_extrusion: float = 0.0
-    max_ray_distance: float = 0.0
-    use_cage: bool = False
-    cage_object: str = ""  # an object's name ("" = none); scene.mc_ao holds a pointer
+class _BakeSettingsMethods:
+    """What a BakeSettings does with its values; its fields come from mc_ao.schema (see below)."""
 
     @classmethod
     def from_properties(cls, props, **overrides):
@@ -70,7 +38,7 @@ class BakeSettings:
 
         An object pointer (``cage_object``) becomes the object's name ("" for none).
         """
-        values = {f.name: getattr(props, f.name) for f in fields(cls)}
+        values = {f.name: getattr(props, f.name) for f in dataclasses.fields(cls)}
         cage = values.get("cage_object")
         if cage is None:
             values["cage_object"] = ""
@@ -98,7 +66,7 @@ class BakeSettings:
         their end would bake into one image. So the object's part is shortened instead and gets 8
         hex digits of a hash of the whole object name ("<start of name>-1a2b3c4d_AO"): the same
         object always gets the same image, different objects different ones. This is not a file
-        name: files get theirs from mc_ao.jobs.output_files().
+        name: files get theirs from mc_ao.filewriter.output_files().
         """
         template = (self.image_name or "{object}_AO") + suffix
         name = template.replace("{object}", object_name)
@@ -119,7 +87,7 @@ class BakeSettings:
     def bent_image_name_for(self, object_name, max_bytes=None):
         """The image of ``object_name``'s bent normals: "<object>_BentNormal", made to fit as
         image_name_for() makes the AO image's name fit."""
-        return BakeSettings(image_name="{object}_BentNormal").image_name_for(object_name, max_bytes)
+        return dataclasses.replace(self, image_name="{object}_BentNormal").image_name_for(object_name, max_bytes)
 
     @property
     def replicates(self):
@@ -146,8 +114,8 @@ class BakeSettings:
             samples=self.samples,
             min_samples=min(self.min_samples, self.samples),
             target_error=self.target_error,
-            # 0 means unlimited; anything else goes to the core as it is (which refuses < 0 and NaN).
-            max_distance=float("inf") if self.max_distance == 0 else self.max_distance,
+            # no limit (0 or inf) is inf to the core; anything else goes as it is (the core refuses < 0, NaN)
+            max_distance=float("inf") if unlimited(self.max_distance) else self.max_distance,
             distribution=DISTRIBUTIONS[self.distribution],
             source=SOURCES[self.source],
             margin=self.margin,
@@ -157,6 +125,17 @@ class BakeSettings:
             **({"bent_normals": True} if self.bent_normals and not self.vertex_colors else {}),
             replicates=self.replicates,
         )
+
+
+#: Everything one bake needs besides the objects: a frozen dataclass with one field per schema setting.
+BakeSettings = dataclasses.make_dataclass(
+    "BakeSettings",
+    [(s.name, _TYPES[s.kind], dataclasses.field(default=s.default)) for s in SETTINGS],
+    bases=(_BakeSettingsMethods,), frozen=True,
+)
+BakeSettings.__module__ = __name__
+BakeSettings.__doc__ = ("Everything one bake needs besides the objects; one field per mc_ao.schema setting "
+                        "(the scene.mc_ao properties' names).")
 
 
 def _clip_utf8(text, limit):

@@ -18,7 +18,7 @@ leave the image as it was.
 - Files: ``<name>.<tile>.<ext>`` (Blender's ``<UDIM>`` token, Mari's and Substance's convention), and
   ``<name>_stderr.<tile>.exr`` for the standard errors.
 
-Importing this module needs no bpy (the script and mc_ao.jobs use its file names).
+Importing this module needs no bpy (the script and mc_ao.filewriter use its file names).
 """
 
 import os
@@ -45,7 +45,7 @@ def token_path(path):
 
 
 def tile_files(files, tile):
-    """mc_ao.jobs.OutputFile list of one tile: every path with ``.<tile>`` before its extension."""
+    """mc_ao.filewriter.OutputFile list of one tile: every path with ``.<tile>`` before its extension."""
     from dataclasses import replace
 
     return [replace(f, path=tile_path(f.path, tile),
@@ -141,9 +141,9 @@ def _rgba(px):
 
 def _write_tile(path, pixels, float_buffer):
     """One tile's (H, W, 4) pixels to ``path`` (EXR float or 8-bit PNG, linear), any writer."""
-    from . import jobs
+    from . import filewriter
 
-    if jobs.oiio_available():
+    if filewriter.oiio_available():
         corelink.load("imageio").write_image(path, pixels, bits="float" if float_buffer else 8)
     else:
         from . import images

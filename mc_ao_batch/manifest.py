@@ -12,7 +12,7 @@ A manifest::
     objects = ["Chair"]           # optional: default, as bake_ao.py (every mesh with a UV map ...)
     samples = 256                 # overrides [defaults] for this file
 
-Every setting is checked against ``scripts/bake_ao.py``'s own argument parser before anything runs,
+Every setting is checked against the bake script's own argument parser (mc_ao.cli) before anything runs,
 so an unknown name or a bad value stops the whole batch with exit status 2 and a message naming the
 entry; what only the bake can tell (an object missing from its file, a broken file) fails that task
 alone.
@@ -26,7 +26,6 @@ does not depend on the order of the entries.
 
 import argparse
 import hashlib
-import importlib.util
 import json
 import os
 import tomllib
@@ -36,7 +35,6 @@ from pathlib import Path
 from core._version import __version__
 from core.filenames import safe_file_stem
 
-from . import BAKE_SCRIPT
 
 #: The batch summary's file name in the output folder; no task folder may take it.
 BATCH_SUMMARY = "mc_ao_batch.json"
@@ -46,7 +44,7 @@ _RUNNER_OPTIONS = {"output", "summary_json", "quiet", "blend"}
 # thread count): left out of a task's fingerprint.
 _NO_EFFECT = {"threads", "quiet", "output", "summary_json", "blend"}
 _ENTRY_KEYS = {"blend"}
-# bake_ao.py options a batch task cannot take, and why (issue 14: one --save path for every task
+# bake_ao.py options a batch task cannot take, and why (one --save path for every task
 # would have each task replace the last one's file).
 _NOT_IN_BATCH = {
     "save": "every task would save its .blend file to that one path; a batch of --target vertex-colors "
@@ -90,18 +88,11 @@ class Task:
         return cls(**data)
 
 
-_BAKE_MODULE = None
-
-
 def bake_script_module():
-    """scripts/bake_ao.py as a module (it imports no bpy at load time), for its argument parser."""
-    global _BAKE_MODULE
-    if _BAKE_MODULE is None:
-        spec = importlib.util.spec_from_file_location("mc_ao_bake_ao_script", BAKE_SCRIPT)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        _BAKE_MODULE = module
-    return _BAKE_MODULE
+    """mc_ao.cli, the logic of scripts/bake_ao.py (it imports no bpy), for its argument parser and checks."""
+    from mc_ao import cli
+
+    return cli
 
 
 def bake_parser():
@@ -118,14 +109,13 @@ def bake_parser():
 
 
 def check_settings(namespace):
-    """bake_ao.py's own check of every setting's value (ranges, formats and bit depths), where it has one."""
-    module = bake_script_module()
-    check = getattr(module, "settings_from", None)
-    if check is None:
-        return
+    """The bake's own check of every setting's value (mc_ao.cli.settings_from: the schema's limits,
+    formats and bit depths, the options together)."""
+    from mc_ao import cli
+
     try:
-        check(namespace)
-    except getattr(module, "UsageError", ManifestError) as exc:
+        cli.settings_from(namespace)
+    except cli.UsageError as exc:
         raise ManifestError(str(exc).replace("\n", "; ")) from None
 
 

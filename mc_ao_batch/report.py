@@ -157,13 +157,9 @@ def output_problem(path, inputs=(), replaces=None):
     path = os.path.abspath(path)
     if os.path.isdir(path):
         return "it is a folder"
-    existing = os.path.dirname(path)
-    while not os.path.exists(existing) and os.path.dirname(existing) != existing:
-        existing = os.path.dirname(existing)
-    if not os.path.isdir(existing):
-        return f"{existing!r} is a file, not a folder"
-    if not os.access(existing, os.W_OK | os.X_OK):
-        return f"the folder {existing!r} is not writable"
+    problem = filecheck.folder_problem(os.path.dirname(path))
+    if problem is not None:
+        return f"its folder: {problem}"
     if atomicfile.read_only(path):
         return "it is read-only"
     if replaces is None:

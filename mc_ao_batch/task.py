@@ -127,7 +127,7 @@ def why_not_done(task):
             if not os.path.isfile(path):
                 return f"{path} is missing"
             try:
-                if path.lower().endswith(".ply"):  # --target vertex-colors (issue 14)
+                if path.lower().endswith(".ply"):  # --target vertex-colors
                     from core.plyio import read_ply
 
                     metadata = read_ply(path)[4]

@@ -96,3 +96,15 @@ def test_an_output_may_not_be_an_input_another_output_or_another_kind(tmp_path):
     assert "a .blend file already there" in filecheck.output_problem(blend, "the summary", replaces=kinds)
     summary.write_text(json.dumps({"mc_ao": "0.1"}))
     assert filecheck.output_problem(summary, "the summary", replaces=kinds) is None
+
+
+def test_an_empty_file_may_be_replaced(tmp_path):
+    """``--summary-json "$(mktemp)"``: the empty file made for the output holds nothing to lose."""
+    empty = tmp_path / "tmp.XXXX"
+    empty.touch()
+    assert filecheck.output_problem(empty, "the summary", replaces=("an mc_ao summary",)) is None
+    assert filecheck.replace_problem(tmp_path / "x.png") is None
+    (tmp_path / "x.png").touch()
+    assert filecheck.replace_problem(tmp_path / "x.png") is None
+    (tmp_path / "x.png").write_text("notes")
+    assert "is a file, not a PNG image" in filecheck.replace_problem(tmp_path / "x.png")

@@ -8,6 +8,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 
 
+# The first bytes of each kind of file a bake writes: a test's "previous file" must be of the kind its
+# name says, or the bake refuses to replace it (mc_ao.filecheck.replace_problem).
+MAGIC = {".png": b"\x89PNG\r\n\x1a\n", ".exr": b"\x76\x2f\x31\x01", ".tif": b"II*\x00", ".ply": b"ply\n"}
+
+
+def old_file(name, text):
+    """The bytes of an old file at ``name`` that a bake may replace: its kind's magic, then ``text``."""
+    return MAGIC.get(Path(str(name)).suffix, b"") + (text.encode() if isinstance(text, str) else text)
+
+
 def clean_scene(bpy):
     """Remove every object, mesh and image, and reset the scene's bake settings."""
     for obj in list(bpy.data.objects):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from blender_helpers import (
-    add_cube, add_plane, assert_unchanged, new_session, pattern_image, select_only, tick_until,
+    add_cube, add_plane, assert_unchanged, new_session, old_file, pattern_image, select_only, tick_until,
 )
 
 pytestmark = pytest.mark.blender
@@ -310,7 +310,7 @@ def test_a_failed_file_write_keeps_the_bake_in_blender_and_the_old_file(bpy, sce
     baked = np.array(bpy.data.images["Ground_AO"].pixels[:])
 
     path = tmp_path / "Ground_AO.png"
-    path.write_bytes(b"the previous bake's file")
+    path.write_bytes(old_file(path, "the previous bake's file"))
 
     def disk_full(oiio, temp, *args):
         with open(temp, "wb") as fh:
@@ -329,7 +329,7 @@ def test_a_failed_file_write_keeps_the_bake_in_blender_and_the_old_file(bpy, sce
         "Error: Ground: the bake is in image 'Ground_AO', but its file was not saved (any file already "
         f"there is unchanged): could not write '{path}': [Errno 28] No space left on device\n"
     )
-    assert path.read_bytes() == b"the previous bake's file"
+    assert path.read_bytes() == old_file(path, "the previous bake's file")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["Ground_AO.png"]  # no temporary file left
     image = bpy.data.images["Ground_AO"]
     assert tuple(image.size) == (24, 24)  # documented: the image in Blender is baked

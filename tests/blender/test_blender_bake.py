@@ -303,9 +303,9 @@ def test_overlapping_uv_islands_are_reported(bpy, scene, capfd):
 def test_save_without_openimageio_goes_through_blenders_writer(bpy, scene, tmp_path, monkeypatch):
     """Debian's Blender has no OpenImageIO module: the file is then written by Blender itself."""
     from core import imageio
-    from mc_ao import jobs
+    from mc_ao import filewriter
 
-    monkeypatch.setattr(jobs, "oiio_available", lambda: False)
+    monkeypatch.setattr(filewriter, "oiio_available", lambda: False)
     ground = add_plane(bpy, "Ground", size=4)
     add_cube(bpy, "Block", size=1.0, location=(0, 0, 0.8))
     settings = scene.mc_ao

@@ -15,7 +15,7 @@ import sys
 import numpy as np
 import pytest
 
-from blender_helpers import ROOT, add_cube, add_plane, clean_scene, select_only
+from blender_helpers import ROOT, add_cube, add_plane, clean_scene, old_file, select_only
 from tests.fullfs import PAGE, fill, listing, small_filesystem
 
 pytestmark = pytest.mark.blender
@@ -47,13 +47,13 @@ def disk(tmp_path):
 
 def previous_files(folder, names=FILES):
     for name in names:
-        (folder / name).write_bytes(f"the previous {name}".encode())
+        (folder / name).write_bytes(old_file(name, f"the previous {name}"))
         (folder / name).chmod(0o640)
 
 
 def assert_unchanged(folder, names=FILES):
     for name in names:
-        assert (folder / name).read_bytes() == f"the previous {name}".encode(), name
+        assert (folder / name).read_bytes() == old_file(name, f"the previous {name}"), name
         assert stat.S_IMODE((folder / name).stat().st_mode) == 0o640
 
 
@@ -88,7 +88,7 @@ def test_the_script_on_a_full_disk_exits_1_and_keeps_every_previous_file(blend, 
 def test_the_script_does_not_replace_a_read_only_file(blend, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    (out / "Ground_AO.png").write_bytes(b"keep me")
+    (out / "Ground_AO.png").write_bytes(old_file("x.png", "keep me"))
     (out / "Ground_AO.png").chmod(0o444)
     proc = run_script(blend, "--objects", "Ground", "--output", out, "--format", "png", "exr", *NOISY)
     assert proc.returncode == 1
@@ -96,7 +96,7 @@ def test_the_script_does_not_replace_a_read_only_file(blend, tmp_path):
         f"bake_ao: Ground: '{out / 'Ground_AO.png'}' is read-only (its write permission is off): it was left "
         "as it is; make it writable, or choose another folder or name, to replace it\n"
     ) in proc.stderr
-    assert (out / "Ground_AO.png").read_bytes() == b"keep me"
+    assert (out / "Ground_AO.png").read_bytes() == old_file("x.png", "keep me")
     assert listing(out) == ["Ground_AO.exr", "Ground_AO.png"]  # the other format is still written
 
 
@@ -141,10 +141,10 @@ def bake_and_report(bpy, capfd):
                                                ("TIFF", "Ground_AO.tif")])
 def test_the_operator_on_a_full_disk_reports_the_error_not_saved(bpy, scene, disk, capfd, monkeypatch,
                                                                  file_format, name, writer):
-    from mc_ao import jobs
+    from mc_ao import filewriter
 
     if writer == "Blender":
-        monkeypatch.setattr(jobs, "oiio_available", lambda: False)
+        monkeypatch.setattr(filewriter, "oiio_available", lambda: False)
     noisy_scene(bpy, scene, disk, file_format)
     previous_files(disk, [name])
     fill(disk, 2 * PAGE)
@@ -164,13 +164,13 @@ def test_the_operator_on_a_full_disk_reports_the_error_not_saved(bpy, scene, dis
 
 @pytest.mark.parametrize("writer", ["OpenImageIO", "Blender"])
 def test_the_operator_does_not_replace_a_read_only_file(bpy, scene, tmp_path, capfd, monkeypatch, writer):
-    from mc_ao import jobs
+    from mc_ao import filewriter
 
     if writer == "Blender":
-        monkeypatch.setattr(jobs, "oiio_available", lambda: False)
+        monkeypatch.setattr(filewriter, "oiio_available", lambda: False)
     noisy_scene(bpy, scene, tmp_path, "PNG")
     path = tmp_path / "Ground_AO.png"
-    path.write_bytes(b"keep me")
+    path.write_bytes(old_file("x.png", "keep me"))
     path.chmod(0o444)
     result, error, _ = bake_and_report(bpy, capfd)
     assert error == (
@@ -178,17 +178,17 @@ def test_the_operator_does_not_replace_a_read_only_file(bpy, scene, tmp_path, ca
         f"there is unchanged): '{path}' is read-only (its write permission is off): it was left as it is; "
         "make it writable, or choose another folder or name, to replace it\n"
     )
-    assert path.read_bytes() == b"keep me" and listing(tmp_path) == ["Ground_AO.png"]
+    assert path.read_bytes() == old_file("x.png", "keep me") and listing(tmp_path) == ["Ground_AO.png"]
 
 
 @pytest.mark.parametrize("writer", ["OpenImageIO", "Blender"])
 def test_saved_files_get_the_umask_or_keep_their_permissions(bpy, scene, tmp_path, capfd, monkeypatch, writer):
     """New files: 0o666 & ~umask (Blender's writer through a mkstemp file made them 0o600); replaced
     files: their own bits."""
-    from mc_ao import jobs
+    from mc_ao import filewriter
 
     if writer == "Blender":
-        monkeypatch.setattr(jobs, "oiio_available", lambda: False)
+        monkeypatch.setattr(filewriter, "oiio_available", lambda: False)
     noisy_scene(bpy, scene, tmp_path, "PNG")
     umask = os.umask(0o022)
     try:

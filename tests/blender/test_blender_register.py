@@ -111,14 +111,30 @@ def test_manifest_is_valid_and_lists_wheels_for_every_platform():
 
 
 def test_the_properties_limits_are_the_cores(bpy, addon):
-    """Samples and size stop where the core's refusal starts (the core is not imported at registration)."""
-    import core.bake
+    """Samples and size stop where the core's refusal starts: read from core.settings, not copied."""
+    import core.settings
+
     from mc_ao import properties
 
-    assert (properties.MAX_SAMPLES, properties.MAX_RESOLUTION) == (core.bake.MAX_SAMPLES, core.bake.MAX_RESOLUTION)
+    assert not hasattr(properties, "MAX_SAMPLES") and not hasattr(properties, "MAX_RESOLUTION")
     rna = bpy.types.Scene.bl_rna.properties["mc_ao"].fixed_type.properties
-    assert rna["samples"].hard_max == rna["min_samples"].hard_max == core.bake.MAX_SAMPLES
-    assert rna["resolution"].hard_max == rna["height"].hard_max == core.bake.MAX_RESOLUTION
+    assert rna["samples"].hard_max == rna["min_samples"].hard_max == core.settings.MAX_SAMPLES
+    assert rna["resolution"].hard_max == rna["height"].hard_max == core.settings.MAX_RESOLUTION
+
+
+def test_every_schema_setting_is_a_property_with_its_default(bpy, addon):
+    from blender_helpers import clean_scene
+    from mc_ao import schema
+    from mc_ao.settings import BakeSettings
+
+    clean_scene(bpy)  # every setting back to its default
+    rna = bpy.types.Scene.bl_rna.properties["mc_ao"].fixed_type.properties
+    for setting in schema.SETTINGS:
+        prop = rna[setting.name]
+        assert (prop.name, prop.description) == (setting.label, setting.help), setting.name
+        if setting.kind != "object":
+            assert prop.default == setting.default == getattr(BakeSettings(), setting.name), setting.name
+    assert BakeSettings.from_properties(bpy.context.scene.mc_ao) == BakeSettings()
 
 
 def test_the_panel_names_the_image_a_long_object_name_bakes_into(bpy, addon):

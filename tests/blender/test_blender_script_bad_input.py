@@ -9,11 +9,12 @@ import sys
 
 import pytest
 
-from blender_helpers import ROOT, add_cube, add_plane, clean_scene
+from blender_helpers import ROOT, add_cube, add_plane, clean_scene, old_file
 
 pytestmark = pytest.mark.blender
 
 SCRIPT = str(ROOT / "scripts" / "bake_ao.py")
+PREVIOUS_PNG = old_file("x.png", "the previous bake")
 FAST = ["--samples", "4", "--resolution", "16", "--threads", "1"]
 
 
@@ -100,7 +101,7 @@ def test_an_output_folder_under_a_file_exits_2_before_baking(blends, tmp_path):
 
 
 def test_a_core_error_fails_that_object_only(blends, tmp_path):
-    (tmp_path / "Bad_AO.png").write_bytes(b"the previous bake")
+    (tmp_path / "Bad_AO.png").write_bytes(PREVIOUS_PNG)
     proc = run_script(blends["nan"], "--objects", "Bad", "Ground", "--occluders", "self", "--output", tmp_path, *FAST)
     assert proc.returncode == 1
     assert (
@@ -109,7 +110,7 @@ def test_a_core_error_fails_that_object_only(blends, tmp_path):
     )
     assert "Traceback" not in proc.stderr
     assert "bake_ao: baked 1 of 2 objects, 1 failed" in proc.stdout
-    assert (tmp_path / "Bad_AO.png").read_bytes() == b"the previous bake"
+    assert (tmp_path / "Bad_AO.png").read_bytes() == PREVIOUS_PNG
     assert sorted(p.name for p in tmp_path.iterdir()) == ["Bad_AO.png", "Ground_AO.png"]
 
 
@@ -125,7 +126,7 @@ def test_ctrl_c_during_a_bake_exits_130_and_writes_nothing(blends, tmp_path):
     """Ctrl-C once the bake traces rays (its first progress line, printed on the bake's first chunk)."""
     out = tmp_path / "out"
     out.mkdir()
-    (out / "Ground_AO.png").write_bytes(b"the previous bake")
+    (out / "Ground_AO.png").write_bytes(PREVIOUS_PNG)
     summary = tmp_path / "summary.json"
     # 65536 samples a texel at 256 x 256: hours of rays, cancelled within a chunk (one texel's rays).
     proc = subprocess.Popen(
@@ -147,7 +148,7 @@ def test_ctrl_c_during_a_bake_exits_130_and_writes_nothing(blends, tmp_path):
         proc.kill()
     assert proc.returncode == 130
     assert err.endswith("bake_ao: cancelled; nothing of Ground was written (any file there is as it was)\n")
-    assert (out / "Ground_AO.png").read_bytes() == b"the previous bake"
+    assert (out / "Ground_AO.png").read_bytes() == PREVIOUS_PNG
     assert sorted(p.name for p in out.iterdir()) == ["Ground_AO.png"]
     record = json.loads(summary.read_text())
     assert record["exit_code"] == 130 and record["error"] == "cancelled (Ctrl-C)"
@@ -180,7 +181,7 @@ def test_ctrl_c_between_an_objects_files_writes_all_of_them_and_says_so(blends, 
     out.mkdir()
     names = ["Ground_AO.png", "Ground_AO.exr", "Ground_AO.tif", "Block_AO.png"]
     for name in names:
-        (out / name).write_bytes(b"the previous bake")
+        (out / name).write_bytes(old_file(name, "the previous bake"))
     proc = subprocess.run(
         [sys.executable, "-c", CTRL_C_AFTER_FIRST_FILE, str(ROOT), SCRIPT, str(blends["mixed"]), "--objects", "Ground",
          "Block", "--output", str(out), "--format", "png", "exr", "tif", *FAST],
@@ -188,8 +189,8 @@ def test_ctrl_c_between_an_objects_files_writes_all_of_them_and_says_so(blends, 
     assert proc.returncode == 130, proc.stderr
     assert proc.stderr.endswith("bake_ao: cancelled; every file of Ground is written; nothing of Block was written "
                                 "(any file there is as it was)\n"), proc.stderr
-    assert all((out / n).read_bytes() != b"the previous bake" for n in names[:3])  # all of Ground's
-    assert (out / "Block_AO.png").read_bytes() == b"the previous bake"
+    assert all((out / n).read_bytes() != old_file(n, "the previous bake") for n in names[:3])  # all of Ground's
+    assert (out / "Block_AO.png").read_bytes() == PREVIOUS_PNG
     assert sorted(p.name for p in out.iterdir()) == sorted(names)
 
 
@@ -210,18 +211,18 @@ runpy.run_path(sys.argv[0], run_name="__main__")
 def test_a_killed_run_keeps_the_old_files_and_the_next_run_removes_its_temporary_files(blends, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    (out / "Ground_AO.png").write_bytes(b"the previous bake")
+    (out / "Ground_AO.png").write_bytes(PREVIOUS_PNG)
     args = [str(blends["mixed"]), "--objects", "Ground", "--output", str(out), *FAST]
     proc = subprocess.run([sys.executable, "-c", KILLED_MID_WRITE, str(ROOT), SCRIPT, *args],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == -signal.SIGKILL, proc.stderr
-    assert (out / "Ground_AO.png").read_bytes() == b"the previous bake"
+    assert (out / "Ground_AO.png").read_bytes() == PREVIOUS_PNG
     left = [p.name for p in out.iterdir() if p.name.startswith(".mc_ao-")]
     assert left, "the killed run left no temporary file: the test did not kill it mid-write"
     proc = subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert sorted(p.name for p in out.iterdir()) == ["Ground_AO.png"]
-    assert (out / "Ground_AO.png").read_bytes() != b"the previous bake"
+    assert (out / "Ground_AO.png").read_bytes() != PREVIOUS_PNG
 
 
 # -- every setting is checked before anything is baked: exit 2, once ------------------------------

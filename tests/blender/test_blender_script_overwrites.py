@@ -108,3 +108,34 @@ def test_save_onto_a_full_disk_exits_1_and_keeps_the_previous_file(scene_copy, t
         assert f"{saved} was not saved" in proc.stderr and "Traceback" not in proc.stderr
         assert saved.read_bytes() == previous
         assert listing(disk) == ["baked.blend"]  # no temporary file left
+
+
+@pytest.mark.parametrize("name, extra", [("Ground_AO.png", []), ("Ground_AO_stderr.exr", ["--stderr"]),
+                                         ("Ground_AO.ply", ["--target", "vertex-colors"])])
+def test_an_output_path_holding_a_file_of_another_kind_is_refused_before_baking(scene_copy, tmp_path, name, extra):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / name).write_bytes(scene_copy.read_bytes())  # the user's .blend file, saved under that name
+    proc = run_script(scene_copy, "--objects", "Ground", "--output", out, *extra, *FAST)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert f"'{out / name}' is a .blend file, not" in proc.stderr and "nothing was baked" in proc.stderr
+    assert "baking" not in proc.stdout
+    assert (out / name).read_bytes() == scene_copy.read_bytes() and listing(out) == [name]
+
+
+def test_the_operator_refuses_to_save_over_a_file_of_another_kind(bpy, addon, tmp_path):
+    from blender_helpers import select_only
+
+    clean_scene(bpy)
+    ground = add_plane(bpy, "Ground", size=4)
+    select_only(bpy, ground)
+    settings = bpy.context.scene.mc_ao
+    settings.resolution, settings.samples, settings.threads = 16, 4, 1
+    settings.save_to_file = True
+    settings.output_dir = str(tmp_path)
+    notes = tmp_path / "Ground_AO.png"
+    notes.write_text("my notes, not an image\n")
+    with pytest.raises(RuntimeError, match="is a file, not a PNG image: it was left as it is.*nothing was baked"):
+        bpy.ops.object.mc_ao_bake()
+    assert notes.read_text() == "my notes, not an image\n" and "Ground_AO" not in bpy.data.images
+    clean_scene(bpy)

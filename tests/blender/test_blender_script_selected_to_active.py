@@ -146,7 +146,7 @@ def test_misses_are_reported(blends, tmp_path):
     (["--cage", "Chair_cage"], "--cage is a setting of --selected-to-active"),
     (["--selected-to-active", "--extrusion", "-1"], "--extrusion must be a finite distance >= 0, not -1.0"),
     (["--selected-to-active", "--max-ray-distance", "nan"],
-     "--max-ray-distance must be a distance >= 0 (0 = no limit), not nan"),
+     "--max-ray-distance must be a distance >= 0 (0 or inf = unlimited), not nan"),
     (["--match-suffix", "_x", "_x"], "--match-suffix needs two different, non-empty suffixes, not '_x' and '_x'"),
     (["--match-suffix", "_high", "_low", "--active", "Chair_low"],
      "--active names one low-poly; with --match-suffix, --objects names the low-poly objects"),

@@ -337,13 +337,13 @@ def test_every_ray_missing_is_refused_saying_what_to_change(bpy, scene, capfd):
 
 
 def test_settings_are_checked_before_baking(bpy, scene, capfd):
-    from mc_ao import jobs
+    from mc_ao import schema
     from mc_ao.settings import BakeSettings
 
-    assert jobs.check_settings(BakeSettings(cage_extrusion=-1.0)) == [
+    assert schema.problems(BakeSettings(cage_extrusion=-1.0)) == [
         ("cage_extrusion", "must be a finite distance >= 0, not -1.0")]
-    assert jobs.check_settings(BakeSettings(max_ray_distance=float("nan"))) == [
-        ("max_ray_distance", "must be a distance >= 0 (0 = no limit), not nan")]
+    assert schema.problems(BakeSettings(max_ray_distance=float("nan"))) == [
+        ("max_ray_distance", "must be a distance >= 0 (0 or inf = unlimited), not nan")]
     props = bpy.context.scene.mc_ao.bl_rna.properties
     assert props["cage_extrusion"].hard_min == props["max_ray_distance"].hard_min == 0.0
     # Cycles' names, so that users know them.

@@ -170,3 +170,16 @@ def test_names_reach_the_terminal_and_the_batch_log_escaped(bpy, tmp_path):
         assert not any(line.startswith("bake_ao: baked 99") for line in text.splitlines()), text
     assert "Evil\\x1b[2J" in proc.stdout and "\\u202eelif" in proc.stdout
     assert "Missing\\x1b[31m" in batch.stdout
+
+
+def test_the_operators_reports_hold_names_escaped(bpy, scene, capfd):
+    """Blender prints an operator's reports to the terminal in the background: escaped there too."""
+    objects = make_objects(bpy, [TERMINAL_TRICKS])
+    select_only(bpy, objects[0])
+    scene.mc_ao.resolution, scene.mc_ao.samples = 8, 2
+    capfd.readouterr()
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    out, err = capfd.readouterr()
+    assert "Evil\\x1b[2J" in out + err
+    assert not re.search("[\x00-\x08\x0b-\x1f\x7f\u202e]", out + err), out + err
+    assert not any(line.startswith("bake_ao: baked 99") for line in (out + err).splitlines())

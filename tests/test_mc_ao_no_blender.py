@@ -1,4 +1,4 @@
-"""mc_ao.jobs, what the script and the operator share, without Blender: settings checks, file names, the
+"""What the script, the operator and the batch share in mc_ao, without Blender (schema, bakerun, filewriter): settings checks, file names, the
 settings record, the worker's messages."""
 
 import math
@@ -10,22 +10,22 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao
-from core.bake import MAX_RESOLUTION, MAX_SAMPLES
-from mc_ao import jobs
+from core.settings import MAX_RESOLUTION, MAX_SAMPLES
+from mc_ao import bakerun, filewriter, schema
 from mc_ao.settings import BakeSettings
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def test_importing_needs_no_bpy():
-    code = "import sys; sys.modules['bpy'] = None\nimport mc_ao.jobs, mc_ao.settings\nprint('ok')"
+    code = "import sys; sys.modules['bpy'] = None\nimport mc_ao.bakerun, mc_ao.filewriter, mc_ao.schema, mc_ao.settings, mc_ao.cli\nprint('ok')"
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout == "ok\n", out.stderr
 
 
 def test_the_defaults_pass_the_checks():
-    assert jobs.check_settings(BakeSettings()) == []
-    assert jobs.check_settings(BakeSettings(samples=MAX_SAMPLES, resolution=MAX_RESOLUTION, max_distance=math.inf)) == []
+    assert schema.problems(BakeSettings()) == []
+    assert schema.problems(BakeSettings(samples=MAX_SAMPLES, resolution=MAX_RESOLUTION, max_distance=math.inf)) == []
 
 
 @pytest.mark.parametrize("field, value, message", [
@@ -45,11 +45,11 @@ def test_the_defaults_pass_the_checks():
     ("max_distance", -1.0, "must be a distance >= 0 (0 or inf = unlimited), not -1.0"),
     ("max_distance", math.nan, "must be a distance >= 0 (0 or inf = unlimited), not nan"),
     ("max_distance", -math.inf, "must be a distance >= 0 (0 or inf = unlimited), not -inf"),
-    ("source", "SOBOLISH", "must be one of SOBOL, STRATIFIED, INDEPENDENT, HALTON, not 'SOBOLISH'"),
+    ("source", "SOBOLISH", "must be one of SOBOL, HALTON, STRATIFIED, INDEPENDENT, not 'SOBOLISH'"),
     ("file_format", "JPEG", "must be one of PNG, OPEN_EXR, TIFF, not 'JPEG'"),
 ])
 def test_each_bad_setting_is_named(field, value, message):
-    assert jobs.check_settings(BakeSettings(**{field: value})) == [(field, message)]
+    assert schema.problems(BakeSettings(**{field: value})) == [(field, message)]
 
 
 def test_the_checks_agree_with_the_core():
@@ -61,7 +61,7 @@ def test_the_checks_agree_with_the_core():
                      BakeSettings(samples=MAX_SAMPLES + 1, resolution=4),
                      BakeSettings(resolution=4, max_distance=-1.0),
                      BakeSettings(resolution=4, target_error=math.nan)):
-        ok = not jobs.check_settings(settings)
+        ok = not schema.problems(settings)
         try:
             bake_ao(plane, **settings.bake_kwargs(threads=1))
         except SettingsError:
@@ -77,7 +77,7 @@ def test_the_settings_record_is_what_the_core_writes():
     P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     F = np.array([[0, 1, 2], [0, 2, 3]])
     result = bake_ao(Mesh(P, F, uvs=P[F][:, :, :2]), **settings.bake_kwargs(threads=1))
-    record = jobs.settings_record(settings)
+    record = filewriter.settings_record(settings)
     shared = {k: result.metadata[k] for k in record if k in result.metadata}
     assert shared == {k: record[k] for k in shared} and len(shared) >= 10
     assert record["max_distance"] == math.inf and record["min_samples"] == 8
@@ -86,7 +86,7 @@ def test_the_settings_record_is_what_the_core_writes():
 
 def test_file_names_stay_in_the_folder_and_apart(tmp_path):
     names = ["../x_AO", "/abs/x_AO", "a/b_AO", "a_b_AO", "Cube_AO", "cube_AO", "CON", "..", "x" * 300]
-    plan = jobs.output_files(str(tmp_path / "out"), names, [("PNG", 8), ("OPEN_EXR", "half")], stderr=True)
+    plan = filewriter.output_files(str(tmp_path / "out"), names, [("PNG", 8), ("OPEN_EXR", "half")], stderr=True)
     paths = [p for files in plan.values() for f in files for p in (f.path, f.stderr_path) if p]
     assert len(paths) == 3 * len(names) == len({p.casefold() for p in paths})
     assert all(os.path.dirname(p) == str(tmp_path / "out") for p in paths)
@@ -96,14 +96,14 @@ def test_file_names_stay_in_the_folder_and_apart(tmp_path):
 
 def test_a_standard_error_file_that_would_be_another_images_file_is_refused(tmp_path):
     with pytest.raises(SettingsError, match="would both be saved as 'Ground_stderr.exr'"):
-        jobs.output_files(str(tmp_path), ["Ground", "Ground_stderr"], [("OPEN_EXR", "half")], stderr=True)
+        filewriter.output_files(str(tmp_path), ["Ground", "Ground_stderr"], [("OPEN_EXR", "half")], stderr=True)
 
 
 def test_a_planted_link_cannot_lead_a_file_out_of_the_folder(tmp_path):
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "Ground_AO.png").symlink_to(tmp_path / "elsewhere.png")
     with pytest.raises(SettingsError, match="outside the output folder"):
-        jobs.output_files(str(tmp_path / "out"), ["Ground_AO"], [("PNG", 8)])
+        filewriter.output_files(str(tmp_path / "out"), ["Ground_AO"], [("PNG", 8)])
 
 
 class CoreJob:
@@ -131,14 +131,14 @@ def messages(run):
 
 def test_a_run_reports_progress_results_and_errors_then_ends():
     settings = BakeSettings(resolution=8, samples=4, margin=0)
-    run = jobs.BakeRun([CoreJob(uvs_scale=1e17), CoreJob()], settings, threads=1, live=True)
+    run = bakerun.BakeRun([CoreJob(uvs_scale=1e17), CoreJob()], settings, threads=1, live=True)
     run.start()
     got = messages(run)
     run.stop()
     kinds = [m[0] for m in got]
     assert kinds[0] == "error" and "UV coordinates beyond" in str(got[0][2])
     assert kinds[-2:] == ["done", "end"] and "progress" in kinds and "tile" in kinds
-    assert sorted(run.started) == [0, 1] and not jobs.RUNS
+    assert sorted(run.started) == [0, 1] and not bakerun.RUNS
 
 
 @pytest.mark.parametrize("limit", [63, 255])  # Blender 4.2-4.4, 5.0 and later
@@ -155,3 +155,20 @@ def test_image_names_fit_blenders_limit_and_stay_apart(limit):
     long_template = BakeSettings(image_name="{object}_" + "t" * 300)
     assert len(long_template.image_name_for("Cube", limit).encode()) <= limit
     assert BakeSettings(image_name="{object}&{object}").image_name_for("é" * 100, limit).count("&") == 1
+
+
+def test_a_file_of_another_kind_is_not_written_over_at_write_time(tmp_path):
+    """Files found only after the bake (UDIM tiles) get the planning's check where they are written."""
+    import types
+
+    pytest.importorskip("OpenImageIO")
+    result = types.SimpleNamespace(ao=np.full((2, 2), 0.5, np.float32), stderr=np.zeros((2, 2), np.float32),
+                                   metadata={})
+    blend = tmp_path / "Ground_AO.1001.png"
+    blend.write_bytes(b"BLENDER-v402 somebody's scene")
+    fine = tmp_path / "Ground_AO.1002.png"
+    files = [filewriter.OutputFile(str(blend), "PNG", 8), filewriter.OutputFile(str(fine), "PNG", 8)]
+    written, failures = filewriter.write_outputs(result, files)
+    assert written == [str(fine)] and [p for p, _ in failures] == [str(blend)]
+    assert "is a .blend file, not a PNG image" in str(failures[0][1])
+    assert blend.read_bytes() == b"BLENDER-v402 somebody's scene"

@@ -1,72 +1,24 @@
-"""What issue 14 adds to a bake, in one place for the operator and scripts/bake_ao.py.
+"""The outputs of a finished bake, by kind, for the operator and the script: which images a job
+needs (:func:`check_images`), where its files go (:func:`output_files`: AO, standard error, bent
+normals, a colour-attribute bake's PLY) and writing them (:func:`write_files`: per UDIM tile too), the
+summary line of a bake that is not a plain image (:func:`summary`), and for the operator the end of
+such a job in Blender (:func:`finish_job`: colour attribute or tiled images, saved, linked) and the
+bent-normal image beside a plain one (:func:`finish_bent`, :func:`save_bent`).
 
-- which objects can be baked (a colour-attribute bake needs no UV map), what each job carries
-  (face corners, tangent frames), the checks before baking (an attribute of another type or domain,
-  a tiled image of another size), the core call (:func:`run`: core.bake_vertex_ao, core.bake_udim,
-  or core.bake_ao with bent normals);
-- the files of a finished job (:func:`write_files`: per UDIM tile, the bent-normal map, the PLY of a
-  colour-attribute bake) and its summary line;
-- for the operator, the end of a job that is not a plain image (:func:`finish_job`) and the
-  bent-normal image beside a plain one (:func:`finish_bent`).
-
-Importing it needs no bpy; the functions that touch Blender data import it.
+Importing it needs no bpy; the functions that touch Blender data import it. It imports nothing above
+it (mc_ao.operators, mc_ao.cli call it).
 """
 
 import os
 
 from . import corelink
+from .baking import id_name_max_bytes, input_notes, throughput
 from .extract import ExtractError
-
-
-def needs_uvs(settings):
-    """Whether the bake's targets need a UV map (all but a colour-attribute bake)."""
-    return not settings.vertex_colors
 
 
 def custom(settings):
     """Whether a job's end differs from a plain image bake's (handled here, not by the operator)."""
     return settings.vertex_colors or settings.use_udim
-
-
-def extra_for(settings):
-    """The ``extra`` callable for a target's extract.object_arrays, or None."""
-    from . import bent, vertex_colors
-
-    parts = []
-    if settings.vertex_colors:
-        parts.append(vertex_colors.corner_data)
-    elif settings.bent_normals:
-        parts.append(bent.frames_data(settings))
-    if not parts:
-        return None
-
-    def extra(mesh, arrays):
-        out = {}
-        for part in parts:
-            out.update(part(mesh, arrays))
-        return out
-
-    return extra
-
-
-def check_plan(jobs_, settings, objects):
-    """Raise ExtractError (naming the objects) for what stops a bake before it starts: two targets
-    sharing one mesh for a colour-attribute bake (one attribute cannot hold both), an attribute of
-    another type or domain, modifiers that change the face corners; ``objects``: name -> object."""
-    from . import vertex_colors
-
-    if settings.vertex_colors:
-        owners = {}
-        for job in jobs_:
-            mesh = objects[job.object_name].data
-            other = owners.get(mesh.name)
-            if other is not None:
-                raise ExtractError(
-                    f"{other} and {job.object_name} share the mesh {mesh.name!r}: its color attribute can "
-                    "hold the bake of only one of them; bake them one at a time, or make the mesh single-user"
-                )
-            owners[mesh.name] = job.object_name
-            vertex_colors.check_object(objects[job.object_name], settings, job.target.extra)
 
 
 def check_images(job, settings):
@@ -87,66 +39,54 @@ def check_images(job, settings):
 
 
 def bent_name(job, settings):
-    from .baking import id_name_max_bytes
-
     return settings.bent_image_name_for(job.object_name, id_name_max_bytes())
 
 
 def stderr_name(job, settings):
-    from .baking import id_name_max_bytes
-
     return settings.stderr_image_name_for(job.object_name, id_name_max_bytes())
-
-
-def run(job, settings, threads, progress=None, cancel=None, on_tile=None):
-    """The core's bake of ``job`` for settings that are not a plain image bake (Job.run's)."""
-    core = corelink.load()
-
-    def mesh(arrays, uvs=True):
-        return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
-                         normals=arrays.normals, name=arrays.name)
-
-    kw = settings.bake_kwargs(threads)
-    occluders = [mesh(o) for o in job.occluders]
-    if settings.vertex_colors:
-        for key in ("resolution", "margin", "bent_normals"):
-            kw.pop(key, None)
-        return core.bake_vertex_ao(mesh(job.target, uvs=False), occluders, corners=job.target.extra["corners"],
-                                   progress=progress, cancel=cancel, **kw)
-    if settings.bent_normals:
-        kw["bent_space"] = (job.target.extra or {}).get("bent_space")
-    if settings.use_udim:
-        return core.bake_udim(mesh(job.target), occluders, progress=progress, cancel=cancel, **kw)
-    return core.bake_ao(mesh(job.target), occluders, progress=progress, cancel=cancel, on_tile=on_tile, **kw)
 
 
 # -- files --------------------------------------------------------------------------------------
 
 def output_files(settings, folder, jobs_, formats, stderr=False):
     """{image name: [OutputFile]} for the AO images (and bent-normal images) of ``jobs_``: distinct,
-    safe names over all of them (mc_ao.jobs.output_files). A colour-attribute bake gets one PLY
+    safe names over all of them (mc_ao.filewriter.output_files). A colour-attribute bake gets one PLY
     file per object, named like its image would be."""
     from dataclasses import replace
 
-    from . import jobs
+    from . import filewriter
 
     names = [j.image_name for j in jobs_]
     if settings.vertex_colors:
-        return jobs.output_files(folder, names, [("PLY", None)])
+        return filewriter.output_files(folder, names, [("PLY", None)])
     bents = [bent_name(j, settings) for j in jobs_] if settings.bent_normals else []
-    plan = jobs.output_files(folder, names + bents, formats, stderr=stderr)
+    plan = filewriter.output_files(folder, names + bents, formats, stderr=stderr)
     for name in bents:
         plan[name] = [replace(f, stderr_path=None) for f in plan[name]]
     return plan
 
 
-def write_files(job, result, files, metadata, settings):
-    """Write a finished job's files; ``(written, failures)`` as mc_ao.jobs.write_outputs.
+def plan_files(settings, folder, jobs_, formats, stderr=False):
+    """output_files(), checked before anything is baked: a planned file that would replace an existing
+    file of another kind raises core.FileWriteError naming every such path (the operator and the
+    script both plan their files here)."""
+    from . import filewriter
 
-    ``files``: output_files()'s dict. UDIM: each tile to ``<name>.<tile>.<ext>``; bent normals to
-    the "<object>_BentNormal" files; a colour-attribute bake to its PLY file.
+    files = output_files(settings, folder, jobs_, formats, stderr=stderr)
+    problems = filewriter.planned_kind_problems(files)
+    if problems:
+        raise corelink.load("errors").FileWriteError("; ".join(problems) + "; nothing was baked")
+    return files
+
+
+def write_files(job, result, files, metadata, settings):
+    """Write a finished job's files, every kind; ``(written, failures)`` as mc_ao.filewriter.write_outputs.
+
+    ``files``: output_files()'s dict. The AO image (and its standard error) to its files; UDIM: each
+    tile to ``<name>.<tile>.<ext>``; bent normals to the "<object>_BentNormal" files; a
+    colour-attribute bake to its PLY file.
     """
-    from . import bent, jobs, udim, vertex_colors
+    from . import bent, filewriter, udim, vertex_colors
 
     written, failures = [], []
     meta = dict(metadata)
@@ -156,8 +96,12 @@ def write_files(job, result, files, metadata, settings):
         positions, sizes, verts, ao = vertex_colors.ply_data(result, data, settings.attribute_domain)
         meta = dict(result.metadata, **meta, content="ao")
         for f in files[job.image_name]:
+            problem = filewriter.kind_problem(f.path)
+            if problem is not None:
+                failures.append((f.path, corelink.load("errors").FileWriteError(problem)))
+                continue
             try:
-                jobs.make_output_folder(os.path.dirname(f.path))
+                filewriter.make_output_folder(os.path.dirname(f.path))
                 plyio.write_ply(f.path, positions, sizes, verts, ao, meta)
                 written.append(f.path)
             except (corelink.load().McAoError, OSError) as exc:
@@ -167,7 +111,7 @@ def write_files(job, result, files, metadata, settings):
     for tile, res in results.items():
         own = files[job.image_name] if tile is None else udim.tile_files(files[job.image_name], tile)
         tile_meta = meta if tile is None else dict(meta, udim_tile=tile)
-        w, f = jobs.write_outputs(res, own, tile_meta)
+        w, f = filewriter.write_outputs(res, own, tile_meta)
         written += w
         failures += f
         if settings.bent_normals:
@@ -183,8 +127,6 @@ def write_files(job, result, files, metadata, settings):
 
 def summary(job, result, settings):
     """The summary line of a job that is not a plain image (None for a plain one)."""
-    from .baking import throughput
-
     per, rate = throughput(result)
     if settings.vertex_colors:
         domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
@@ -208,7 +150,7 @@ def finish_job(session, context, i, result):
     result (attribute, tiled images), save its files, report its notes and summary."""
     import bpy
 
-    from . import baking, images, udim, vertex_colors
+    from . import images, udim, vertex_colors
 
     job = session.run.jobs[i]
     settings = session.settings
@@ -245,10 +187,7 @@ def finish_job(session, context, i, result):
             session.unsummarised_errors += 1
         elif settings.use_udim and settings.link_to_file:
             _link_udim(session, job, result)
-    from .operators import _redraw
-
-    _redraw(context)
-    for note in baking.input_notes(result):
+    for note in input_notes(result):
         session._warn(f"{job.object_name}: {note}")
     session._summarise(summary(job, result, settings))
 
@@ -257,11 +196,10 @@ def _save(session, job, result):
     """Write the job's files; report them; the written paths, or None after a failure (reported)."""
     import bpy
 
-    from . import jobs
+    from . import filewriter
 
     settings = session.settings
-    metadata = dict(jobs.settings_record(settings), object=job.object_name,
-                    blend=bpy.path.basename(bpy.data.filepath))
+    metadata = filewriter.file_metadata(settings, job, bpy.data.filepath)
     try:
         files = output_files(settings, session.output_dir, session.run.jobs,
                              [(settings.file_format, settings.file_bits)], stderr=settings.error_map)
@@ -276,7 +214,7 @@ def _save(session, job, result):
         session.report({"ERROR"}, f"{job.object_name}: the bake is in {where}, but its file was not saved "
                                   f"(any file already there is unchanged): {why}")
     if written:
-        session.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
+        session.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({filewriter.writer_name()})")
     return written if written and not failures else None
 
 
@@ -342,7 +280,7 @@ def save_bent(session, job, result, saved_ao):
     """With Save to File (plain images): write the bent-normal files; link the image to its file."""
     import bpy
 
-    from . import bent, images, jobs
+    from . import bent, filewriter, images
 
     settings = session.settings
     if not settings.bent_normals or result.bent is None or session.output_dir is None:
@@ -350,9 +288,8 @@ def save_bent(session, job, result, saved_ao):
     name = bent_name(job, settings)
     files = output_files(settings, session.output_dir, session.run.jobs,
                          [(settings.file_format, settings.file_bits)])[name]
-    metadata = dict(result.metadata, **jobs.settings_record(settings), object=job.object_name,
-                    content="bent_normal", bent_space=settings.bent_space.lower(),
-                    blend=bpy.path.basename(bpy.data.filepath))
+    metadata = dict(result.metadata, **filewriter.file_metadata(settings, job, bpy.data.filepath),
+                    content="bent_normal", bent_space=settings.bent_space.lower())
     written, failures = bent.write_files(bent.encoded(result, settings), files, metadata)
     for path, exc in failures:
         session.file_errors += 1
@@ -360,7 +297,7 @@ def save_bent(session, job, result, saved_ao):
         session.report({"ERROR"}, f"{job.object_name}: the bent normals are in image {name!r}, but their file was "
                                   f"not saved (any file already there is unchanged): {exc}")
     if written:
-        session.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({jobs.writer_name()})")
+        session.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({filewriter.writer_name()})")
         if settings.link_to_file and not failures:
             try:
                 images.use_file(bpy.data.images[name], written[0], relative=settings.output_dir.startswith("//"))

@@ -1,0 +1,272 @@
+"""Every bake setting once: name, type, default, limits, help, the script option and manifest key that
+set it, and the targets it applies to. No bpy.
+
+Made from this list: the scene's property group (mc_ao.properties), the fields of
+mc_ao.settings.BakeSettings, scripts/bake_ao.py's options (mc_ao.cli) and with them the batch
+manifest's keys (a manifest key is the option's name with '_' for '-'), and the one check of every
+value before any work (:func:`problems`). Limits that are the core's (``MAX_SAMPLES``,
+``MAX_RESOLUTION``, ``MAX_SEED``) are named here and read from ``core.settings`` where they are used.
+
+"No distance limit" has one meaning for every distance here: 0 or infinity (:func:`unlimited`).
+"""
+
+import math
+from dataclasses import dataclass, field
+
+__all__ = ["Setting", "SETTINGS", "BY_NAME", "BY_KEY", "problems", "unlimited", "limit", "cli_value",
+           "from_cli", "MAX_THREADS"]
+
+#: The most threads a bake may ask for: far above any machine's cores, far below what would exhaust
+#: the process starting them.
+MAX_THREADS = 1024
+_SEED_FALLBACK = (1 << 64) - 1  # the core's random streams take the seed as one uint64 word
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One bake setting.
+
+    name : the BakeSettings field and the scene property (``scene.mc_ao.<name>``).
+    kind : "int", "float", "distance" (a float where 0 and inf mean no limit), "bool", "enum", "str",
+        or "object" (an object's name; a pointer on the scene).
+    default, label (the UI's name), help (the UI's tooltip and the option's help).
+    lo, hi : limits of an int or float; ``hi`` may name a core.settings constant ("MAX_SAMPLES").
+    zero : what 0 means, said in messages ("every core").
+    items : an enum's ``(identifier, UI name, description)``; the script's choice for an identifier is
+        it in lower case with '-' for '_' (``VERTEX_COLORS`` -> ``vertex-colors``).
+    key : the script option's name with '_' for '-', and the manifest key; None for a setting of the
+        panel only (the script sets it another way, e.g. ``--format``, or not at all).
+    targets : where it applies: "image", "vertex", "udim", "bent", "selected_to_active", "all".
+    ui : further keyword arguments of the Blender property (soft limits, subtype, unit, ...).
+    """
+
+    name: str
+    kind: str
+    default: object
+    label: str
+    help: str
+    lo: object = None
+    hi: object = None
+    zero: str = ""
+    items: tuple = ()
+    key: object = ""  # "" = the name
+    targets: tuple = ("all",)
+    ui: dict = field(default_factory=dict)
+
+    @property
+    def option_key(self):
+        """The option's dest and manifest key, or None."""
+        return None if self.key is None else (self.key or self.name)
+
+    @property
+    def option(self):
+        return None if self.option_key is None else "--" + self.option_key.replace("_", "-")
+
+    @property
+    def identifiers(self):
+        return tuple(i[0] for i in self.items)
+
+
+def cli_value(identifier):
+    """The script's choice for an enum identifier: ``VERTEX_COLORS`` -> ``vertex-colors``."""
+    return identifier.lower().replace("_", "-")
+
+
+def from_cli(setting, value):
+    """A script option's value as the setting holds it (an enum's identifier from its choice)."""
+    if setting.kind == "enum":
+        return {cli_value(i): i for i in setting.identifiers}.get(value, value)
+    return value
+
+
+SETTINGS = (
+    Setting("samples", "int", 128, "Samples", "Rays per texel (the most, when adaptive sampling stops early)",
+            lo=1, hi="MAX_SAMPLES", ui={"soft_max": 4096}),
+    Setting("min_samples", "int", 16, "Min Samples", "Rays per texel before adaptive sampling may stop a texel",
+            lo=1, hi="MAX_SAMPLES", ui={"soft_max": 1024}),
+    Setting("target_error", "float", 0.0, "Noise Threshold",
+            "Adaptive sampling: stop a texel once its AO is known to within this, 95% of the time (0.01: "
+            "+-0.01). Open and fully occluded areas stop at Min Samples, noisy ones take up to Samples. 0 "
+            "turns adaptive sampling off", lo=0.0, zero="adaptive sampling off",
+            ui={"max": 1.0, "soft_max": 0.1, "step": 0.1, "precision": 4}),
+    Setting("resolution", "int", 1024, "Size",
+            "Width of the image in pixels. An existing image of another size is resized to this size (and "
+            "put back as it was if its bake is cancelled or fails)", lo=1, hi="MAX_RESOLUTION", key=None,
+            targets=("image",), ui={"soft_min": 16, "soft_max": 8192, "subtype": "PIXEL"}),
+    Setting("height", "int", 0, "Height", "Height of the image in pixels; 0 makes it square", lo=0,
+            hi="MAX_RESOLUTION", zero="as wide as high", key=None, targets=("image",),
+            ui={"soft_max": 8192, "subtype": "PIXEL"}),
+    Setting("max_distance", "distance", 0.0, "Distance",
+            "Occluders farther than this do not count; 0 (or inf) = no limit",
+            ui={"soft_max": 100.0, "subtype": "DISTANCE", "unit": "LENGTH"}),
+    Setting("source", "enum", "SOBOL", "Sampler", "Where each texel's sample points come from", items=(
+        ("SOBOL", "Sobol'", "Owen-scrambled Sobol' points over position and direction (least noise)"),
+        ("HALTON", "Halton", "Scrambled Halton points"),
+        ("STRATIFIED", "Stratified", "Jittered strata"),
+        ("INDEPENDENT", "Independent", "Independent uniform random points"))),
+    Setting("distribution", "enum", "COSINE", "Directions", "How ray directions are spread over the hemisphere",
+            items=(("COSINE", "Cosine", "Cosine-weighted: no noise on open surfaces"),
+                   ("UNIFORM", "Uniform", "Uniform over the hemisphere"))),
+    Setting("occluders", "enum", "VISIBLE", "Occluders",
+            "What casts occlusion onto the baked objects: every visible object (default), the baked "
+            "objects (selected), or each object alone (self)", items=(
+                ("SELF", "Object Alone", "Each object occludes only itself"),
+                ("SELECTED", "Selected", "The selected objects occlude each other"),
+                ("VISIBLE", "All Visible", "Every visible object in the view layer"))),
+    Setting("uv_map", "str", "", "UV Map", "UV map to bake into; empty for each mesh's active render UV map",
+            targets=("image", "udim", "bent")),
+    Setting("margin", "int", 16, "Margin", "Extend the baked islands by this many pixels, against seams",
+            lo=0, hi="MAX_RESOLUTION", targets=("image", "udim", "bent"), ui={"soft_max": 64, "subtype": "PIXEL"}),
+    Setting("image_name", "str", "", "Image",
+            'Image to bake into; empty for "<object>_AO"; "{object}" is replaced by the object name. An '
+            "existing image is reused, resized to the bake's size; files are named after it, made safe",
+            targets=("image", "udim", "vertex")),
+    Setting("float_buffer", "bool", True, "32-bit Float",
+            "Bake into a float image (else 8-bit); files get 16-bit PNG or float EXR/TIFF when on",
+            key=None, targets=("image", "udim", "vertex")),
+    Setting("save_to_file", "bool", False, "Save to File", "Also write each baked image to a file", key=None,
+            targets=("image", "udim", "bent")),
+    Setting("file_format", "enum", "PNG", "Format", "Format of the saved files", key=None, items=(
+        ("PNG", "PNG", "8-bit PNG (16-bit with 32-bit Float on)"),
+        ("OPEN_EXR", "OpenEXR", "Half-float EXR (float with 32-bit Float on)"),
+        ("TIFF", "TIFF", "8-bit TIFF (float with 32-bit Float on)")), targets=("image", "udim", "bent")),
+    Setting("output_dir", "str", "//", "Folder",
+            'Folder for the files ("//" is the .blend file\'s folder), created if missing. A folder that '
+            "cannot be written is refused before baking; if a file fails to write after the bake, the image "
+            "in Blender keeps the bake and any file already on disk is left as it was", key=None,
+            targets=("image", "udim", "bent"), ui={"subtype": "DIR_PATH", "blend_relative": True}),
+    Setting("link_to_file", "bool", True, "Link Image to File",
+            "After the file is saved, the image in Blender loads from it, as after Image > Save As: the .blend "
+            "file stays small and needs the file beside it. Off, or without Save to File, the image's pixels "
+            "are packed into the .blend file", key=None, targets=("image", "udim", "bent")),
+    Setting("seed", "int", 0, "Seed", "Seed of the random scrambling; the same seed gives the same image",
+            lo=0, hi="MAX_SEED", ui={"max": (1 << 31) - 1}),
+    Setting("threads", "int", 0, "Threads", "Worker threads; 0 uses the add-on preferences' default (all cores)",
+            lo=0, hi=MAX_THREADS, zero="every core", ui={"soft_max": 256}),
+    Setting("ignore_backfaces", "bool", False, "Ignore Backfaces", "Rays that hit the back of a face pass through it"),
+    Setting("target", "enum", "IMAGE_TEXTURES", "Target", "Where the AO goes", items=(
+        ("IMAGE_TEXTURES", "Image Textures", "Bake into an image per object, over its UV map"),
+        ("VERTEX_COLORS", "Color Attributes",
+         "Bake into a color attribute of each mesh, one value per vertex or face corner (no UV map needed)"))),
+    Setting("attribute_name", "str", "AO", "Attribute",
+            "Color attribute to bake into, created if missing (as a float color with 32-bit Float on, else a "
+            "byte color); an existing one of another type or domain is refused", key="attribute",
+            targets=("vertex",)),
+    Setting("attribute_domain", "enum", "POINT", "Domain", "Where the color attribute stores its values", items=(
+        ("POINT", "Vertex", "One value per vertex: the mean of its face corners' values, as Cycles bakes it"),
+        ("CORNER", "Face Corner", "One value per face corner (hard edges keep their faces' shading apart)")),
+        key="domain", targets=("vertex",)),
+    Setting("use_udim", "bool", False, "UDIM Tiles",
+            "Bake every UDIM tile the UV map touches (1001 for UVs in [0, 1], 1002 to the right, 1011 above, "
+            "...) into one tiled image, each tile of the bake's size; an existing tiled image is filled tile by "
+            "tile, and saved files are named <image>.<tile>.<ext>", key="udim", targets=("udim",)),
+    Setting("bent_normals", "bool", False, "Bent Normals",
+            "Also bake each texel's mean unoccluded direction into \"<object>_BentNormal\" (RGB = n / 2 + 1/2, "
+            "Blender's normal map convention), from the same rays", targets=("image", "udim")),
+    Setting("bent_space", "enum", "TANGENT", "Space", "Space of the bent normal map", items=(
+        ("TANGENT", "Tangent", "Tangent space of the bake's UV map (MikkTSpace, as Blender's normal bake)"),
+        ("OBJECT", "Object", "Object space")), targets=("bent",)),
+    Setting("error_map", "bool", False, "Error Map",
+            "Also keep how far each texel's AO may be off (its standard error) in the image \"<image>_stderr\", "
+            "and in <file>_stderr.exr with Save to File. The error holds for every sampler: texels then draw "
+            "two independent sample sets, about 1.2 times the noise of one at the same samples",
+            key="stderr", targets=("image", "udim")),
+    Setting("use_selected_to_active", "bool", False, "Selected to Active",
+            "Bake the ambient occlusion of the selected objects onto the active object's UV map, into "
+            "<active>_AO (the active object is the low-poly, the other selected objects the high-poly)",
+            key="selected_to_active", targets=("selected_to_active",)),
+    Setting("cage_extrusion", "float", 0.0, "Cage Extrusion",
+            "Inflate the active object by the specified distance for baking. This helps matching to points "
+            "nearer to the outside of the selected object meshes", lo=0.0, key="extrusion",
+            targets=("selected_to_active",),
+            ui={"soft_max": 1.0, "step": 1, "precision": 3, "subtype": "DISTANCE", "unit": "LENGTH"}),
+    Setting("max_ray_distance", "distance", 0.0, "Max Ray Distance",
+            "The maximum ray distance for matching points between the active and selected objects. If zero, "
+            "there is no limit", targets=("selected_to_active",),
+            ui={"soft_max": 1.0, "step": 1, "precision": 3, "subtype": "DISTANCE", "unit": "LENGTH"}),
+    Setting("use_cage", "bool", False, "Cage", "Cast rays to active object from a cage", key=None,
+            targets=("selected_to_active",)),
+    Setting("cage_object", "object", "", "Cage Object",
+            "Object to use as cage instead of calculating the cage from the active object with cage extrusion; "
+            "it must be a copy of the active object with its vertices moved", key=None,
+            targets=("selected_to_active",)),
+)
+
+BY_NAME = {s.name: s for s in SETTINGS}
+BY_KEY = {s.option_key: s for s in SETTINGS if s.option_key is not None}
+
+
+def unlimited(distance):
+    """True when a distance setting means "no limit": 0 or infinity."""
+    return distance == 0 or distance == math.inf
+
+
+def limit(setting):
+    """``setting.hi`` as a number (a core.settings constant read from the core), or None."""
+    if isinstance(setting.hi, str):
+        from . import corelink
+
+        if setting.hi == "MAX_SEED":
+            return getattr(corelink.load("settings"), "MAX_SEED", _SEED_FALLBACK)
+        return getattr(corelink.load("settings"), setting.hi)
+    return setting.hi
+
+
+def _number(value):
+    if isinstance(value, bool):
+        return None
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def _problem(setting, value):
+    """What is wrong with one setting's value (text saying what is allowed), or None."""
+    kind = setting.kind
+    if kind == "int":
+        if isinstance(value, bool) or not isinstance(value, int) and not hasattr(value, "__index__"):
+            return f"must be a whole number, not {value!r}"
+        lo, hi = setting.lo, limit(setting)
+        value = int(value)
+        if value < lo or (hi is not None and value > hi):
+            span = f"at least {lo}" if hi is None else f"from {lo} to {hi}"
+            zero = f" (0 = {setting.zero})" if setting.zero else ""
+            return f"must be {span}{zero}, not {value}"
+        return None
+    if kind == "float":
+        number = _number(value)
+        if number is None or not math.isfinite(number) or number < setting.lo:
+            what = f"a finite number >= 0 (0 = {setting.zero})" if setting.zero else "a finite distance >= 0"
+            return f"must be {what}, not {value!r}"
+        return None
+    if kind == "distance":
+        number = _number(value)
+        if number is None or not number >= 0:  # NaN fails too; inf means no limit
+            return f"must be a distance >= 0 (0 or inf = unlimited), not {value!r}"
+        return None
+    if kind == "enum":
+        if value not in setting.identifiers:
+            return f"must be one of {', '.join(setting.identifiers)}, not {value!r}"
+        return None
+    if kind == "bool":
+        return None if isinstance(value, bool) else f"must be true or false, not {value!r}"
+    if kind in ("str", "object"):
+        return None if isinstance(value, str) else f"must be text, not {value!r}"
+    raise AssertionError(f"unknown kind {kind!r}")
+
+
+def problems(settings):
+    """Every setting of ``settings`` (a BakeSettings) checked against its schema entry, and the rules
+    between settings: ``[(name, message), ...]``, empty when it can bake."""
+    out = []
+    for setting in SETTINGS:
+        problem = _problem(setting, getattr(settings, setting.name))
+        if problem is not None:
+            out.append((setting.name, problem))
+    if settings.target == "VERTEX_COLORS" and not str(settings.attribute_name).strip():
+        out.append(("attribute_name", "must name the color attribute to bake into, not be empty"))
+    if settings.target == "VERTEX_COLORS" and settings.error_map:
+        out.append(("error_map", "is for image textures: a color-attribute bake has no image to hold the "
+                                 "standard error; turn it off (adaptive sampling still uses the error)"))
+    return out
