@@ -592,7 +592,10 @@ def processes_of(workers, threads, settings, triangles):
         return 1, settings.threads
     if workers == "auto":
         processes, per_worker = auto_workers(triangles)
-        return processes, (per_worker if threads is None else settings.threads)
+        if threads is None:
+            return processes, per_worker
+        # Threads asked for each: as many workers as the cores hold at that many threads each.
+        return max(1, min(processes, cpu_count() // settings.threads)), settings.threads
     return workers, 1 if threads is None else settings.threads
 
 

@@ -54,6 +54,14 @@ def unregister():
             session.abandon()
     for run in list(operators._RUNS):
         run.stop()
+    # The worker processes of the bakes go with the add-on (only when the core was loaded at all).
+    import sys
+
+    from . import corelink
+
+    workers = sys.modules.get(f"{corelink.CORE_NAME}.workers")
+    if workers is not None:
+        workers.shutdown()
     del bpy.types.Scene.mc_ao
     for cls in reversed(_classes):
         bpy.utils.unregister_class(cls)

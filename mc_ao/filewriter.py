@@ -54,6 +54,7 @@ def settings_record(settings):
         **({"target": "vertex_colors", "attribute": settings.attribute_name,
             "domain": settings.attribute_domain.lower()} if settings.target == "VERTEX_COLORS" else {}),
         **({"bent_normals": settings.bent_space.lower()} if settings.bent_normals else {}),
+        **({"denoise": True} if settings.denoise else {}),
         "replicates": int(kw["replicates"]),
     }
     if getattr(settings, "use_selected_to_active", False):

@@ -218,6 +218,8 @@ class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
         col.prop(settings, "distribution")
         col.prop(settings, "seed")
         col.prop(settings, "threads")
+        col.prop(settings, "processes")
+        col.prop(settings, "denoise")
 
 
 class VIEW3D_PT_mc_ao_occlusion(_McAoPanel, bpy.types.Panel):

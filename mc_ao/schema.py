@@ -143,6 +143,16 @@ SETTINGS = (
             lo=0, hi="MAX_SEED", ui={"max": (1 << 31) - 1}),
     Setting("threads", "int", 0, "Threads", "Worker threads; 0 uses the add-on preferences' default (all cores)",
             lo=0, hi=MAX_THREADS, zero="every core", ui={"soft_max": 256}),
+    Setting("processes", "int", 0, "Processes",
+            "Worker processes the bake's tiles are baked in, each with its own copy of the scene, so that every "
+            "core works while Blender stays responsive; 0 picks them from the cores and the memory, 1 bakes in "
+            "Blender's own process on threads. The image is the same either way",
+            lo=0, hi=MAX_THREADS, zero="from the cores and the memory", ui={"soft_max": 64}),
+    Setting("denoise", "bool", False, "Denoise",
+            "Filter the baked AO over the surface, across UV seams, each texel weighed by its own error: much "
+            "less noise at few samples (16 denoised samples beat 128 raw ones on the bench), for a third to "
+            "half of a 64-sample bake's time more; the error map then shows the denoised map's error",
+            targets=("image", "udim", "vertex")),
     Setting("ignore_backfaces", "bool", False, "Ignore Backfaces", "Rays that hit the back of a face pass through it"),
     Setting("target", "enum", "IMAGE_TEXTURES", "Target", "Where the AO goes", items=(
         ("IMAGE_TEXTURES", "Image Textures", "Bake into an image per object, over its UV map"),

@@ -92,10 +92,11 @@ class _BakeSettingsMethods:
     @property
     def replicates(self):
         """Independent randomisations per texel (core.bake_ao's ``replicates``): 2 where the bake's
-        error is used (adaptive sampling stops on it, the error map shows it), for an error estimate
+        error is used (adaptive sampling stops on it, the error map shows it, the denoiser weighs each texel
+        by it), for an error estimate
         that holds for every sample source; else 1, the least noise for the rays (measured: Sobol'
         1.16-1.20 times the RMSE at equal rays with 2)."""
-        return 2 if self.error_map or self.target_error > 0 else 1
+        return 2 if self.error_map or self.target_error > 0 or self.denoise else 1
 
     @property
     def file_bits(self):
@@ -124,6 +125,9 @@ class _BakeSettingsMethods:
             ignore_backfaces=self.ignore_backfaces,
             **({"bent_normals": True} if self.bent_normals and not self.vertex_colors else {}),
             replicates=self.replicates,
+            # 0: from the cores and the memory (core.workers.auto_workers); the same bits for any count
+            workers="auto" if self.processes == 0 else self.processes,
+            **({"denoise": True} if self.denoise else {}),
         )
 
 

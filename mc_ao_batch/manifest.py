@@ -42,7 +42,10 @@ BATCH_SUMMARY = "mc_ao_batch.json"
 _RUNNER_OPTIONS = {"output", "summary_json", "quiet", "blend"}
 # bake_ao.py options that do not change a single output byte (the bake is bit-identical for any
 # thread count): left out of a task's fingerprint.
-_NO_EFFECT = {"threads", "quiet", "output", "summary_json", "blend"}
+_NO_EFFECT = {"threads", "processes", "quiet", "output", "summary_json", "blend"}
+# Settings added after fingerprints were first recorded: left out while at their default, so that a
+# library baked before them is still found done.
+_ADDED_AT_DEFAULT = {"denoise": False}
 _ENTRY_KEYS = {"blend"}
 # bake_ao.py options a batch task cannot take, and why (one --save path for every task
 # would have each task replace the last one's file).
@@ -235,7 +238,8 @@ def _blend_identity(path):
 
 
 def _fingerprint(blend_given, identity, namespace):
-    settings = {k: v for k, v in vars(namespace).items() if k not in _NO_EFFECT}
+    settings = {k: v for k, v in vars(namespace).items()
+                if k not in _NO_EFFECT and not (k in _ADDED_AT_DEFAULT and v == _ADDED_AT_DEFAULT[k])}
     record = {"mc_ao": __version__, "blend": blend_given, "file": identity, "settings": settings}
     text = json.dumps(record, sort_keys=True, default=lambda v: list(v) if isinstance(v, tuple) else str(v))
     return hashlib.sha256(text.encode()).hexdigest()

@@ -270,3 +270,11 @@ def test_a_pool_whose_self_test_fails_falls_back_to_threads_and_says_why(monkeyp
     assert "not in worker processes" in warning and "self-test differently" in warning
     assert "warnings" not in ref.report
     W.shutdown()
+
+
+def test_auto_workers_with_threads_given_keep_within_the_cores():
+    from core.settings import BakeSettings
+
+    s = BakeSettings.from_arguments(8, 4, 4, 0.0, 1.0, "cosine", "sobol", 0, 0, 2, False, 0.0, None, 1 << 16)
+    processes, threads = W.processes_of("auto", 2, s, 1000)
+    assert threads == 2 and processes * threads <= max(2, W.cpu_count())
