@@ -113,7 +113,10 @@ class Job:
 
         extra = {}
         if self.highpoly:
-            extra = dict(highpoly=[mesh(h) for h in self.highpoly], extrusion=self.extrusion,
+            # Extrusion 0 (the default) is measured from the meshes (core.highpoly's automatic extrusion:
+            # how far the high-poly lies outside the low-poly), never Cycles' trap of no extrusion at all.
+            extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
+            extra = dict(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
                          max_ray_distance=self.max_ray_distance,
                          cage=None if self.cage is None else mesh(self.cage))
         return core.bake_ao(
@@ -250,7 +253,8 @@ def input_notes(result):
         n = report.get(key)
         if n:
             notes.append((one if n == 1 else several).format(n=n))
-    return notes + miss_notes(result)
+    # The core's own warnings (matching rays from behind the high-poly, worker processes not used, ...).
+    return notes + miss_notes(result) + [str(w) for w in report.get("warnings", ())]
 
 
 def visible_geometry(depsgraph, view_layer):
@@ -354,9 +358,11 @@ def miss_summary(result):
     if not cast:
         return ""
     missed = getattr(result, "missed", 0)
+    auto = (getattr(result, "metadata", None) or {}).get("extrusion_auto") and "extrusion" in report
+    measured = f"; extrusion {report['extrusion']:.4g} measured from the meshes" if auto else ""
     if not missed:
-        return "; no sample point missed the high-poly"
-    return f"; {missed} of {cast} sample points missed the high-poly"
+        return f"{measured}; no sample point missed the high-poly"
+    return f"{measured}; {missed} of {cast} sample points missed the high-poly"
 
 
 def miss_notes(result):

@@ -187,7 +187,8 @@ SETTINGS = (
             key="selected_to_active", targets=("selected_to_active",)),
     Setting("cage_extrusion", "float", 0.0, "Cage Extrusion",
             "Inflate the active object by the specified distance for baking. This helps matching to points "
-            "nearer to the outside of the selected object meshes", lo=0.0, key="extrusion",
+            "nearer to the outside of the selected object meshes. 0 measures it from the meshes: how far the "
+            "high-poly lies outside the low-poly along its normals", lo=0.0, key="extrusion",
             targets=("selected_to_active",),
             ui={"soft_max": 1.0, "step": 1, "precision": 3, "subtype": "DISTANCE", "unit": "LENGTH"}),
     Setting("max_ray_distance", "distance", 0.0, "Max Ray Distance",

@@ -325,7 +325,7 @@ def test_a_cage_of_another_topology_is_refused_naming_both(bpy, scene, capfd):
 def test_every_ray_missing_is_refused_saying_what_to_change(bpy, scene, capfd):
     low = add_plane(bpy, "Low", size=2, location=(0, 0, -0.3))  # below the high surface
     high = sculpt(bpy)
-    s2a_scene(scene, cage_extrusion=0.0)
+    s2a_scene(scene, cage_extrusion=0.01)  # an extrusion set by hand, too short
     select_only(bpy, low, high)
     bpy.context.view_layer.objects.active = low
     result, error, reports = run(bpy, capfd)
@@ -334,6 +334,9 @@ def test_every_ray_missing_is_refused_saying_what_to_change(bpy, scene, capfd):
             "the high-poly surface lies outside 'Low', up to ") in error
     assert "raise the extrusion above 0.3" in error or "raise the extrusion above 0.4" in error
     assert "Low_AO" not in bpy.data.images
+    # Extrusion 0, the default, is measured from the meshes: the same pair bakes.
+    scene.mc_ao.cage_extrusion = 0.0
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"} and "Low_AO" in bpy.data.images
 
 
 def test_settings_are_checked_before_baking(bpy, scene, capfd):
