@@ -552,7 +552,10 @@ def save_blend(bpy, path):
 
     def write(temp):
         try:
-            result = bpy.ops.wm.save_as_mainfile(filepath=os.fspath(temp), copy=True, check_existing=False)
+            # An absolute path: Blender 4.2 resolves a relative one against $PWD, not the working directory,
+            # and the two differ when a program starts the script in another folder.
+            result = bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(os.fspath(temp)), copy=True,
+                                                 check_existing=False)
         finally:
             # The temporary file existed (empty) when Blender saved over it: Blender kept it as a
             # backup version, "<temp>1".
