@@ -31,7 +31,7 @@ def register(addon_name="mc_ao"):
     for cls in _classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.mc_ao = bpy.props.PointerProperty(type=properties.McAoSettings)
-    for name, handler in operators.UNDO_HANDLERS.items():
+    for name, handler in operators.HANDLERS.items():
         getattr(bpy.app.handlers, name).append(handler)
 
 
@@ -41,7 +41,7 @@ def unregister():
 
     from . import operators
 
-    for name, handler in operators.UNDO_HANDLERS.items():
+    for name, handler in operators.HANDLERS.items():
         handlers = getattr(bpy.app.handlers, name)
         while handler in handlers:
             handlers.remove(handler)

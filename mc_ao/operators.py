@@ -101,13 +101,32 @@ def is_running():
     return bool(_RUNS)
 
 
+# The last report of the last bake that ended or was refused ("INFO" | "WARNING" | "ERROR", text), or
+# None: the panel shows it under the button until the next bake, since the status bar shows a report
+# for a few seconds only (and Blender 4.3 showed none at all after a finished modal bake, see the
+# README). It belongs to the file it was baked in: opening or starting another file forgets it.
+last_outcome = None
+
+
+def set_outcome(report):
+    """Remember ``report`` (type, text) as the last bake's outcome, or forget it (None)."""
+    global last_outcome
+    last_outcome = report
+
+
+@bpy.app.handlers.persistent
+def forget_outcome(*_args):
+    """load_post handler: another file is open; the last bake's line was about the one before."""
+    set_outcome(None)
+
+
 @bpy.app.handlers.persistent
 def stop_bakes_before_undo(*_args):
     """undo_pre / redo_pre handler: stop the workers of running bakes before the undo runs.
 
     An undo frees and re-reads datablocks, and Blender's undo stores no image pixels: a bake that
     went on writing into its images across it would write into what the undo took back, and the
-    images' previous content would be lost. UNDO_HANDLERS lists where each handler goes.
+    images' previous content would be lost. HANDLERS lists where each handler goes.
     """
     for session in list(_SESSIONS):
         session.interrupt()
@@ -122,11 +141,12 @@ def end_bakes_after_undo(*_args):
 
 
 # bpy.app.handlers list name -> handler; register() appends them, unregister() removes them.
-UNDO_HANDLERS = {
+HANDLERS = {
     "undo_pre": stop_bakes_before_undo,
     "redo_pre": stop_bakes_before_undo,
     "undo_post": end_bakes_after_undo,
     "redo_post": end_bakes_after_undo,
+    "load_post": forget_outcome,
 }
 
 
@@ -164,10 +184,6 @@ def with_warnings(text, warnings, errors=0):
     return f"{text}; {' and '.join(counts)} before this, in the Info editor"
 
 
-# The last report of the last bake that ended ("INFO" | "WARNING" | "ERROR", text), or None: the
-# panel shows it under the button until the next bake, since the status bar shows a report for a
-# few seconds only (and Blender 4.3 showed none at all after a finished modal bake, see the README).
-last_outcome = None
 
 
 class BakeSession:
@@ -599,8 +615,7 @@ class BakeSession:
         self.run = None
         self.snapshots = {}
         self.results = []
-        global last_outcome
-        last_outcome = self.last_report
+        set_outcome(self.last_report)
         return self.ended
 
     def abandon(self):
@@ -666,6 +681,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
     def execute(self, context):
         self.session = BakeSession(self.report)
         if not self.session.start(context, live=False):
+            set_outcome(self.session.last_report)  # the refusal, not an earlier bake's success
             return {"CANCELLED"}
         return self.session.wait(context)
 
@@ -676,6 +692,7 @@ class OBJECT_OT_mc_ao_bake(bpy.types.Operator):
             return self.execute(context)
         self.session = BakeSession(self.report)
         if not self.session.start(context, live=True):
+            set_outcome(self.session.last_report)  # the refusal, not an earlier bake's success
             return {"CANCELLED"}
         self.session.area = context.area
         wm = context.window_manager

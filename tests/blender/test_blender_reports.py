@@ -192,3 +192,27 @@ def test_wrap_text_cuts_at_spaces_and_keeps_long_words_whole(addon):
     assert panel.wrap_text("aa bb cc dd", 5, len) == ["aa bb", "cc dd"]
     assert panel.wrap_text("aa bbbbbbbb cc", 5, len) == ["aa", "bbbbbbbb", "cc"]
     assert panel.wrap_text("", 5, len) == [""]
+
+
+def test_the_last_bake_line_belongs_to_the_file_and_the_last_action(bpy, scene, tmp_path):
+    """After a bake, opening another file forgets its line; a refused bake replaces a success."""
+    from mc_ao import operators
+
+    ground = add_plane(bpy, "Ground", size=2)
+    select_only(bpy, ground)
+    scene.mc_ao.resolution, scene.mc_ao.samples = 8, 2
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    assert operators.last_outcome[0] == "INFO"
+    # A refused bake (settings that cannot go together, found when it starts) is the last action now.
+    scene.mc_ao.target, scene.mc_ao.error_map = "VERTEX_COLORS", True
+    with pytest.raises(RuntimeError):
+        bpy.ops.object.mc_ao_bake()
+    assert operators.last_outcome is not None and operators.last_outcome[0] == "ERROR"
+    assert "error_map" in operators.last_outcome[1].lower().replace(" ", "_")
+    scene.mc_ao.target, scene.mc_ao.error_map = "IMAGE_TEXTURES", False
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"} and operators.last_outcome[0] == "INFO"
+    # Another file: nothing of this one's bake is shown there.
+    other = tmp_path / "other.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(other), copy=True)
+    bpy.ops.wm.open_mainfile(filepath=str(other))
+    assert operators.last_outcome is None
