@@ -93,7 +93,18 @@ def why_not(context):
                 or selected_to_active.why_not(context.selected_objects, context.active_object,
                                               selected_to_active.cage_of(settings)))
     needs_uvs = settings is None or settings.target != "VERTEX_COLORS"
-    return baking.why_not_bakeable(context.selected_objects, needs_uvs)
+    reason = baking.why_not_bakeable(context.selected_objects, needs_uvs)
+    if reason is None and not needs_uvs:
+        # A color attribute bake that every selected mesh's modifiers make impossible is greyed out
+        # too, with the reason, rather than refused after the click.
+        from . import vertex_colors
+
+        depsgraph = context.evaluated_depsgraph_get() if hasattr(context, "evaluated_depsgraph_get") else None
+        problems = [vertex_colors.modifier_problem(obj, depsgraph) for obj in context.selected_objects
+                    if baking.can_be_target(obj, needs_uvs)]
+        if problems and all(problems):
+            return problems[0] if len(problems) == 1 else "; ".join(problems)
+    return reason
 
 
 def is_running():

@@ -295,8 +295,19 @@ class OBJECT_OT_mc_ao_preview(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if not any(obj.type == "MESH" for obj in context.selected_objects):
+        meshes = [obj for obj in context.selected_objects if obj.type == "MESH"]
+        if not meshes:
             cls.poll_message_set("Select a mesh object that has a baked AO")
+            return False
+        if any(has_preview(obj) for obj in meshes):
+            return True  # the click removes it
+        # Greyed out, with the reason, where no selected mesh has a baked AO to show yet.
+        settings = BakeSettings.from_properties(context.scene.mc_ao)
+        reasons = [(obj, source_of(obj, settings)) for obj in meshes]
+        missing = [(obj, why) for obj, (kind, why) in reasons if kind is None]
+        if len(missing) == len(meshes):
+            obj, why = missing[0]
+            cls.poll_message_set(f"{obj.name}: {why}")
             return False
         return True
 

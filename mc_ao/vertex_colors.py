@@ -100,6 +100,22 @@ def check_object(obj, settings, data=None):
         )
 
 
+def modifier_problem(obj, depsgraph):
+    """Why ``obj``'s color attribute cannot take a bake because its modifiers change its vertices or
+    face corners (the evaluated mesh against its own, as the bake's check finds it), or None. Cheap
+    enough for a button's poll: the depsgraph has the evaluated mesh already."""
+    if obj.type != "MESH" or depsgraph is None:
+        return None
+    evaluated = obj.evaluated_get(depsgraph).data
+    mesh = obj.data
+    if (len(evaluated.vertices), len(evaluated.loops)) == (len(mesh.vertices), len(mesh.loops)):
+        return None
+    return (f"{obj.name}: its modifiers change the mesh ({len(evaluated.vertices)} vertices and "
+            f"{len(evaluated.loops)} face corners evaluated, {len(mesh.vertices)} and {len(mesh.loops)} in the "
+            "mesh), so the bake cannot be stored in its color attribute; apply the modifiers or bake into "
+            "image textures")
+
+
 def values(result, data, domain):
     """The attribute's values (N,) float: per face corner, or per vertex the mean of its corners'."""
     core_vertices = _core_vertices()

@@ -163,3 +163,14 @@ def test_an_object_with_nothing_baked_is_told_so(bpy, scene):
             bpy.ops.object.mc_ao_preview()
     assert len(plane.material_slots) == 0 and "mc_ao_preview" not in plane.keys()
     np.testing.assert_equal(len(bpy.data.materials), 0)
+
+
+def test_preview_is_greyed_with_the_reason_until_something_is_baked(bpy, scene):
+    plane = add_plane(bpy, "Fresh", size=2)
+    with bpy.context.temp_override(selected_objects=[plane], active_object=plane):
+        assert not bpy.ops.object.mc_ao_preview.poll()
+    select_only(bpy, plane)
+    scene.mc_ao.resolution, scene.mc_ao.samples = 8, 2
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    with bpy.context.temp_override(selected_objects=[plane], active_object=plane):
+        assert bpy.ops.object.mc_ao_preview.poll()

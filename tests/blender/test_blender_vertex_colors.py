@@ -241,3 +241,18 @@ def test_the_error_map_is_refused_for_color_attributes(bpy, scene):
     assert reports[-1][0] == "ERROR", reports
     assert "Error Map is for image textures" in reports[-1][1] and "nothing was baked" in reports[-1][1]
     assert obj.data.color_attributes.get("AO") is None
+
+
+def test_the_button_is_greyed_with_the_reason_when_modifiers_make_the_bake_impossible(bpy, scene):
+    from mc_ao import operators
+
+    obj = grid(bpy, subdivisions=2)
+    obj.modifiers.new("Subdivision", "SUBSURF")
+    select_only(bpy, obj)
+    bpy.context.view_layer.update()  # the UI draws the button after the depsgraph evaluated the modifier
+    assert scene.mc_ao.target == "VERTEX_COLORS"
+    assert not bpy.ops.object.mc_ao_bake.poll()
+    assert operators.why_not(bpy.context).startswith("Grid: its modifiers change the mesh")
+    obj.modifiers.clear()
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.mc_ao_bake.poll() and operators.why_not(bpy.context) is None
