@@ -233,6 +233,59 @@ def check_plan(jobs_, settings, objects):
             vertex_colors.check_object(objects[job.object_name], settings, job.target.extra)
 
 
+# The UV coverage of a mesh, by (mesh name, its number of face corners, UV map): the panel asks on
+# every redraw, and reading a large mesh's UVs costs milliseconds.
+_COVERAGE = {}
+
+
+def uv_coverage(obj, uv_map=""):
+    """About the share of the UV square that ``obj``'s faces cover (core.cost.covered_fraction of its
+    UV map's triangles), cached per mesh; 0.5 where it cannot be read."""
+    import numpy as np
+
+    mesh = obj.data
+    layer = mesh.uv_layers.get(uv_map) if uv_map else mesh.uv_layers.active
+    if layer is None or not len(mesh.loops):
+        return 0.5
+    key = (mesh.name_full, len(mesh.loops), layer.name)
+    if key not in _COVERAGE:
+        uv = np.empty(2 * len(mesh.loops), np.float32)
+        layer.data.foreach_get("uv", uv)
+        uv = uv.reshape(-1, 2)
+        mesh.calc_loop_triangles()
+        tris = np.empty(3 * len(mesh.loop_triangles), np.int32)
+        mesh.loop_triangles.foreach_get("loops", tris)
+        if len(_COVERAGE) > 64:
+            _COVERAGE.clear()
+        _COVERAGE[key] = corelink.load("cost").covered_fraction(uv[tris.reshape(-1, 3)])
+    return _COVERAGE[key]
+
+
+def bake_cost(settings, targets, depsgraph=None, occluder_triangles=0):
+    """What baking ``targets`` with ``settings`` will cost, before it runs (core.cost): a
+    core.cost.Cost for them all, one after another. Triangles are the evaluated meshes' where a
+    depsgraph is given. The processes each hold the scene; threads and processes as the bake takes
+    them (0: every core)."""
+    cost = corelink.load("cost")
+    workers = corelink.load("workers")
+    w, h = settings.size
+    cores = settings.threads or workers.cpu_count()
+    processes = settings.processes or cores
+    seconds, peak = 0.0, 0
+    for obj in targets:
+        mesh = obj.evaluated_get(depsgraph).data if depsgraph is not None else obj.data
+        triangles = len(mesh.loops) - 2 * len(mesh.polygons)  # an n-gon is n - 2 triangles
+        covered = (uv_coverage(obj, settings.uv_map) if not settings.vertex_colors else 1.0) * w * h
+        if settings.vertex_colors:
+            covered = len(mesh.loops)
+        c = cost.estimate(covered, settings.samples, triangles + occluder_triangles,
+                          image_texels=w * h if not settings.vertex_colors else covered,
+                          threads=1 if processes > 1 else cores, processes=processes)
+        seconds += c.seconds
+        peak = max(peak, c.bytes)
+    return cost.Cost(seconds, peak)
+
+
 def throughput(result):
     """(mean samples per covered texel, million rays per second) of a bake result."""
     covered = result.samples[result.mask]

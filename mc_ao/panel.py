@@ -130,12 +130,29 @@ def draw_targets(layout, context):
     else:
         each = "one tiled image each" if settings.use_udim else "one image each"
         layout.label(text=f"{len(targets)} objects, {each}", icon="IMAGE_DATA")
+    draw_cost(layout, context, settings, targets)
     skipped = [obj for obj in selected if obj not in targets]
     for obj in skipped[:MAX_SKIPPED_LINES]:
         why = "no UV map" if obj.type == "MESH" else "not a mesh"
         wrapped_label(layout, context, f"Skipped: {obj.name} ({why})", icon="ERROR")
     if len(skipped) > MAX_SKIPPED_LINES:
         layout.label(text=f"... and {len(skipped) - MAX_SKIPPED_LINES} more skipped", icon="ERROR")
+
+
+def draw_cost(layout, context, settings, targets):
+    """The bake's estimated time and memory (core.cost, calibrated by the bench), and a warning before
+    a bake that will not fit in memory."""
+    if not targets:
+        return
+    try:
+        cost = baking.bake_cost(settings, targets, context.evaluated_depsgraph_get())
+        available = baking.corelink.load("workers").memory_limit()
+    except Exception:  # the core cannot load (no numpy, no embreex): the bake will say why
+        return
+    wrapped_label(layout, context, f"Estimate: {cost.describe()}", icon="TIME")
+    if available is not None and cost.bytes > available:
+        wrapped_label(layout, context, f"This bake needs about {cost.bytes / 2 ** 30:.1f} GiB, more than the "
+                      f"{available / 2 ** 30:.1f} GiB free: lower the resolution or the processes", icon="ERROR")
 
 
 class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):

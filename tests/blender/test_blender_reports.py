@@ -179,11 +179,11 @@ def test_the_panel_shows_the_last_bakes_outcome(bpy, scene):
     select_only(bpy, ground)
     outcome = ("WARNING", "Ground: 24x24 into 'Ground_AO' in 0.05 s, 16 samples per texel, 1.00 M rays/s; "
                           "1 warning before this, in the Info editor")
-    labels = draw_main_panel(bpy, SIDEBAR, last_outcome=outcome)
+    labels = [x for x in draw_main_panel(bpy, SIDEBAR, last_outcome=outcome) if x[1] != "TIME"]  # the estimate
     assert labels[0] == ("Into Ground_AO", "IMAGE_DATA")
     assert " ".join(text for text, _ in labels[1:]) == "Last bake: " + outcome[1]
     assert labels[1][1] == "ERROR"  # the warning icon
-    assert draw_main_panel(bpy, SIDEBAR) == [("Into Ground_AO", "IMAGE_DATA")]  # before any bake
+    assert [x for x in draw_main_panel(bpy, SIDEBAR) if x[1] != "TIME"] == [("Into Ground_AO", "IMAGE_DATA")]
 
 
 def test_wrap_text_cuts_at_spaces_and_keeps_long_words_whole(addon):
@@ -216,3 +216,34 @@ def test_the_last_bake_line_belongs_to_the_file_and_the_last_action(bpy, scene, 
     bpy.ops.wm.save_as_mainfile(filepath=str(other), copy=True)
     bpy.ops.wm.open_mainfile(filepath=str(other))
     assert operators.last_outcome is None
+
+
+def test_the_panel_shows_what_the_bake_will_cost_and_warns_before_it_does_not_fit(bpy, scene, monkeypatch):
+    from mc_ao import baking, corelink
+    from mc_ao.settings import BakeSettings
+
+    ground = add_plane(bpy, "Ground", size=4)
+    select_only(bpy, ground)
+    scene.mc_ao.resolution, scene.mc_ao.samples = 1024, 128
+    labels = draw_main_panel(bpy, SIDEBAR)
+    (estimate,) = [text for text, icon in labels if icon == "TIME"]
+    assert estimate.startswith("Estimate: about ") and ("MiB" in estimate or "GiB" in estimate)
+    cost = baking.bake_cost(BakeSettings.from_properties(scene.mc_ao), [ground])
+    # A 1024^2 plane (all of it covered) at 128 samples: what core.cost says, the panel shows.
+    assert cost == corelink.load("cost").estimate(1024 * 1024, 128, 2, image_texels=1024 * 1024,
+                                                   threads=1 if cost_processes(scene) > 1 else cost_cores(scene),
+                                                   processes=cost_processes(scene))
+    assert not any(icon == "ERROR" for _, icon in labels)
+    monkeypatch.setattr(corelink.load("workers"), "memory_limit", lambda: 1 << 20)  # 1 MiB free
+    warned = [text for text, icon in draw_main_panel(bpy, SIDEBAR) if icon == "ERROR"]
+    assert warned and warned[0].startswith("This bake needs about")
+
+
+def cost_cores(scene):
+    from mc_ao import corelink
+
+    return scene.mc_ao.threads or corelink.load("workers").cpu_count()
+
+
+def cost_processes(scene):
+    return scene.mc_ao.processes or cost_cores(scene)
