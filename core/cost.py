@@ -39,12 +39,13 @@ class Cost:
     bytes: int
 
     def describe(self):
-        """E.g. 'about 12 s and 1.3 GiB'."""
+        """E.g. 'about 12 s and 1.3 GiB', 'under a second and 300 MiB'."""
         s = self.seconds
-        t = f"{s:.1f} s" if s < 10 else f"{s:.0f} s" if s < 120 else f"{s / 60:.0f} min"
+        t = ("under a second" if s < 1 else f"{s:.1f} s" if s < 10 else f"{s:.0f} s" if s < 120
+             else f"{s / 60:.0f} min")
         gib = self.bytes / 2 ** 30
         m = f"{gib:.1f} GiB" if gib >= 1 else f"{self.bytes / 2 ** 20:.0f} MiB"
-        return f"about {t} and {m}"
+        return f"{t} and {m}" if s < 1 else f"about {t} and {m}"
 
 
 def estimate(covered_texels, samples, triangles, image_texels=None, threads=1, processes=1, chunk_rays=1 << 16):

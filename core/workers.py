@@ -408,8 +408,11 @@ class Pool:
                         deal(w)
                     elif kind == "tile":
                         w.busy.remove(msg[2]["key"])
-                        store(TileOut(**msg[2]))
+                        if failure is None and not cancelled:
+                            store(TileOut(**msg[2]))
                         deal(w)
+                        if (failure is not None or cancelled) and not w.busy:
+                            pending.discard(w)  # stopped, and nothing of it left to wait for
                     elif kind == "finish":
                         finished[w] = msg[2]
                         pending.discard(w)
@@ -444,6 +447,8 @@ class Pool:
                 w.end()
                 workers.discard(w)
                 self.broken = True
+            elif not w.busy:
+                workers.discard(w)  # idle (its totals asked for, or nothing dealt): nothing to stop
             else:
                 try:
                     w.send("cancel", bake_id)

@@ -56,4 +56,6 @@ def test_the_bake_estimate_finds_the_covered_texels_from_the_uvs():
     # More processes: less time, more memory (each holds the scene).
     c = cost.estimate_bake(full, resolution=256, samples=64, threads=1, processes=4)
     assert c.seconds < a.seconds and c.bytes > a.bytes
-    assert "about" in a.describe() and ("MiB" in a.describe() or "GiB" in a.describe())
+    assert ("MiB" in a.describe() or "GiB" in a.describe())
+    assert cost.Cost(0.4, 300 << 20).describe() == "under a second and 300 MiB"
+    assert cost.Cost(12.3, 3 << 30).describe() == "about 12 s and 3.0 GiB"

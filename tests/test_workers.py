@@ -278,3 +278,27 @@ def test_auto_workers_with_threads_given_keep_within_the_cores():
     s = BakeSettings.from_arguments(8, 4, 4, 0.0, 1.0, "cosine", "sobol", 0, 0, 2, False, 0.0, None, 1 << 16)
     processes, threads = W.processes_of("auto", 2, s, 1000)
     assert threads == 2 and processes * threads <= max(2, W.cpu_count())
+
+
+def test_a_cancel_from_a_tile_ends_the_bake_whatever_each_worker_is_doing():
+    """Cancelled as the first tile is stored, with tiles still dealt and results on their way back: the
+    bake raises BakeCancelled and does not wait for a worker it stopped. (A cancel while the parent
+    is held in on_tile, every worker idle with its results queued, hung the bake before: that is
+    tests/blender/test_blender_bad_input.py::test_esc_during_a_bake_puts_the_images_back with the
+    operator's default processes.)"""
+    target, occ = scene()
+    for seed in range(8):
+        stop = threading.Event()
+        out = []
+
+        def bake():
+            try:
+                bake_ao(target, occ, resolution=64, samples=4, tile_size=16, workers=2, seed=seed, cancel=stop,
+                        on_tile=lambda *a: stop.set())
+            except BakeCancelled:
+                out.append("cancelled")
+
+        t = threading.Thread(target=bake, daemon=True)
+        t.start()
+        t.join(120)  # a bound for a slow machine: a bake left waiting for a stopped worker never ends
+        assert out == ["cancelled"], seed
