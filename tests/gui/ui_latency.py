@@ -12,6 +12,9 @@ and runs the modes of $MC_AO_LAT_MODES one after another:
 - ``idle``: no bake, for $MC_AO_LAT_IDLE seconds;
 - ``burn``: no bake, $MC_AO_LAT_WORKERS busy processes beside Blender for as long (CPU load that never
   takes Blender's GIL: what worker processes cost the UI on a machine with no core to spare);
+- ``idle-redraw``, ``burn-redraw``: no bake, but new progress texts in the 3D Viewport's header and
+  the status bar every 0.1 s, as the operator sets them while it bakes (so Blender redraws), alone
+  and beside the busy processes of ``burn``;
 - ``gil``: no bake, one busy Python thread inside Blender for as long (what the GIL costs the UI);
 - ``threads``: Bake AO as the add-on runs it (its worker thread, the core's threads);
 - ``workers``: the same, with the installed core's ``bake_ao`` given ``workers=$MC_AO_LAT_WORKERS``
@@ -19,6 +22,9 @@ and runs the modes of $MC_AO_LAT_MODES one after another:
   is replaced); the first such bake starts the pool (cold), later ones reuse it (warm);
 - ``threads-nice``, ``workers-nice``: the same bakes with the baking threads, or the worker
   processes, at nice $MC_AO_LAT_NICE (the pool is made before the bake, so that its workers are reniced);
+- ``threads-quiet``, ``workers-quiet``: the same bakes with the add-on's progress texts and live
+  image updates switched off (the image is written once, at the end), so that Blender hardly
+  redraws: what the bake itself (its GIL, its CPU) costs the timer;
 - ``threads-hidden``, ``workers-hidden``: the same bakes with nothing showing the AO image (the Image
   Editor empty, the viewport in material colours): the add-on still updates the image, nothing draws it;
 - ``shot``: a ``workers`` bake into a new image, during which a screenshot is taken (its figures carry
@@ -57,8 +63,8 @@ RES = int(os.environ.get("MC_AO_LAT_RES", "1024"))
 SAMPLES = int(os.environ.get("MC_AO_LAT_SAMPLES", "128"))
 WORKERS = int(os.environ.get("MC_AO_LAT_WORKERS", "2"))
 IDLE_SECONDS = float(os.environ.get("MC_AO_LAT_IDLE", "15"))
-MODES = os.environ.get("MC_AO_LAT_MODES", "idle burn gil threads workers workers-nice threads-nice threads workers "
-                       "threads-hidden workers-hidden shot").split()
+MODES = os.environ.get("MC_AO_LAT_MODES", "idle burn gil idle-redraw burn-redraw threads workers threads-quiet "
+                       "workers-quiet threads-nice workers-nice threads workers shot").split()
 OBJECT = os.environ.get("MC_AO_LAT_OBJECT", "Suzanne")
 NICE = int(os.environ.get("MC_AO_LAT_NICE", "10"))
 INTERVAL = 0.010
@@ -174,6 +180,8 @@ def instrument_operator():
 
     def timed(name, fn):
         def wrapper(*args, **kw):
+            if state.get("quiet") and name == "flush_live":
+                return None  # no live image updates (nor their redraws): the image is written at the end
             t0 = time.perf_counter()
             try:
                 return fn(*args, **kw)
@@ -187,6 +195,13 @@ def instrument_operator():
 
     session.on_event = timed("on_event", session.on_event)
     session._flush_live = timed("flush_live", session._flush_live)
+    set_texts = session.set_texts
+
+    def quiet_texts(self, context, text):
+        if not state.get("quiet") or text is None:
+            return set_texts(self, context, text)
+
+    session.set_texts = quiet_texts
 
 
 def draw_counter(name):
@@ -397,7 +412,10 @@ def setup():
 @guarded
 def setup2():
     arrange()
-    results.update(blender=bpy.app.version_string, python=sys.version.split()[0], executable=sys.executable,
+    import gpu
+
+    results.update(gpu=f"{gpu.platform.vendor_get()} | {gpu.platform.renderer_get()} | {gpu.platform.version_get()}",
+                   blender=bpy.app.version_string, python=sys.version.split()[0], executable=sys.executable,
                    resolution=RES, samples=SAMPLES, workers=WORKERS, cpus=os.cpu_count(),
                    affinity=len(os.sched_getaffinity(0)), load_before=os.getloadavg())
     write("ready.json", {"ok": True})
@@ -421,8 +439,9 @@ def next_mode():
     mode = MODES.pop(0)
     log("mode", mode)
     state["mode"] = {"mode": mode, "load_before": os.getloadavg()}
-    state["inject_workers"] = mode in ("workers", "shot", "workers-hidden", "workers-nice")
+    state["inject_workers"] = mode in ("workers", "shot", "workers-hidden", "workers-nice", "workers-quiet")
     state["nice"] = NICE if mode.endswith("-nice") else 0
+    state["quiet"] = mode.endswith("-quiet")
     display(hidden=mode.endswith("-hidden"))
     if mode == "shot":  # a new image, so that the screenshot shows it filling in
         image = bpy.data.images.get(f"{OBJECT}_AO")
@@ -433,7 +452,14 @@ def next_mode():
         state["mode"]["pool"] = "warm" if core().workers._POOL is not None else "cold"
     start_recording()
     state["t0"] = time.perf_counter()
-    if mode == "idle":
+    if mode in ("idle-redraw", "burn-redraw"):
+        # What the operator does on every tick (0.1 s) while it bakes: new progress texts in the 3D
+        # Viewport's header and the status bar, so Blender redraws them; no bake.
+        state["redraw"] = 0
+        bpy.app.timers.register(redraw, first_interval=0.1)
+    if mode == "burn-redraw":
+        state["burners"] = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(WORKERS)]
+    if mode in ("idle", "idle-redraw", "burn-redraw"):
         bpy.app.timers.register(end_idle, first_interval=IDLE_SECONDS)
         return None
     if mode == "burn":  # CPU load outside Blender's GIL: two busy processes
@@ -456,6 +482,24 @@ def next_mode():
     return None
 
 
+def redraw():
+    if state.get("redraw") is None:
+        window, scr = screen()
+        for area in scr.areas:
+            if area.type == "VIEW_3D":
+                area.header_text_set(None)
+        window.workspace.status_text_set(None)
+        return None
+    state["redraw"] += 1
+    window, scr = screen()
+    text = f"MC AO: baking Suzanne (1/1), {state['redraw'] % 100}% - Esc to cancel"
+    for area in scr.areas:
+        if area.type == "VIEW_3D":
+            area.header_text_set(text)
+    window.workspace.status_text_set(text)
+    return 0.1
+
+
 def spin():
     while state["spin"]:
         pass
@@ -464,6 +508,7 @@ def spin():
 @guarded
 def end_idle():
     state["spin"] = False
+    state["redraw"] = None
     for p in state.pop("burners", []):
         p.kill()
         p.wait()
@@ -498,7 +543,7 @@ def close_mode(ms, seconds):
              addon_main=state["main"], draws=state["draws"])
     bakes = state["bakes"][state["bakes_before"]:]
     m["bakes"] = bakes
-    if m["mode"] not in ("idle", "burn", "gil"):
+    if m["mode"] not in ("idle", "burn", "gil", "idle-redraw", "burn-redraw"):
         image = bpy.data.images.get(f"{OBJECT}_AO")
         m["image"] = None if image is None else list(image.size)
         if m["mode"] == "threads":
@@ -517,7 +562,7 @@ def table():
     for m in results["modes"]:
         name = m["mode"] + (f" ({m['pool']})" if "pool" in m else "")
         bake = (m.get("bakes") or [{}])[0]
-        secs = f"({m['seconds']:.0f})" if m["mode"] in ("idle", "burn", "gil") else f"{m['seconds']:.1f}"
+        secs = f"({m['seconds']:.0f})" if m["mode"] in ("idle", "burn", "gil", "idle-redraw", "burn-redraw") else f"{m['seconds']:.1f}"
         wcpu = bake.get("worker_cpu_s")
         main = m.get("addon_main", {})
         lines.append(
