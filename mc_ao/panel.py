@@ -164,7 +164,9 @@ class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.mc_ao
         layout = self.split_layout()
-        layout.prop(settings, "target", expand=True)
+        # A menu, not two buttons: at the sidebar's default width each half cut the names off
+        # ("Image Te...", "Color Attr...").
+        layout.prop(settings, "target")
         col = layout.column()
         if settings.target == "VERTEX_COLORS":
             col.prop(settings, "attribute_name", icon="GROUP_VCOL")
@@ -211,10 +213,11 @@ class VIEW3D_PT_mc_ao_selected_to_active(_McAoPanel, bpy.types.Panel):
             col.prop(settings, "cage_object")
             sub = col.column()
             sub.active = settings.cage_object is None  # a cage object replaces the extrusion
-            sub.prop(settings, "cage_extrusion")
+            sub.prop(settings, "cage_extrusion", text="Extrusion")
         else:
             col.prop(settings, "cage_extrusion", text="Extrusion")
-        col.prop(settings, "max_ray_distance")
+        # Cycles' name, "Max Ray Distance", is cut off at the sidebar's default width; the tooltip keeps it.
+        col.prop(settings, "max_ray_distance", text="Ray Distance")
 
 
 class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):

@@ -247,3 +247,42 @@ def cost_cores(scene):
 
 def cost_processes(scene):
     return scene.mc_ao.processes or cost_cores(scene)
+
+
+def test_no_setting_label_is_cut_off_at_the_sidebars_default_width(bpy, scene):
+    """Every label left of a field, and every menu's value, measures no more than the longest that the
+    real Blender 4.3 showed whole at the sidebar's default width ("Noise Threshold" as a label, "Color
+    Attributes" in a menu); "Max Ray Distance" as a label and "Image Textures" in half a row were cut."""
+    from mc_ao import panel
+
+    drawn = []
+
+    class Recorder:
+        def __getattr__(self, name):
+            if name == "prop":
+                return lambda data, prop, **kw: drawn.append((data, prop, kw))
+            return lambda *a, **k: self
+
+        def __setattr__(self, name, value):
+            pass
+
+    settings = scene.mc_ao
+    for target in ("IMAGE_TEXTURES", "VERTEX_COLORS"):
+        settings.target = target
+        for use_cage in (False, True):
+            settings.use_cage = use_cage
+            for cls in (getattr(panel, n) for n in dir(panel) if n.startswith("VIEW3D_PT_mc_ao")):
+                panel_self = types.SimpleNamespace(layout=Recorder(), split_layout=lambda: Recorder())
+                cls.draw(panel_self, bpy.context)
+    label_room = panel.text_width("Noise Threshold", bpy.context)
+    value_room = panel.text_width("Color Attributes", bpy.context)
+    for data, prop, kw in drawn:
+        rna = data.bl_rna.properties[prop]
+        if rna.type == "BOOLEAN" or kw.get("text") == "":
+            continue  # a checkbox's label has the whole row
+        label = kw.get("text", rna.name)
+        assert panel.text_width(label, bpy.context) <= label_room, label
+        assert not kw.get("expand"), prop  # a row of buttons cuts every name in it
+        if rna.type == "ENUM":
+            for item in rna.enum_items:
+                assert panel.text_width(item.name, bpy.context) <= value_room, item.name
