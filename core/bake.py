@@ -41,7 +41,7 @@ from .mesh import Mesh
 from .patterns import TexelPattern
 from . import raster as R
 from .raster import bin_triangles, prepare
-from .scheduler import Scheduler, is_cancelled, run_all
+from .scheduler import is_cancelled
 from .settings import (DISTRIBUTIONS, MAX_RESOLUTION, MAX_SAMPLES, SAMPLE_PIECE, BakeSettings, auto_tile_shape,
                        available_memory, estimate_memory)
 from .surface import SurfaceTable
@@ -539,26 +539,16 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                 r, c, _ = bake.rect(out.key)
                 on_tile(r, c, ao[r, c].copy())
 
-    fallback = _workers.usable_pool(processes, per_worker)
-    if fallback is not None:
-        processes = 1
-    if _workers.in_process(processes):
-        shared = Scheduler(bake.planned, progress, cancel)
-        bake.trace_setup(shared, cancel, on_rays)
-        run_all(lambda key: store(bake.tile(key)), keys, s.threads, shared, progress)
-        rays, trace_s, trace_cpu = shared.rays, shared.trace_seconds, shared.trace_cpu_seconds
-        counters = bake.start.counters()
-    else:
-        if on_rays is not None:
-            raise SettingsError("on_rays sees the rays of this process only: bake with workers=1 to record them")
-        job = dict(target=_workers.mesh_data(target_in), occluders=[_workers.mesh_data(o) for o in occluders_in],
-                   settings=dataclasses.asdict(s), bent_normals=bent_normals, bent_space=bent_space_in,
-                   highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
-                   extrusion=extrusion if s2a is None else s2a.world.extrusion,  # measured once, here
-                   max_ray_distance=max_ray_distance,
-                   cage=None if cage is None else _workers.mesh_data(cage))
-        rays, trace_s, trace_cpu, counters = _workers.run_tiles(processes, per_worker, job, keys, bake.planned, store,
-                                                                progress, cancel)
+    def job():
+        """What a worker rebuilds this bake from: the input as given, plain data (the extrusion measured here)."""
+        return dict(target=_workers.mesh_data(target_in), occluders=[_workers.mesh_data(o) for o in occluders_in],
+                    settings=dataclasses.asdict(s), bent_normals=bent_normals, bent_space=bent_space_in,
+                    highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
+                    extrusion=extrusion if s2a is None else s2a.world.extrusion,
+                    max_ray_distance=max_ray_distance, cage=None if cage is None else _workers.mesh_data(cage))
+
+    rays, trace_s, trace_cpu, counters, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store,
+                                                                       progress, cancel, on_rays)
     if s2a is not None:
         extra = _highpoly.finish_report(counters, miss, mask, s2a)
         missed = counters["missed"]

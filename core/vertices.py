@@ -30,7 +30,6 @@ from .estimators import ErrorModel
 from .kernel import Kernel
 from .mesh import corner_positions
 from .patterns import POOL_POINTS, TexelPattern
-from .scheduler import Scheduler, run_all
 from .settings import BakeSettings, pattern_span
 from .surface import point_table, point_units
 from .tilebaker import SurfaceStart, TileBaker
@@ -238,22 +237,14 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
             bent[ids] = out.bent
 
     keys = list(range(len(bake.blocks)))
-    fallback = _workers.usable_pool(processes, per_worker)
-    if fallback is not None:
-        processes = 1
-    if _workers.in_process(processes):
-        shared = Scheduler(bake.planned, progress, cancel)
-        bake.trace_setup(shared, cancel, on_rays)
-        run_all(lambda key: store(bake.tile(key)), keys, s.threads, shared, progress)
-        rays, trace_s, trace_cpu = shared.rays, shared.trace_seconds, shared.trace_cpu_seconds
-    else:
-        if on_rays is not None:
-            raise SettingsError("on_rays sees the rays of this process only: bake with workers=1 to record them")
-        job = dict(kind="vertex", target=_workers.mesh_data(target), occluders=[_workers.mesh_data(o) for o in occluders],
-                   settings=dataclasses.asdict(s), corners=corners, merge=bool(merge), bent_normals=bool(bent_normals),
-                   block=bake.block)
-        rays, trace_s, trace_cpu, _ = _workers.run_tiles(processes, per_worker, job, keys, bake.planned, store,
-                                                         progress, cancel)
+    def job():
+        """What a worker rebuilds this bake from (plain data)."""
+        return dict(kind="vertex", target=_workers.mesh_data(target), occluders=[_workers.mesh_data(o) for o in occluders],
+                    settings=dataclasses.asdict(s), corners=corners, merge=bool(merge), bent_normals=bool(bent_normals),
+                    block=bake.block)
+
+    rays, trace_s, trace_cpu, _, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store, progress,
+                                                                cancel, on_rays)
     unit = bake.unit
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
     for key in ("margin", "resolution"):

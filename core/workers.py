@@ -623,6 +623,26 @@ def run_tiles(processes, threads, job, keys, planned, store, progress, cancel):
     return pool_for(processes, threads).run(job, keys, planned, store, progress, cancel)
 
 
+def bake_tiles(bake, keys, processes, threads, job, store, progress, cancel, on_rays=None):
+    """Bake ``keys`` of ``bake`` (a :class:`core.bake.TexelBake` or :class:`core.vertices.VertexBake`,
+    its prologue done) in this process on ``bake.s.threads`` threads, or on ``processes`` worker
+    processes of ``threads`` threads (or a Dask cluster); ``store`` each tile's
+    :class:`core.bake.TileOut`. ``job()`` makes the plain data workers rebuild the bake from (only
+    when they bake). Where a local pool cannot be used (its self-test failed), this process bakes.
+
+    Returns (rays, trace seconds, trace CPU seconds, the start stage's counters, the reason the pool
+    was not used or None)."""
+    fallback = usable_pool(processes, threads)
+    if fallback is None and not in_process(processes):
+        if on_rays is not None:
+            raise SettingsError("on_rays sees the rays of this process only: bake with workers=1 to record them")
+        return (*run_tiles(processes, threads, job(), keys, bake.planned, store, progress, cancel), None)
+    shared = Scheduler(bake.planned, progress, cancel)
+    bake.trace_setup(shared, cancel, on_rays)
+    run_all(lambda key: store(bake.tile(key)), keys, bake.s.threads, shared, progress)
+    return shared.rays, shared.trace_seconds, shared.trace_cpu_seconds, bake.start.counters(), fallback
+
+
 def usable_pool(processes, threads):
     """None when the local pool of ``processes`` started and passed its self-test (or the tiles go to
     a Dask cluster), else the reason it cannot be used (the bake then runs on threads)."""
