@@ -35,7 +35,8 @@ import time
 
 from .errors import FileWriteError
 
-__all__ = ["PendingFile", "TEMP_PREFIX", "write_file", "io_error", "fsync_dir", "remove_stale"]
+
+__all__ = ["write_text", "PendingFile", "TEMP_PREFIX", "write_file", "io_error", "fsync_dir", "remove_stale"]
 
 #: Every temporary (and backup) file a writer here makes starts with this.
 TEMP_PREFIX = ".mc_ao-"
@@ -384,3 +385,20 @@ def write_file(target, write, verify=None, overwrite=True, error=FileWriteError,
     pending.finish(verify)
     pending.commit()
     return pending.target
+
+
+def write_text(target, text, error=FileWriteError):
+    """Write ``text`` (UTF-8) to ``target`` through :func:`write_file`, read back whole before it
+    replaces the old file; the folder is made if missing. Summaries, logs, job files."""
+
+    def write(temp):
+        with open(temp, "w", encoding="utf-8") as f:
+            f.write(text)
+
+    def verify(temp):
+        with open(temp, encoding="utf-8") as f:
+            if f.read() != text:
+                raise ValueError("it reads back different")
+
+    os.makedirs(os.path.dirname(os.path.abspath(target)), exist_ok=True)
+    return write_file(target, write, verify=verify, error=error)

@@ -303,19 +303,8 @@ class Summary:
             print(f"bake_ao: error: the summary {str(self.path)!r} was not written: {problem}", file=sys.stderr)
             return False
 
-        def write(temp):
-            with open(temp, "w", encoding="utf-8") as f:
-                f.write(text)
-
-        def verify(temp):
-            with open(temp, encoding="utf-8") as f:
-                if f.read() != text:
-                    raise ValueError("it reads back different")
-
         try:
-            folder = os.path.dirname(os.path.abspath(self.path))
-            os.makedirs(folder, exist_ok=True)
-            atomicfile.write_file(self.path, write, verify=verify)
+            atomicfile.write_text(self.path, text)
         except OSError as exc:
             print(f"bake_ao: error: the summary {str(self.path)!r} was not written: {exc}", file=sys.stderr)
             return False

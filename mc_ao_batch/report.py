@@ -134,18 +134,7 @@ def write_json_atomic(path, data, inputs=(), replaces=None):
     if problem is not None:
         raise FileWriteError(f"{os.fspath(path)!r}: {problem}")
     text = json.dumps(data, indent=1, sort_keys=False) + "\n"
-
-    def write(temp):
-        with open(temp, "w", encoding="utf-8") as f:
-            f.write(text)
-
-    def verify(temp):
-        with open(temp, encoding="utf-8") as f:
-            if f.read() != text:
-                raise ValueError("it reads back different")
-
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    atomicfile.write_file(path, write, verify=verify)
+    atomicfile.write_text(path, text)
 
 
 def output_problem(path, inputs=(), replaces=None):
