@@ -286,13 +286,6 @@ class Kernel:
         tex = units.texel[unit]
         kt = tex if replicates is None else tex + replicates * tile.texels  # the pieces' rows of keys
         e, o = keys.pattern[kt], keys.order[kt]
-        # Feature planes of the pieces' samples: x[j] (g, k) is feature j of every sample, each
-        # plane contiguous (numpy's passes over a column of (n, 6) rows cost 2-4 times as much, and
-        # a piece's (6, k) planes are one matrix for BLAS, rows n apart). Xor-ordered patterns map
-        # an aligned power-of-two block of samples onto consecutive pool rows (in another order),
-        # whole rows of a (rows / size, size) view of each plane: a call whose pieces all start at
-        # the same sample takes its samples as such blocks (a piece of 56 from sample 8: blocks of
-        # 8, 16 and 32), others go sample by sample. Plane 2 is the constant 1.
         xf, x, blocks, firsts, first = self._gather(ws, keys, kt, e, o, curved, start, k, g, n)
         a, b = x[0], x[1]
         # (u, v) -> the triangle's texel space: a translation for squares, Heitz's map and the
@@ -440,6 +433,13 @@ class Kernel:
         texel-shifted position (u2, u3) in [0, 1) as planes 0, 1, the constant 1, and the lifted
         direction features of (u0, u1) (``curved``: the sphere form). Returns (xf, x, blocks, firsts,
         first): the planes flat and by piece, and how the samples were addressed (for ``on_rays``)."""
+        # Feature planes of the pieces' samples: x[j] (g, k) is feature j of every sample, each
+        # plane contiguous (numpy's passes over a column of (n, 6) rows cost 2-4 times as much, and
+        # a piece's (6, k) planes are one matrix for BLAS, rows n apart). Xor-ordered patterns map
+        # an aligned power-of-two block of samples onto consecutive pool rows (in another order),
+        # whole rows of a (rows / size, size) view of each plane: a call whose pieces all start at
+        # the same sample takes its samples as such blocks (a piece of 56 from sample 8: blocks of
+        # 8, 16 and 32), others go sample by sample. Plane 2 is the constant 1.
         first = firsts = None
         feats = self.pattern.feature_planes(self.kinds[curved])
         xf = ws.x[:6 * n].reshape(6, n)

@@ -58,6 +58,7 @@ import traceback
 
 import numpy as np
 
+from . import cost as _cost
 from . import errors as _errors
 from .errors import BakeCancelled, McAoError, SettingsError
 from .scheduler import Scheduler, is_cancelled, run_all
@@ -67,12 +68,6 @@ _HEADER = struct.Struct("<Q")
 AHEAD = 2
 #: Progress messages per worker and bake, at most (a message per chunk would let a busy parent slow them).
 PROGRESS_STEPS = 512
-#: Bytes a worker holds per triangle of the bake's meshes beyond its Embree scene (the surface table,
-#: UV triangles, tiles), and that scene's own: what :func:`auto_workers` divides the memory by.
-WORKER_BYTES_PER_TRIANGLE = 600
-EMBREE_BYTES_PER_TRIANGLE = 80
-#: A worker's fixed memory: an interpreter with numpy, embreex and the core imported, its sample pool.
-WORKER_BASE_BYTES = 150 << 20
 
 
 class BakeWorkerError(McAoError, RuntimeError):
@@ -572,7 +567,9 @@ def auto_workers(triangles, cores=None, memory=None):
     fewer with more threads each where memory holds fewer copies of the scene (threads share one)."""
     cores = cpu_count() if cores is None else cores
     memory = memory_limit() if memory is None else memory
-    per_worker = WORKER_BASE_BYTES + triangles * (WORKER_BYTES_PER_TRIANGLE + EMBREE_BYTES_PER_TRIANGLE)
+    # A worker's memory: what core.cost estimates for a process holding the scene (measured 770-830
+    # bytes a triangle per worker with its Embree scene, beside its interpreter and sample pool).
+    per_worker = _cost.BYTES_PER_PROCESS + triangles * _cost.BYTES_PER_TRIANGLE
     workers = cores if memory is None else max(1, min(cores, int(memory * 0.8 // per_worker)))
     return workers, max(1, cores // workers)
 
