@@ -96,13 +96,16 @@ class Job:
     def selected_to_active(self):
         return bool(self.highpoly)
 
-    def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None):
+    def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None, quantity=None):
         """core.bake_ao of this job; returns its result. Needs no bpy (safe in a worker thread).
 
+        ``quantity``: bake this core quantity (core.bake_ao's ``quantity``, e.g. "thickness") instead
+        of the settings' own, without bent normals (an output that needs a second quantity).
         Raises core.McAoError subclasses (core.BakeCancelled when ``cancel`` fires).
         """
         if settings.vertex_colors or settings.use_udim or settings.bent_normals:
-            return _run_other(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile)
+            return _run_other(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile,
+                              quantity=quantity)
         core = corelink.load()
 
         def mesh(arrays):
@@ -122,7 +125,7 @@ class Job:
         return core.bake_ao(
             mesh(self.target),
             occluders=[mesh(o) for o in self.occluders],
-            **settings.bake_kwargs(threads),
+            **_kwargs(settings, threads, quantity),
             progress=progress,
             cancel=cancel,
             on_tile=on_tile,
@@ -165,7 +168,17 @@ _TARGET_NOTES = {
 }
 
 
-def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None):
+def _kwargs(settings, threads, quantity=None):
+    """The core's keyword arguments of a job's bake; another ``quantity`` than the settings' comes
+    without bent normals (the core makes them with the AO only)."""
+    kw = settings.bake_kwargs(threads)
+    if quantity is not None:
+        kw["quantity"] = quantity
+        kw.pop("bent_normals", None)
+    return kw
+
+
+def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None, quantity=None):
     """The core's bake of ``job`` for a colour-attribute, UDIM or bent-normal bake (Job.run's)."""
     core = corelink.load()
 
@@ -173,14 +186,14 @@ def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None)
         return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
                          normals=arrays.normals, name=arrays.name)
 
-    kw = settings.bake_kwargs(threads)
+    kw = _kwargs(settings, threads, quantity)
     occluders = [mesh(o) for o in job.occluders]
     if settings.vertex_colors:
         for key in ("resolution", "margin", "bent_normals"):
             kw.pop(key, None)
         return core.bake_vertex_ao(mesh(job.target, uvs=False), occluders, corners=job.target.extra["corners"],
                                    progress=progress, cancel=cancel, **kw)
-    if settings.bent_normals:
+    if kw.get("bent_normals"):
         kw["bent_space"] = (job.target.extra or {}).get("bent_space")
     if settings.use_udim:
         return core.bake_udim(mesh(job.target), occluders, progress=progress, cancel=cancel, **kw)
