@@ -75,35 +75,57 @@ class BakeWorkerError(McAoError, RuntimeError):
 
 
 def send(stream, obj):
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    stream.write(_HEADER.pack(len(data)))
+    """Write ``obj`` as a message: a pickle (protocol 5) whose arrays travel out of band, each
+    array's bytes written straight from its memory after the pickle (no copy of them into the
+    pickle, none on the way in: a worker's scene arrives in the buffers its arrays then use)."""
+    buffers = []
+    data = pickle.dumps(obj, protocol=5, buffer_callback=buffers.append)
+    views = [b.raw() for b in buffers]
+    stream.write(_HEADER.pack(len(data)) + _HEADER.pack(len(views)) + b"".join(_HEADER.pack(v.nbytes) for v in views))
     stream.write(data)
+    for v in views:
+        stream.write(v)
     stream.flush()
 
 
 def receive(stream):
     """The next message, or None at the end of the stream."""
-    head = _read(stream, _HEADER.size)
+    head = _read(stream, 2 * _HEADER.size)
     if head is None:
         return None
-    data = _read(stream, _HEADER.unpack(head)[0])
-    return None if data is None else pickle.loads(data)
+    size, count = _HEADER.unpack(head[:_HEADER.size])[0], _HEADER.unpack(head[_HEADER.size:])[0]
+    sizes = _read(stream, count * _HEADER.size) if count else b""
+    if sizes is None:
+        return None
+    data = _read(stream, size)
+    if data is None:
+        return None
+    buffers = []
+    for i in range(count):
+        buf = _read(stream, _HEADER.unpack_from(sizes, i * _HEADER.size)[0])
+        if buf is None:
+            return None
+        buffers.append(buf)
+    return pickle.loads(data, buffers=buffers)
 
 
 def _read(stream, n):
-    parts, left = [], n
-    while left:
-        b = stream.read(left)
-        if not b:
+    """``n`` bytes of ``stream`` in one writable buffer (an array unpickled from it uses it as it
+    is), or None at the end of the stream."""
+    out = bytearray(n)
+    view, got = memoryview(out), 0
+    while got < n:
+        k = stream.readinto(view[got:])
+        if not k:
             return None
-        parts.append(b)
-        left -= len(b)
-    return b"".join(parts)
+        got += k
+    return out
 
 
 def mesh_data(mesh):
-    """A :class:`core.Mesh` as plain data for a worker."""
-    return dict(positions=mesh.positions, triangles=mesh.triangles, uvs=mesh.uvs, normals=mesh.normals,
+    """A :class:`core.Mesh` as plain data for a worker (its corner normals as given: the worker
+    computes the unit ones, the same bits; none for a flat-shaded mesh)."""
+    return dict(positions=mesh.positions, triangles=mesh.triangles, uvs=mesh.uvs, normals=mesh.given_normals(),
                 name=mesh.name)
 
 
