@@ -76,7 +76,12 @@ class BakeResult:
     report : counts of what the input held: degenerate UV triangles skipped, triangles of zero area
         in space skipped (they have no surface), triangles with UVs
         outside [0, 1] (only their part inside the image is baked), texels covered by more than one
-        UV island (averaged over all surfaces covering them), covered texels.
+        UV island (averaged over all surfaces covering them), covered texels. ``worker_memory``:
+        one dict per process that held the bake (this one, ``process`` 'parent', then each worker,
+        'worker N'): ``rss`` and ``peak`` resident bytes (VmRSS and VmHWM; a worker's peak is its
+        bake's own, from ``start``, its size before it built the scene; ``ready``, after), and
+        ``held``, the bytes of the arrays its bake holds (meshes, tables; Embree's scenes are not
+        arrays and are in ``ready - start``): :func:`core.workers.memory_entry`.
     bent : None, or with ``bent_normals``, (H, W, 3) float32 unit bent normals in the bake's
         ``bent_space`` (covered and margin texels; zero elsewhere), see :mod:`core.bent`.
 
@@ -667,6 +672,9 @@ def _bake_images(target, occluders, resolution, samples, quantities, *, maps=Fal
                                                                        progress, cancel, on_rays)
     if len(quantities) == 1:
         counters = {base: dict(counters, rays=rays, trace_seconds=trace_s, trace_cpu_seconds=trace_cpu)}
+    else:  # the processes' memory, once for the whole bake: each map's report has it
+        memory = counters.pop("worker_memory", [])
+        counters = {q: dict(counters[q], worker_memory=memory) for q in quantities}
     extras = {}
     for q in quantities:
         if s2a is not None:
@@ -706,6 +714,7 @@ def _finish(img, s, pro, s2a, extra, counters, fallback, denoise, t_start, quant
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
               "degenerate_triangles": uvtris.degenerate_space,
               "uv_outside_triangles": uvtris.outside, "overlapping_texels": img.overlap}
+    report["worker_memory"] = counters.get("worker_memory", [])
     if s2a is not None:
         metadata.update(s2a.metadata())
         extra = dict(extra)

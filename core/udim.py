@@ -282,6 +282,12 @@ def _assemble(target, resolution, results, todo, coverage, denoise, margin):
                 report[key] = value  # the same in every tile (the extrusion is measured on the whole mesh)
             elif key == "warnings":
                 report[key] = report.get(key, []) + [w for w in value if w not in report.get(key, [])]
+            elif key == "worker_memory":  # per process, the tile bake of its largest peak
+                best = {e["process"]: e for e in report.get(key, [])}
+                for e in value:
+                    if ((best.get(e["process"]) or {}).get("peak") or 0) <= (e.get("peak") or 0):
+                        best[e["process"]] = e
+                report[key] = list(best.values())
             elif key != "uv_outside_triangles":
                 report[key] = report.get(key, 0) + value
     report["uv_outside_udim_triangles"] = coverage.outside

@@ -58,7 +58,10 @@ def check_maps(maps, singles, quantities=("ao", "thickness")):
         assert maps[q].metadata["quantities"] == list(quantities)
         assert maps[q].metadata["quantity"] == q
         assert "quantities" not in singles[q].metadata
-        assert maps[q].report == singles[q].report
+        # The processes' memory (report['worker_memory']) is measured, not computed: the rest is the same.
+        assert ({k: v for k, v in maps[q].report.items() if k != "worker_memory"}
+                == {k: v for k, v in singles[q].report.items() if k != "worker_memory"})
+        assert ("worker_memory" in maps[q].report) == ("worker_memory" in singles[q].report)
 
 
 BASE = dict(resolution=48, samples=16, max_distance=0.5, seed=3, margin=2)
