@@ -270,7 +270,8 @@ class TileOut:
     """One tile's values, as the baker hands them to whoever assembles the images (this process or,
     from a worker process, plain arrays). ``texels`` flat ids; ``lost`` the texels none of whose
     sample points found a surface (selected to active: uncovered); ``sums``, ``tri``, ``weights``:
-    the bent-normal sums and where each texel's normal is interpolated (None without bent normals)."""
+    the bent-normal sums and where each texel's normal is interpolated (None without bent normals);
+    ``guide``: the denoiser's guide of the texels (:func:`core.denoise.tile_guide`; None without denoise)."""
 
     key: tuple
     texels: np.ndarray
@@ -283,6 +284,7 @@ class TileOut:
     tri: np.ndarray = None
     weights: np.ndarray = None
     bent: np.ndarray = None
+    guide: tuple = None
 
 
 class TexelBake:
@@ -291,8 +293,8 @@ class TexelBake:
     bakes tiles in this process and in a worker process (:mod:`core.workers`), which builds it again
     from the same input and settings: the same tiles, the same bits."""
 
-    def __init__(self, pro, s, bent_normals=False):
-        self.pro, self.bent_normals = pro, bool(bent_normals)
+    def __init__(self, pro, s, bent_normals=False, guide=False):
+        self.pro, self.bent_normals, self.guide = pro, bool(bent_normals), bool(guide)
         self.uvtris = prepare(pro.target, s.width, s.height)
         self.s = s.fit_tiles(R.uv_centres(self.uvtris))  # automatic tiles of dense meshes: fewer triangles each
         self.bins = bin_triangles(self.uvtris, s.width, s.height, self.s.tile_shape)
@@ -345,6 +347,10 @@ class TexelBake:
         se[lost] = 0.0
         out = TileOut(key, t, np.clip(est.mean, 0.0, 1.0).astype(np.float32), se, est.n.astype(np.int32), lost,
                       int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum()))
+        if self.guide:  # what the denoiser needs of these texels, from their fragments
+            from .denoise import tile_guide
+
+            out.guide = tile_guide(frag, self.uvtris, self.pro.target, w)
         if sums is not None:
             out.sums = sums
             out.tri = bent_mod.primary_pieces(frag, w)
@@ -506,7 +512,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     pro.check_memory(s)
     pro.check_cancel()
 
-    bake = TexelBake(pro, s, bent_normals)
+    bake = TexelBake(pro, s, bent_normals, guide=denoise)
     s, uvtris, keys = bake.s, bake.uvtris, sorted(bake.bins)
     ao = np.zeros((h, w), np.float32)
     se = np.zeros((h, w), np.float32)
@@ -514,6 +520,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     mask = np.zeros((h, w), bool)
     bent = np.zeros((h, w, 3), np.float32) if bent_normals else None
     miss = np.zeros((h, w), bool) if s2a is not None else None
+    # The denoiser's guide per texel (triangle, surface point, normal), filled in by the tiles.
+    guide = ((np.full(h * w, -1, np.int32), np.zeros((h * w, 3), np.float32), np.zeros((h * w, 3), np.float32))
+             if denoise else None)
     overlap = 0
     lock = threading.Lock()
 
@@ -533,6 +542,9 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
             bent.reshape(-1, 3)[t] = out.bent
         if miss is not None:
             miss.reshape(-1)[t] = out.lost
+        if out.guide is not None:
+            for a, v in zip(guide, out.guide):
+                a[t] = v
         with lock:
             overlap += out.overlapping
             if on_tile is not None:
@@ -543,6 +555,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         """What a worker rebuilds this bake from: the input as given, plain data (the extrusion measured here)."""
         return dict(target=_workers.mesh_data(target_in), occluders=[_workers.mesh_data(o) for o in occluders_in],
                     settings=dataclasses.asdict(s), bent_normals=bent_normals, bent_space=bent_space_in,
+                    guide=bool(denoise),
                     highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
                     extrusion=extrusion if s2a is None else s2a.world.extrusion,
                     max_ray_distance=max_ray_distance, cage=None if cage is None else _workers.mesh_data(cage))
@@ -561,7 +574,8 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         raw_ao, raw_se = ao.copy(), se.copy()
         if s.margin > 0:
             dilate(raw_ao, mask, s.margin, threads=s.threads, out=raw_ao)
-        ao, se, info = _denoise.denoise(ao, se, mask, _denoise.surface_guide(pro.target, (w, h)), threads=s.threads)
+        ao, se, info = _denoise.denoise(ao, se, mask, _denoise.surface_guide(pro.target, (w, h), texels=guide),
+                                        threads=s.threads)
     if s.margin > 0:
         dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:
