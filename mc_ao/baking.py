@@ -91,6 +91,13 @@ class Job:
     extrusion: float = 0.0
     max_ray_distance: float = 0.0
     notes: list = field(default_factory=list)
+    # What this job bakes (core.bake_ao's quantity): 'ao' or 'thickness'; an object baked for both has a
+    # job for each, each with its own image.
+    quantity: str = "ao"
+
+    def quantity_kwargs(self):
+        """core.bake_ao's quantity for this job: nothing for AO (a plain bake passes what it did before)."""
+        return {} if self.quantity == "ao" else {"quantity": self.quantity}
 
     @property
     def selected_to_active(self):
@@ -127,6 +134,7 @@ class Job:
             cancel=cancel,
             on_tile=on_tile,
             **extra,
+            **self.quantity_kwargs(),
         )
 
 
@@ -173,7 +181,7 @@ def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None)
         return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
                          normals=arrays.normals, name=arrays.name)
 
-    kw = settings.bake_kwargs(threads)
+    kw = dict(settings.bake_kwargs(threads), **job.quantity_kwargs())
     occluders = [mesh(o) for o in job.occluders]
     if settings.vertex_colors:
         for key in ("resolution", "margin", "bent_normals"):
@@ -310,30 +318,6 @@ def input_notes(result):
     return notes + miss_notes(result) + [str(w) for w in report.get("warnings", ())]
 
 
-def visible_geometry(depsgraph, view_layer):
-    """(original object name or None for an instance, MeshArrays) of everything visible in the view layer."""
-    for inst in depsgraph.object_instances:
-        obj = inst.object
-        if obj.type not in GEOMETRY_TYPES:
-            continue
-        key = None
-        if not inst.is_instance:
-            if not obj.original.visible_get(view_layer=view_layer):
-                continue
-            key = obj.original.name
-        arrays = object_arrays(obj, matrix=inst.matrix_world.copy())
-        if arrays is not None:
-            yield key, arrays
-
-
-def _selected_geometry(depsgraph, objects):
-    for obj in objects:
-        if obj.type in GEOMETRY_TYPES:
-            arrays = object_arrays(obj.evaluated_get(depsgraph))
-            if arrays is not None:
-                yield obj.name, arrays
-
-
 def id_name_max_bytes():
     """The longest datablock name this Blender keeps, in bytes of UTF-8 (63 up to 4.4, 255 from 5.0).
 
@@ -358,19 +342,26 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     selected : list of bpy.types.Object
         The occluders when ``settings.occluders == "SELECTED"`` (each target is left out of its own list).
     view_layer : bpy.types.ViewLayer, optional
-        Whose visibility counts for ``settings.occluders == "VISIBLE"``; the depsgraph's by default.
+        Whose rendered objects occlude for ``settings.occluders == "VISIBLE"`` (All Rendered); the
+        depsgraph's by default. Include, Exclude, Only Local and each object's Occludes Other Objects
+        narrow the occluders (mc_ao.occluders).
+
+    Returns one Job per target and quantity (AO, thickness), in that order.
 
     Raises
     ------
     ExtractError
-        A target has no faces or no such UV map, or two targets would bake into one image.
+        A target has no faces or no such UV map, two targets would bake into one image, a bad Include
+        or Exclude collection, or a Channel the Into image does not have.
     """
+    from . import occluders as occluder_sets
+
     max_bytes = id_name_max_bytes()
     image_names = {}
     for obj in targets:
-        names = [settings.image_name_for(obj.name, max_bytes)]
+        names = [settings.quantity_image_name_for(obj.name, q, max_bytes) for q in settings.quantities]
         if settings.error_map and not settings.vertex_colors:
-            names.append(settings.stderr_image_name_for(obj.name, max_bytes))
+            names += [settings.quantity_image_name_for(obj.name, q, max_bytes, "_stderr") for q in settings.quantities]
         if settings.bent_normals and not settings.vertex_colors:
             names.append(settings.bent_image_name_for(obj.name, max_bytes))
         for name in names:
@@ -381,12 +372,9 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
                 )
             image_names[name] = obj.name
 
-    if settings.occluders == "VISIBLE":
-        pool = list(visible_geometry(depsgraph, view_layer or depsgraph.view_layer))
-    elif settings.occluders == "SELECTED":
-        pool = list(_selected_geometry(depsgraph, selected))
-    else:
-        pool = []
+    check_channel(settings)
+    notes = []
+    pool = occluder_sets.pool(depsgraph, settings, selected=selected, view_layer=view_layer, notes=notes)
 
     extra = extra_for(settings)
     jobs = []
@@ -398,9 +386,48 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
         if target is None:
             raise ExtractError(f"{obj.name} has no faces to bake")
         occluders = [arrays for key, arrays in pool if key != obj.name]
-        jobs.append(Job(obj.name, settings.image_name_for(obj.name, max_bytes), target, occluders))
+        for quantity in settings.quantities:
+            jobs.append(Job(obj.name, settings.quantity_image_name_for(obj.name, quantity, max_bytes), target,
+                            occluders, quantity=quantity))
+    if jobs:
+        jobs[0].notes.extend(notes)
     check_plan(jobs, settings, {obj.name: obj for obj in targets})
     return jobs
+
+
+# Channel index of each Channel setting.
+CHANNELS = {"R": 0, "G": 1, "B": 2, "A": 3}
+
+
+def channel_problem(settings, images=None):
+    """Why AO cannot go into ``settings.channel`` of the image ``settings.into`` (bpy.data.images, or
+    ``images``: name -> image), or None (Channel off, or it can)."""
+    if settings.channel == "NONE":
+        return None
+    if images is None:
+        import bpy
+
+        images = bpy.data.images
+    image = images.get(settings.into)
+    if image is None:
+        return f"Into: there is no image named {settings.into!r} to write the AO into"
+    channels = image.channels
+    # An image of 3 channels has no alpha; one of 1 or 2 (grey, grey and alpha) no separate green or blue.
+    has = {4: "RGBA", 3: "RGB", 2: "RA", 1: "R"}.get(channels, "")
+    if settings.channel not in has:
+        return (f"image {settings.into!r} has no {settings.channel} channel (it has {channels}: "
+                f"{', '.join(has) or 'none'}); choose one of them")
+    # The writer that puts one channel into an existing image is not part of this version: refuse
+    # rather than bake into the object's own image instead.
+    return (f"Channel {settings.channel} into {settings.into!r}: writing the AO into one channel of an existing "
+            "image is not available in this version; set Channel to Own Image")
+
+
+def check_channel(settings, images=None):
+    """Raise ExtractError with :func:`channel_problem`'s reason, before any work."""
+    problem = channel_problem(settings, images)
+    if problem is not None:
+        raise ExtractError(problem)
 
 
 def miss_summary(result):

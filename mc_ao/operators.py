@@ -473,7 +473,7 @@ class BakeSession:
 
     def _error_map(self, job, result, saved):
         """The finished job's standard error into its own float image "<image>_stderr", kept like the AO."""
-        name = self.settings.stderr_image_name_for(job.object_name, baking.id_name_max_bytes())
+        name = outputs.stderr_name(job, self.settings)
         h, w = result.stderr.shape
         try:
             images.prepare_image(name, w, h, float_buffer=True)

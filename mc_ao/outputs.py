@@ -43,7 +43,7 @@ def bent_name(job, settings):
 
 
 def stderr_name(job, settings):
-    return settings.stderr_image_name_for(job.object_name, id_name_max_bytes())
+    return settings.quantity_image_name_for(job.object_name, job.quantity, id_name_max_bytes(), "_stderr")
 
 
 # -- files --------------------------------------------------------------------------------------

@@ -21,6 +21,11 @@ from scenes import QUAD, box, plane
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+def without_memory(report):
+    """A bake's report less ``worker_memory`` (each process's sizes differ from bake to bake)."""
+    return {k: v for k, v in report.items() if k != "worker_memory"}
+
+
 def scene():
     """A bumpy plane (smooth normals: every kernel form) under a lid, with a box resting on it."""
     n = 12
@@ -51,7 +56,7 @@ def test_workers_give_the_bits_of_one_process_for_any_workers_threads_and_tiles(
         r = bake_ao(target, occ, **extra, **args)
         for name in FIELDS + (("bent",) if kw.get("bent_normals") else ()):
             assert np.array_equal(getattr(ref, name), getattr(r, name)), (extra, name)
-        assert r.rays == ref.rays and r.report == ref.report
+        assert r.rays == ref.rays and without_memory(r.report) == without_memory(ref.report)
 
 
 def test_selected_to_active_and_udim_in_workers_are_the_bits_of_one_process():
