@@ -294,6 +294,7 @@ class TileOut:
     weights: np.ndarray = None
     bent: np.ndarray = None
     maps: dict = None  # a bake of several quantities: the tile of each other quantity, as plain data
+    guide: tuple = None  # the denoiser's guide of the texels (core.denoise.tile_guide); None without denoise
 
 
 class TexelBake:
@@ -302,8 +303,8 @@ class TexelBake:
     bakes tiles in this process and in a worker process (:mod:`core.workers`), which builds it again
     from the same input and settings: the same tiles, the same bits."""
 
-    def __init__(self, pro, s, bent_normals=False):
-        self.pro, self.bent_normals = pro, bool(bent_normals)
+    def __init__(self, pro, s, bent_normals=False, guide=False):
+        self.pro, self.bent_normals, self.guide = pro, bool(bent_normals), bool(guide)
         self.uvtris = prepare(pro.target, s.width, s.height)
         self.s = s.fit_tiles(R.uv_centres(self.uvtris))  # automatic tiles of dense meshes: fewer triangles each
         self.bins = bin_triangles(self.uvtris, s.width, s.height, self.s.tile_shape)
@@ -316,7 +317,7 @@ class TexelBake:
         taken once), with settings ``s`` (:func:`core.maps.lane_settings` of this bake's)."""
         out = object.__new__(TexelBake)
         out.pro, out.uvtris, out.bins, out.planned = self.pro, self.uvtris, self.bins, self.planned
-        out.s, out.bent_normals, out.root = s, bool(bent_normals), self
+        out.s, out.bent_normals, out.root, out.guide = s, bool(bent_normals), self, False
         return out
 
     @functools.cached_property
@@ -374,6 +375,10 @@ class TexelBake:
         se[lost] = 0.0
         out = TileOut(key, t, np.clip(est.mean, 0.0, 1.0).astype(np.float32), se, est.n.astype(np.int32), lost,
                       int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum()))
+        if self.guide:  # what the denoiser needs of these texels, from their fragments
+            from .denoise import tile_guide
+
+            out.guide = tile_guide(frag, self.uvtris, self.pro.target, w)
         if sums is not None:
             out.sums = sums
             out.tri = bent_mod.primary_pieces(frag, w)
@@ -562,11 +567,12 @@ def bake_maps(target, occluders=(), resolution=(1024, 1024), samples=256, *, qua
                         **_options(locals()))
 
 
-def texel_bake(pro, s, quantities, bent_normals=False):
+def texel_bake(pro, s, quantities, bent_normals=False, guide=False):
     """The bake of ``quantities`` over ``pro`` with settings ``s`` (the base quantity's,
     :func:`core.maps.base_quantity`): a :class:`TexelBake`, or for several quantities a
-    :class:`core.maps.MapsBake` of lanes over its layout. The same in this process and in a worker."""
-    root = TexelBake(pro, s, bent_normals and s.quantity == "ao")
+    :class:`core.maps.MapsBake` of lanes over its layout. The same in this process and in a worker.
+    ``guide``: the base quantity's tiles also return the denoiser's guide of their texels."""
+    root = TexelBake(pro, s, bent_normals and s.quantity == "ao", guide=guide)
     if tuple(quantities) == (s.quantity,):
         return root
     from .maps import MapsBake, lane_settings
@@ -578,8 +584,8 @@ def texel_bake(pro, s, quantities, bent_normals=False):
 class _Images:
     """One quantity's images, filled tile by tile (on whichever thread finished a tile)."""
 
-    def __init__(self, bake, w, h, bent, miss, on_tile):
-        self.bake, self.on_tile = bake, on_tile
+    def __init__(self, bake, w, h, bent, miss, on_tile, guide=None):
+        self.bake, self.on_tile, self.guide = bake, on_tile, guide
         self.ao = np.zeros((h, w), np.float32)
         self.se = np.zeros((h, w), np.float32)
         self.count = np.zeros((h, w), np.int32)
@@ -603,6 +609,9 @@ class _Images:
             self.bent.reshape(-1, 3)[t] = out.bent
         if self.miss is not None:
             self.miss.reshape(-1)[t] = out.lost
+        if out.guide is not None and self.guide is not None:
+            for a, v in zip(self.guide, out.guide):
+                a[t] = v
         with self.lock:
             self.overlap += out.overlapping
             if self.on_tile is not None:
@@ -644,11 +653,17 @@ def _bake_images(target, occluders, resolution, samples, quantities, *, maps=Fal
     pro.check_memory(s)
     pro.check_cancel()
 
-    bake = texel_bake(pro, s, quantities, bent_normals)
+    # The denoiser's guide per texel (triangle, surface point, normal), filled in by the base
+    # quantity's tiles from their fragments (selected to active rasterises without locating: the
+    # denoiser then finds the texels' triangles itself).
+    guide = ((np.full(h * w, -1, np.int32), np.zeros((h * w, 3), np.float32), np.zeros((h * w, 3), np.float32))
+             if denoise and s2a is None else None)
+    bake = texel_bake(pro, s, quantities, bent_normals, guide=guide is not None)
     lanes = bake.lanes if len(quantities) > 1 else {base: bake}
     s, uvtris, keys = bake.s, bake.uvtris, sorted(bake.bins)
     images = {q: _Images(b, w, h, b.bent_normals, s2a is not None,
-                         None if on_tile is None else on_tile if not maps else functools.partial(on_tile, q))
+                         None if on_tile is None else on_tile if not maps else functools.partial(on_tile, q),
+                         guide if q == base else None)
               for q, b in lanes.items()}
     root = lanes[base]
 
@@ -666,7 +681,7 @@ def _bake_images(target, occluders, resolution, samples, quantities, *, maps=Fal
                     highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
                     extrusion=extrusion if s2a is None else s2a.world.extrusion,
                     max_ray_distance=max_ray_distance, cage=None if cage is None else _workers.mesh_data(cage),
-                    quantities=list(quantities))
+                    quantities=list(quantities), guide=guide is not None)
 
     rays, trace_s, trace_cpu, counters, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store,
                                                                        progress, cancel, on_rays)
@@ -682,11 +697,11 @@ def _bake_images(target, occluders, resolution, samples, quantities, *, maps=Fal
         elif not images[q].mask.any() and not empty_ok:
             raise pro.nothing_covered(s, uvtris)
     return {q: _finish(images[q], lanes[q].s, pro, s2a, extras.get(q), counters[q], fallback, denoise, t_start,
-                       quantities if maps else None, uvtris)
+                       quantities if maps else None, uvtris, guide)
             for q in quantities}
 
 
-def _finish(img, s, pro, s2a, extra, counters, fallback, denoise, t_start, quantities, uvtris):
+def _finish(img, s, pro, s2a, extra, counters, fallback, denoise, t_start, quantities, uvtris, guide=None):
     """One quantity's BakeResult from its filled images: denoise, margin, bent normals, metadata, report."""
     ao, se, mask, bent = img.ao, img.se, img.mask, img.bent
     w, h = s.width, s.height
@@ -697,7 +712,8 @@ def _finish(img, s, pro, s2a, extra, counters, fallback, denoise, t_start, quant
         raw_ao, raw_se = ao.copy(), se.copy()
         if s.margin > 0:
             dilate(raw_ao, mask, s.margin, threads=s.threads, out=raw_ao)
-        ao, se, info = _denoise.denoise(ao, se, mask, _denoise.surface_guide(pro.target, (w, h)), threads=s.threads)
+        ao, se, info = _denoise.denoise(ao, se, mask, _denoise.surface_guide(pro.target, (w, h), texels=guide),
+                                        threads=s.threads)
     if s.margin > 0:
         dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:

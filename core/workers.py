@@ -332,7 +332,8 @@ def _setup(job, cancel, progress):
                    highpoly=None if job["highpoly"] is None else [_mesh(m) for m in job["highpoly"]],
                    extrusion=job["extrusion"], max_ray_distance=job["max_ray_distance"], cage=_mesh(job["cage"]),
                    bent_normals=job["bent_normals"])
-    bake = texel_bake(pro, s, job.get("quantities", [s.quantity]), job["bent_normals"])
+    bake = texel_bake(pro, s, job.get("quantities", [s.quantity]), job["bent_normals"],
+                      guide=job.get("guide", False))
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)
     return bake, shared, s.threads
