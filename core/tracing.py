@@ -10,6 +10,7 @@ grows with the scene's size and with the point's distance from the origin (float
 absolute precision with both).
 """
 
+import copy
 import functools
 import time
 from dataclasses import dataclass
@@ -169,6 +170,17 @@ class Tracer:
         #: measures its own work alone (``bake_ao(..., constant_answer=True)``; the result is not AO).
         self.constant_answer = False
         self.ground = None if ground is None else float(ground)
+
+    def sharing(self, ignore_backfaces=False, falloff=0.0, max_distance=float("inf"), ground=None):
+        """A tracer of the same meshes (the same Embree scenes, built once) asked with other settings:
+        the quantities of one bake whose rays see the same meshes (:func:`core.bake_maps`)."""
+        out = copy.copy(self)
+        out.ignore_backfaces, out.falloff, out.max_distance = ignore_backfaces, falloff, max_distance
+        out.tfar = np.float32(min(max_distance, FAR))
+        out.simple = not ignore_backfaces and falloff == 0
+        out.constant_answer = False
+        out.ground = None if ground is None else float(ground)
+        return out
 
     @functools.cached_property
     def face_normals(self):

@@ -315,15 +315,16 @@ def self_test():
 
 
 def _setup(job, cancel, progress):
-    from .bake import Prologue, TexelBake
+    from .bake import Prologue, texel_bake
     from .settings import BakeSettings
 
     s = BakeSettings(**job["settings"])
     if job.get("kind") == "vertex":
-        from .vertices import VertexBake
+        from .vertices import vertex_bake
 
         pro = Prologue(_mesh(job["target"]), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=False)
-        bake = VertexBake(pro, s, job["corners"], job["merge"], job["bent_normals"], job["block"])
+        bake = vertex_bake(pro, s, job["corners"], job.get("quantities", [s.quantity]), job["merge"],
+                           job["bent_normals"], job["block"])
         shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
         bake.trace_setup(shared, cancel)
         return bake, shared, s.threads
@@ -331,7 +332,8 @@ def _setup(job, cancel, progress):
                    highpoly=None if job["highpoly"] is None else [_mesh(m) for m in job["highpoly"]],
                    extrusion=job["extrusion"], max_ray_distance=job["max_ray_distance"], cage=_mesh(job["cage"]),
                    bent_normals=job["bent_normals"])
-    bake = TexelBake(pro, s, job["bent_normals"])
+    bake = texel_bake(pro, s, job.get("quantities", [s.quantity]), job["bent_normals"],
+                      guide=job.get("guide", False))
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)
     return bake, shared, s.threads
@@ -634,15 +636,22 @@ def run_dask(client, job, keys, planned, store, progress, cancel, threads=1):
 
 
 def _sum_counters(parts):
-    """The start stages' counters of several processes, added up (texts: the first given)."""
+    """The start stages' counters of several processes, added up (texts: the first given; a bake of
+    several quantities has each quantity's counters under its name, added up the same way)."""
     counters = {}
     for p in parts:
-        for k, v in p["counters"].items():
-            if isinstance(v, (int, float)) and k != "directions_per_point":
-                counters[k] = counters.get(k, 0) + v
-            elif counters.get(k) is None:
-                counters[k] = v
+        _add_counters(counters, p["counters"])
     return counters
+
+
+def _add_counters(into, counters):
+    for k, v in counters.items():
+        if isinstance(v, dict):
+            _add_counters(into.setdefault(k, {}), v)
+        elif isinstance(v, (int, float)) and k != "directions_per_point":
+            into[k] = into.get(k, 0) + v
+        elif into.get(k) is None:
+            into[k] = v
 
 
 _POOL = None
