@@ -95,9 +95,14 @@ class Job:
     # job for each, each with its own image.
     quantity: str = "ao"
 
-    def quantity_kwargs(self):
-        """core.bake_ao's quantity for this job: nothing for AO (a plain bake passes what it did before)."""
-        return {} if self.quantity == "ao" else {"quantity": self.quantity}
+    def bake_kwargs(self, settings, threads=None):
+        """core.bake_ao's keyword arguments for this job: the settings' (BakeSettings.bake_kwargs), and
+        for a thickness map its quantity, without the ground (only the object itself occludes it)."""
+        kw = settings.bake_kwargs(threads)
+        if self.quantity != "ao":
+            kw.pop("ground", None)
+            kw["quantity"] = self.quantity
+        return kw
 
     @property
     def selected_to_active(self):
@@ -129,12 +134,11 @@ class Job:
         return core.bake_ao(
             mesh(self.target),
             occluders=[mesh(o) for o in self.occluders],
-            **settings.bake_kwargs(threads),
+            **self.bake_kwargs(settings, threads),
             progress=progress,
             cancel=cancel,
             on_tile=on_tile,
             **extra,
-            **self.quantity_kwargs(),
         )
 
 
@@ -181,7 +185,7 @@ def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None)
         return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
                          normals=arrays.normals, name=arrays.name)
 
-    kw = dict(settings.bake_kwargs(threads), **job.quantity_kwargs())
+    kw = job.bake_kwargs(settings, threads)
     occluders = [mesh(o) for o in job.occluders]
     if settings.vertex_colors:
         for key in ("resolution", "margin", "bent_normals"):
@@ -386,9 +390,9 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
         if target is None:
             raise ExtractError(f"{obj.name} has no faces to bake")
         occluders = [arrays for key, arrays in pool if key != obj.name]
-        for quantity in settings.quantities:
+        for quantity in settings.quantities:  # a thickness map: the object alone occludes it
             jobs.append(Job(obj.name, settings.quantity_image_name_for(obj.name, quantity, max_bytes), target,
-                            occluders, quantity=quantity))
+                            occluders if quantity == "ao" else [], quantity=quantity))
     if jobs:
         jobs[0].notes.extend(notes)
     check_plan(jobs, settings, {obj.name: obj for obj in targets})
@@ -411,7 +415,7 @@ def channel_problem(settings, images=None):
     image = images.get(settings.into)
     if image is None:
         return f"Into: there is no image named {settings.into!r} to write the AO into"
-    channels = image.channels
+    channels = image_channels(image)
     # An image of 3 channels has no alpha; one of 1 or 2 (grey, grey and alpha) no separate green or blue.
     has = {4: "RGBA", 3: "RGB", 2: "RA", 1: "R"}.get(channels, "")
     if settings.channel not in has:
@@ -421,6 +425,16 @@ def channel_problem(settings, images=None):
     # rather than bake into the object's own image instead.
     return (f"Channel {settings.channel} into {settings.into!r}: writing the AO into one channel of an existing "
             "image is not available in this version; set Channel to Own Image")
+
+
+def image_channels(image):
+    """How many channels ``image`` holds (its file's or its buffer's): Blender's Image.channels says 4
+    for every loaded image, its depth (bits per pixel) tells: 8 bits a channel, 32 in a float image."""
+    depth = getattr(image, "depth", 0)
+    per = 32 if getattr(image, "is_float", False) else 8
+    if depth and depth % per == 0 and 1 <= depth // per <= 4:
+        return depth // per
+    return image.channels
 
 
 def check_channel(settings, images=None):
