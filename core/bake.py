@@ -224,6 +224,12 @@ class Prologue:
         return (self.target.triangle_count + sum(o.triangle_count for o in self.occluders)
                 + (self.s2a.triangle_count if self.s2a else 0))
 
+    @property
+    def triangle_counts(self):
+        """(target, occluders, high-poly meshes and cage) triangles: :mod:`core.cost` prices them apart."""
+        return (self.target.triangle_count, sum(o.triangle_count for o in self.occluders),
+                self.s2a.triangle_count if self.s2a else 0)
+
     def check_memory(self, s):
         """Refuse a texel bake that would not fit in the memory available (BakeMemoryError)."""
         tri_total = self.triangle_count
@@ -644,7 +650,7 @@ def _bake_images(target, occluders, resolution, samples, quantities, *, maps=Fal
                    max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
     s2a = pro.s2a
     w, h = s.width, s.height
-    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
+    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_counts)
     if not _workers.in_process(processes) and tile_size is None:
         # Tiles for every thread of every worker, two each at least (they are dealt as workers free up).
         total = _workers.worker_count(processes) * per_worker

@@ -279,7 +279,7 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
     lanes = bake.lanes if len(quantities) > 1 else {base: bake}
     root = lanes[base]
     pro.check_cancel()
-    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
+    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_counts)
     m = len(root.p)
     values = {q: dict(ao=np.zeros(m, np.float32), se=np.zeros(m, np.float32), count=np.zeros(m, np.int32),
                       bent=np.zeros((m, 3), np.float32) if b.bent_normals else None) for q, b in lanes.items()}

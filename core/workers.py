@@ -685,14 +685,19 @@ def memory_limit():
 
 
 def auto_workers(triangles, cores=None, memory=None):
-    """(workers, threads each) for a bake of ``triangles`` (every mesh it holds): one worker a core,
-    fewer with more threads each where memory holds fewer copies of the scene (threads share one)."""
+    """(workers, threads each) for a bake of ``triangles``: a count (every mesh, costed as the
+    target's) or (target, occluder, high-poly) triangles. One worker a core, fewer with more threads
+    each where memory holds fewer copies of the scene (threads share one): the workers and what the
+    parent adds while they bake within 80% of ``memory`` (None: :func:`memory_limit`, the machine's
+    available memory or what its container's cgroup has left, whichever is less)."""
     cores = cpu_count() if cores is None else cores
     memory = memory_limit() if memory is None else memory
-    # A worker's memory: what core.cost estimates for a process holding the scene (measured 770-830
-    # bytes a triangle per worker with its Embree scene, beside its interpreter and sample pool).
-    per_worker = _cost.BYTES_PER_PROCESS + triangles * _cost.BYTES_PER_TRIANGLE
-    workers = cores if memory is None else max(1, min(cores, int(memory * 0.8 // per_worker)))
+    target, occluders, highpoly = (int(triangles), 0, 0) if np.ndim(triangles) == 0 else map(int, triangles)
+    # core.cost's measured figures: each worker's peak (its tables and Embree scenes, its interpreter
+    # and sample pool), and the parent's share while they bake.
+    per_worker = _cost.process_bytes(target, occluders, highpoly)
+    parent = _cost.parent_bytes(target, occluders + highpoly)
+    workers = cores if memory is None else max(1, min(cores, int((memory * 0.8 - parent) // per_worker)))
     return workers, max(1, cores // workers)
 
 
