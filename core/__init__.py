@@ -14,14 +14,14 @@ from . import cost, stats, warps
 from .integrate import Estimate, estimate, integrate
 from .stats import RunningStats
 from .mesh import Mesh
-from .bake import BakeResult, bake_ao
+from .bake import BakeResult, bake_ao, bake_maps
 from .imageio import ImageReadError
-from .udim import UdimResult, bake_udim
-from .vertices import VertexBakeResult, bake_vertex_ao
+from .udim import UdimResult, bake_udim, bake_udim_maps
+from .vertices import VertexBakeResult, bake_vertex_ao, bake_vertex_maps
 
 __all__ = [
     "__version__", "Mesh", "bake_ao", "BakeResult", "integrate", "estimate", "Estimate", "RunningStats",
     "stats", "warps", "McAoError", "MeshError", "MeshTypeError", "SettingsError", "BakeMemoryError",
     "BakeCancelled", "ImageWriteError", "ImageReadError", "bake_udim", "UdimResult", "bake_vertex_ao",
-    "VertexBakeResult",
+    "VertexBakeResult", "bake_maps", "bake_udim_maps", "bake_vertex_maps",
 ]

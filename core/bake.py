@@ -76,7 +76,12 @@ class BakeResult:
     report : counts of what the input held: degenerate UV triangles skipped, triangles of zero area
         in space skipped (they have no surface), triangles with UVs
         outside [0, 1] (only their part inside the image is baked), texels covered by more than one
-        UV island (averaged over all surfaces covering them), covered texels.
+        UV island (averaged over all surfaces covering them), covered texels. ``worker_memory``:
+        one dict per process that held the bake (this one, ``process`` 'parent', then each worker,
+        'worker N'): ``rss`` and ``peak`` resident bytes (VmRSS and VmHWM; a worker's peak is its
+        bake's own, from ``start``, its size before it built the scene; ``ready``, after), and
+        ``held``, the bytes of the arrays its bake holds (meshes, tables; Embree's scenes are not
+        arrays and are in ``ready - start``): :func:`core.workers.memory_entry`.
     bent : None, or with ``bent_normals``, (H, W, 3) float32 unit bent normals in the bake's
         ``bent_space`` (covered and margin texels; zero elsewhere), see :mod:`core.bent`.
 
@@ -219,6 +224,12 @@ class Prologue:
         return (self.target.triangle_count + sum(o.triangle_count for o in self.occluders)
                 + (self.s2a.triangle_count if self.s2a else 0))
 
+    @property
+    def triangle_counts(self):
+        """(target, occluders, high-poly meshes and cage) triangles: :mod:`core.cost` prices them apart."""
+        return (self.target.triangle_count, sum(o.triangle_count for o in self.occluders),
+                self.s2a.triangle_count if self.s2a else 0)
+
     def check_memory(self, s):
         """Refuse a texel bake that would not fit in the memory available (BakeMemoryError)."""
         tri_total = self.triangle_count
@@ -249,12 +260,17 @@ class Prologue:
 
     def tracer(self, s):
         """The occlusion tracer of the target and its occluders (and the ground), in the bake's frame;
-        for a thickness map, of the target alone (:mod:`core.thickness`)."""
-        if s.quantity == "thickness":
-            tracer = Tracer([self.target], s.ignore_backfaces, s.falloff, s.max_distance / self.unit)
+        for a thickness map, of the target alone (:mod:`core.thickness`). A second quantity of the
+        same bake whose rays see the same meshes (a thickness map beside AO without occluders) shares
+        the first one's Embree scenes (:meth:`core.tracing.Tracer.sharing`)."""
+        meshes = [self.target] if s.quantity == "thickness" else [self.target] + self.occluders
+        ground = None if s.quantity == "thickness" else self.ground_height(s)[1]
+        last = getattr(self, "_tracer", None)
+        if last is not None and len(last[0]) == len(meshes) and all(a is b for a, b in zip(last[0], meshes)):
+            tracer = last[1].sharing(s.ignore_backfaces, s.falloff, s.max_distance / self.unit, ground=ground)
         else:
-            tracer = Tracer([self.target] + self.occluders, s.ignore_backfaces, s.falloff, s.max_distance / self.unit,
-                            ground=self.ground_height(s)[1])
+            tracer = Tracer(meshes, s.ignore_backfaces, s.falloff, s.max_distance / self.unit, ground=ground)
+            self._tracer = (meshes, tracer)
         tracer.constant_answer = s.constant_answer
         return tracer
 
@@ -283,6 +299,8 @@ class TileOut:
     tri: np.ndarray = None
     weights: np.ndarray = None
     bent: np.ndarray = None
+    maps: dict = None  # a bake of several quantities: the tile of each other quantity, as plain data
+    guide: tuple = None  # the denoiser's guide of the texels (core.denoise.tile_guide); None without denoise
 
 
 class TexelBake:
@@ -291,8 +309,8 @@ class TexelBake:
     bakes tiles in this process and in a worker process (:mod:`core.workers`), which builds it again
     from the same input and settings: the same tiles, the same bits."""
 
-    def __init__(self, pro, s, bent_normals=False):
-        self.pro, self.bent_normals = pro, bool(bent_normals)
+    def __init__(self, pro, s, bent_normals=False, guide=False):
+        self.pro, self.bent_normals, self.guide = pro, bool(bent_normals), bool(guide)
         self.uvtris = prepare(pro.target, s.width, s.height)
         self.s = s.fit_tiles(R.uv_centres(self.uvtris))  # automatic tiles of dense meshes: fewer triangles each
         self.bins = bin_triangles(self.uvtris, s.width, s.height, self.s.tile_shape)
@@ -300,18 +318,29 @@ class TexelBake:
         # rectangle's texels times samples, and credit what it did not cover as it is rasterised.
         self.planned = sum(self.rect(key)[2] for key in self.bins) * self.s.samples
 
+    def lane(self, s, bent_normals=False):
+        """The bake of another quantity over this one's layout (UV triangles, tiles, surface table:
+        taken once), with settings ``s`` (:func:`core.maps.lane_settings` of this bake's)."""
+        out = object.__new__(TexelBake)
+        out.pro, out.uvtris, out.bins, out.planned = self.pro, self.uvtris, self.bins, self.planned
+        out.s, out.bent_normals, out.root, out.guide = s, bool(bent_normals), self, False
+        return out
+
     @functools.cached_property
     def table(self):
         """The target's surface table, built where tiles are baked (a parent whose workers bake them
         never needs it: hundreds of bytes a triangle it does not hold)."""
-        return SurfaceTable.build(self.pro.target, self.uvtris)
+        root = self.__dict__.get("root")  # another quantity's bake over the same layout (:meth:`lane`)
+        return root.table if root is not None else SurfaceTable.build(self.pro.target, self.uvtris)
 
     def rect(self, key):
         """Rows, columns and texel count of tile ``key``."""
         x0, y0, x1, y1 = self.s.tile_bounds(key)
         return slice(y0, y1), slice(x0, x1), (x1 - x0) * (y1 - y0)
 
-    def trace_setup(self, shared, cancel, on_rays=None):
+    def trace_setup(self, shared, cancel, on_rays=None, pattern=None):
+        """The tracing: scene, sample pattern (``pattern``: another quantity's of the same bake, the
+        same points), kernel, start stage and tile baker."""
         pro, s = self.pro, self.s
         stage = None if pro.s2a is None else _highpoly.HighPolyStage(
             pro.s2a, pro.target, pro.occluders, self.uvtris, self.table, self.bins, s, pro.unit,
@@ -319,7 +348,9 @@ class TexelBake:
             occluding=s.quantity == "ao")
         tracer = pro.tracer(s) if stage is None else stage.scene.tracer
         tracer.constant_answer = s.constant_answer
-        pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
+        if pattern is None:
+            pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=s.pool_points())
+        self.pattern = pattern
         kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
         # Located samples take one matrix form for the whole bake (see core.kernel.TileContext).
         self.start = (SurfaceStart(self.table, tracer, located_curved=bool(np.any(self.table.smooth[self.uvtris.valid])))
@@ -329,11 +360,16 @@ class TexelBake:
         self.errors = ErrorModel(s, grouped=self.start.grouped)
         self.shared = shared
 
-    def tile(self, key, directions=True):
+    def layout(self, key):
+        """Tile ``key``'s fragments and sample units (:meth:`core.tilebaker.TileBaker.layout`)."""
+        return self.baker.layout(key, self.bins[key])
+
+    def tile(self, key, directions=True, layout=None):
         """Bake tile ``key``: its :class:`TileOut`. ``directions``: turn bent-normal sums into unit
-        directions here (False: leave the sums, for the process that assembles the images)."""
+        directions here (False: leave the sums, for the process that assembles the images);
+        ``layout``: the tile's :meth:`layout`, taken already for another quantity."""
         s, w = self.s, self.s.width
-        frag, est, sums = self.baker.bake(key, self.bins[key])
+        frag, est, sums = self.baker.bake(key, self.bins[key], layout)
         self.shared.advance((self.rect(key)[2] - len(frag.texels)) * s.samples)
         t = frag.texels
         if not len(t):
@@ -345,6 +381,10 @@ class TexelBake:
         se[lost] = 0.0
         out = TileOut(key, t, np.clip(est.mean, 0.0, 1.0).astype(np.float32), se, est.n.astype(np.int32), lost,
                       int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum()))
+        if self.guide:  # what the denoiser needs of these texels, from their fragments
+            from .denoise import tile_guide
+
+            out.guide = tile_guide(frag, self.uvtris, self.pro.target, w)
         if sums is not None:
             out.sums = sums
             out.tri = bent_mod.primary_pieces(frag, w)
@@ -483,10 +523,123 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     With ``highpoly``, also MeshError when no matching ray finds the high-poly surface (it says what
     to change), before any AO ray is traced.
     """
+    return _bake_images(target, occluders, resolution, samples, (quantity,), **_options(locals()))[quantity]
+
+
+#: bake_ao's keyword arguments that _bake_images takes as they are.
+_OPTIONS = ("min_samples", "target_error", "max_distance", "distribution", "source", "margin", "seed", "threads",
+            "ignore_backfaces", "falloff", "replicates", "progress", "cancel", "on_tile", "tile_size", "chunk_rays",
+            "on_rays", "bent_normals", "bent_space", "highpoly", "extrusion", "max_ray_distance", "cage", "empty_ok",
+            "workers", "ground", "constant_answer", "denoise")
+
+
+def _options(arguments):
+    return {k: arguments[k] for k in _OPTIONS}
+
+
+def bake_maps(target, occluders=(), resolution=(1024, 1024), samples=256, *, quantities=("ao", "thickness"),
+              min_samples=16, target_error=0.0, max_distance=float("inf"), distribution="cosine", source="sobol",
+              margin=16, seed=0, threads=None, ignore_backfaces=False, falloff=0.0, replicates=2, progress=None,
+              cancel=None, on_tile=None, tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False,
+              bent_space=None, highpoly=None, extrusion=None, max_ray_distance=0.0, cage=None, empty_ok=False,
+              workers=1, ground=None, constant_answer=False, denoise=False):
+    """Bake several quantities of ``target`` (AO and the thickness map) in one pass: one set-up, each
+    quantity its own rays (:mod:`core.maps`).
+
+    Parameters
+    ----------
+    quantities : the quantities to bake, distinct names of 'ao' and 'thickness' (default both).
+    ground, ignore_backfaces, bent_normals, bent_space : apply to the AO map only (the thickness map is
+        occluded by the object alone, :mod:`core.thickness`); refused without 'ao' in ``quantities``.
+    on_tile : called as on_tile(quantity, rows, cols, block), as :func:`bake_ao`'s with the quantity.
+    on_rays : sees the rays of every quantity.
+    The others are :func:`bake_ao`'s, for every quantity.
+
+    Returns
+    -------
+    {quantity: BakeResult}, in the order of ``quantities``: each bit for bit the :func:`bake_ao` of
+    that quantity with the same settings; ``metadata['quantities']`` lists the quantities baked
+    together, ``seconds`` is the whole bake's wall time, ``rays`` and the Embree seconds the quantity's
+    own.
+
+    Raises
+    ------
+    What :func:`bake_ao` raises, and SettingsError for ``quantities`` that are not a list of distinct
+    quantities.
+    """
+    from .maps import check_quantities
+
+    return _bake_images(target, occluders, resolution, samples, check_quantities(quantities), maps=True,
+                        **_options(locals()))
+
+
+def texel_bake(pro, s, quantities, bent_normals=False, guide=False):
+    """The bake of ``quantities`` over ``pro`` with settings ``s`` (the base quantity's,
+    :func:`core.maps.base_quantity`): a :class:`TexelBake`, or for several quantities a
+    :class:`core.maps.MapsBake` of lanes over its layout. The same in this process and in a worker.
+    ``guide``: the base quantity's tiles also return the denoiser's guide of their texels."""
+    root = TexelBake(pro, s, bent_normals and s.quantity == "ao", guide=guide)
+    if tuple(quantities) == (s.quantity,):
+        return root
+    from .maps import MapsBake, lane_settings
+
+    return MapsBake({q: root if q == s.quantity else root.lane(lane_settings(root.s, q), bent_normals and q == "ao")
+                     for q in quantities})
+
+
+class _Images:
+    """One quantity's images, filled tile by tile (on whichever thread finished a tile)."""
+
+    def __init__(self, bake, w, h, bent, miss, on_tile, guide=None):
+        self.bake, self.on_tile, self.guide = bake, on_tile, guide
+        self.ao = np.zeros((h, w), np.float32)
+        self.se = np.zeros((h, w), np.float32)
+        self.count = np.zeros((h, w), np.int32)
+        self.mask = np.zeros((h, w), bool)
+        self.bent = np.zeros((h, w, 3), np.float32) if bent else None
+        self.miss = np.zeros((h, w), bool) if miss else None
+        self.overlap = 0
+        self.lock = threading.Lock()
+
+    def store(self, out):
+        if not len(out.texels):
+            return
+        t = out.texels
+        self.ao.reshape(-1)[t] = out.ao
+        self.se.reshape(-1)[t] = out.stderr
+        self.count.reshape(-1)[t] = out.samples
+        self.mask.reshape(-1)[t] = ~out.lost
+        if out.sums is not None:
+            self.bake.directions(out)
+        if out.bent is not None:
+            self.bent.reshape(-1, 3)[t] = out.bent
+        if self.miss is not None:
+            self.miss.reshape(-1)[t] = out.lost
+        if out.guide is not None and self.guide is not None:
+            for a, v in zip(self.guide, out.guide):
+                a[t] = v
+        with self.lock:
+            self.overlap += out.overlapping
+            if self.on_tile is not None:
+                r, c, _ = self.bake.rect(out.key)
+                self.on_tile(r, c, self.ao[r, c].copy())
+
+
+def _bake_images(target, occluders, resolution, samples, quantities, *, maps=False, min_samples=16,
+                 target_error=0.0, max_distance=float("inf"), distribution="cosine", source="sobol", margin=16, seed=0,
+                 threads=None, ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None,
+                 on_tile=None, tile_size=None, chunk_rays=1 << 16, on_rays=None, bent_normals=False, bent_space=None,
+                 highpoly=None, extrusion=None, max_ray_distance=0.0, cage=None, empty_ok=False, workers=1,
+                 ground=None, constant_answer=False, denoise=False):
+    """:func:`bake_ao` of every quantity of ``quantities`` over one set-up: {quantity: BakeResult}.
+    ``maps``: the results say which quantities were baked together (``metadata['quantities']``)."""
+    from .maps import base_quantity
+
     t_start = time.perf_counter()
+    base = base_quantity(quantities)
     s = BakeSettings.from_arguments(resolution, samples, min_samples, target_error, max_distance, distribution,
                                     source, margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays,
-                                    replicates, ground=ground, quantity=quantity)
+                                    replicates, ground=ground, quantity=base)
     s = dataclasses.replace(s, constant_answer=bool(constant_answer))
     if denoise and s.replicates < 2:
         raise SettingsError("denoise needs replicates >= 2: the filter weighs each texel by its standard error, "
@@ -497,7 +650,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
                    max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
     s2a = pro.s2a
     w, h = s.width, s.height
-    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
+    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_counts)
     if not _workers.in_process(processes) and tile_size is None:
         # Tiles for every thread of every worker, two each at least (they are dealt as workers free up).
         total = _workers.worker_count(processes) * per_worker
@@ -506,54 +659,58 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
     pro.check_memory(s)
     pro.check_cancel()
 
-    bake = TexelBake(pro, s, bent_normals)
+    # The denoiser's guide per texel (triangle, surface point, normal), filled in by the base
+    # quantity's tiles from their fragments (selected to active rasterises without locating: the
+    # denoiser then finds the texels' triangles itself).
+    guide = ((np.full(h * w, -1, np.int32), np.zeros((h * w, 3), np.float32), np.zeros((h * w, 3), np.float32))
+             if denoise and s2a is None else None)
+    bake = texel_bake(pro, s, quantities, bent_normals, guide=guide is not None)
+    lanes = bake.lanes if len(quantities) > 1 else {base: bake}
     s, uvtris, keys = bake.s, bake.uvtris, sorted(bake.bins)
-    ao = np.zeros((h, w), np.float32)
-    se = np.zeros((h, w), np.float32)
-    count = np.zeros((h, w), np.int32)
-    mask = np.zeros((h, w), bool)
-    bent = np.zeros((h, w, 3), np.float32) if bent_normals else None
-    miss = np.zeros((h, w), bool) if s2a is not None else None
-    overlap = 0
-    lock = threading.Lock()
+    images = {q: _Images(b, w, h, b.bent_normals, s2a is not None,
+                         None if on_tile is None else on_tile if not maps else functools.partial(on_tile, q),
+                         guide if q == base else None)
+              for q, b in lanes.items()}
+    root = lanes[base]
 
-    def store(out):
-        """A tile's values into the images (on whichever thread finished it)."""
-        nonlocal overlap
-        if not len(out.texels):
-            return
-        t = out.texels
-        ao.reshape(-1)[t] = out.ao
-        se.reshape(-1)[t] = out.stderr
-        count.reshape(-1)[t] = out.samples
-        mask.reshape(-1)[t] = ~out.lost
-        if out.sums is not None:
-            bake.directions(out)
-        if out.bent is not None:
-            bent.reshape(-1, 3)[t] = out.bent
-        if miss is not None:
-            miss.reshape(-1)[t] = out.lost
-        with lock:
-            overlap += out.overlapping
-            if on_tile is not None:
-                r, c, _ = bake.rect(out.key)
-                on_tile(r, c, ao[r, c].copy())
+    if len(quantities) > 1:
+        def store(out):
+            for q, o in bake.outs(out).items():
+                images[q].store(o)
+    else:
+        store = images[base].store
 
     def job():
         """What a worker rebuilds this bake from: the input as given, plain data (the extrusion measured here)."""
         return dict(target=_workers.mesh_data(target_in), occluders=[_workers.mesh_data(o) for o in occluders_in],
-                    settings=dataclasses.asdict(s), bent_normals=bent_normals, bent_space=bent_space_in,
+                    settings=dataclasses.asdict(root.s), bent_normals=bent_normals, bent_space=bent_space_in,
                     highpoly=None if highpoly is None else [_workers.mesh_data(m) for m in _highpoly._as_list(highpoly)],
                     extrusion=extrusion if s2a is None else s2a.world.extrusion,
-                    max_ray_distance=max_ray_distance, cage=None if cage is None else _workers.mesh_data(cage))
+                    max_ray_distance=max_ray_distance, cage=None if cage is None else _workers.mesh_data(cage),
+                    quantities=list(quantities), guide=guide is not None)
 
     rays, trace_s, trace_cpu, counters, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store,
                                                                        progress, cancel, on_rays)
-    if s2a is not None:
-        extra = _highpoly.finish_report(counters, miss, mask, s2a)
-        missed = counters["missed"]
-    elif not mask.any() and not empty_ok:
-        raise pro.nothing_covered(s, uvtris)
+    if len(quantities) == 1:
+        counters = {base: dict(counters, rays=rays, trace_seconds=trace_s, trace_cpu_seconds=trace_cpu)}
+    else:  # the processes' memory, once for the whole bake: each map's report has it
+        memory = counters.pop("worker_memory", [])
+        counters = {q: dict(counters[q], worker_memory=memory) for q in quantities}
+    extras = {}
+    for q in quantities:
+        if s2a is not None:
+            extras[q] = _highpoly.finish_report(counters[q], images[q].miss, images[q].mask, s2a)
+        elif not images[q].mask.any() and not empty_ok:
+            raise pro.nothing_covered(s, uvtris)
+    return {q: _finish(images[q], lanes[q].s, pro, s2a, extras.get(q), counters[q], fallback, denoise, t_start,
+                       quantities if maps else None, uvtris, guide)
+            for q in quantities}
+
+
+def _finish(img, s, pro, s2a, extra, counters, fallback, denoise, t_start, quantities, uvtris, guide=None):
+    """One quantity's BakeResult from its filled images: denoise, margin, bent normals, metadata, report."""
+    ao, se, mask, bent = img.ao, img.se, img.mask, img.bent
+    w, h = s.width, s.height
     raw_ao = raw_se = None
     if denoise:
         from . import denoise as _denoise
@@ -561,33 +718,39 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, min_s
         raw_ao, raw_se = ao.copy(), se.copy()
         if s.margin > 0:
             dilate(raw_ao, mask, s.margin, threads=s.threads, out=raw_ao)
-        ao, se, info = _denoise.denoise(ao, se, mask, _denoise.surface_guide(pro.target, (w, h)), threads=s.threads)
+        ao, se, info = _denoise.denoise(ao, se, mask, _denoise.surface_guide(pro.target, (w, h), texels=guide),
+                                        threads=s.threads)
     if s.margin > 0:
         dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:
         bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, s.threads)
     seconds = time.perf_counter() - t_start
+    rays = counters["rays"]
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
+    if quantities is not None:
+        metadata["quantities"] = list(quantities)
     if denoise:
         metadata["denoise"] = True
     if s.ground is not None:
         metadata["ground_height"] = pro.ground_height(s)[0]
     report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": uvtris.degenerate,
               "degenerate_triangles": uvtris.degenerate_space,
-              "uv_outside_triangles": uvtris.outside, "overlapping_texels": overlap}
+              "uv_outside_triangles": uvtris.outside, "overlapping_texels": img.overlap}
+    report["worker_memory"] = counters.get("worker_memory", [])
     if s2a is not None:
         metadata.update(s2a.metadata())
+        extra = dict(extra)
         warnings = extra.pop("warnings")
         report.update(extra)
         report.setdefault("warnings", []).extend(warnings)  # beside any other warning of the bake
     if fallback is not None:
         report.setdefault("warnings", []).append(
             f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
-    return BakeResult(ao=ao, mask=mask, stderr=se, samples=count, rays=rays, seconds=seconds,
-                      trace_seconds=trace_s, threads=s.threads, metadata=metadata, report=report,
-                      trace_cpu_seconds=trace_cpu, bent=bent, miss=miss, missed=missed if s2a is not None else 0,
-                      raw_ao=raw_ao, raw_stderr=raw_se)
+    return BakeResult(ao=ao, mask=mask, stderr=se, samples=img.count, rays=rays, seconds=seconds,
+                      trace_seconds=counters["trace_seconds"], threads=s.threads, metadata=metadata, report=report,
+                      trace_cpu_seconds=counters["trace_cpu_seconds"], bent=bent, miss=img.miss,
+                      missed=counters["missed"] if s2a is not None else 0, raw_ao=raw_ao, raw_stderr=raw_se)
 
 
-__all__ = ["bake_ao", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "MAX_RESOLUTION", "SAMPLE_PIECE",
+__all__ = ["bake_ao", "bake_maps", "BakeResult", "DISTRIBUTIONS", "MAX_SAMPLES", "MAX_RESOLUTION", "SAMPLE_PIECE",
            "estimate_memory", "available_memory", "interval_half_width", "auto_tile_shape"]

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import MeshError
-from .raster import TOUCH, prepare
+from .raster import prepare
 
 #: Window radius in texels: (2 r + 1)^2 image offsets.
 RADIUS = 3
@@ -83,11 +83,13 @@ PILOT_RADIUS = 1
 #: reference: 1.02-1.04); 1.25: 0.95 and 0.95; 1.5: 0.91 and 0.92. With radius 4 (a Gaussian of
 #: 2.5 texels cut less) factor 1 fell short, 1.09 and 1.10, and took 1.5. No factor is needed here.
 BIAS_SCALE = 1.0
-#: Texel pairs per chunk of the rasteriser of texel centres (bounds its memory).
-_CHUNK_PAIRS = 1 << 22
 #: Rows per band of the filter: bounds its working memory and orders its float32 additions (a
 #: constant, so that the result is the same bits for any number of threads).
 BAND_ROWS = 64
+#: Columns without a covered texel that split a band into ranges filtered apart (at least
+#: 2 radius + 1, see :meth:`_Features.segments`): the empty columns between islands are skipped,
+#: and narrower gaps are not worth the calls of one more range.
+SEGMENT_GAP = 16
 
 
 # --- the guide ------------------------------------------------------------------------------------
@@ -96,8 +98,9 @@ BAND_ROWS = 64
 class SurfaceGuide:
     """Per texel of a (H, W) map: where on the surface its centre lies, and its seam links.
 
-    covered : (H, W) bool, texels whose square a UV triangle overlaps with positive area (the bake's mask).
-    triangle : (H, W) int32, the nearest triangle (-1 where not covered).
+    covered : (H, W) bool, the texels the bake covers (its rasteriser's, :mod:`core.raster`: the bake's mask).
+    triangle : (H, W) int32, the lowest triangle that holds the texel's centre, else the nearest of
+        those that overlap the texel (-1 where not covered).
     position, normal : (H, W, 3) float32, the surface point at the centre (the nearest point of the
         triangle) and its unit shading normal.
     scale : (H, W) float32, world length of one texel there (sqrt of the 3D area per texel area).
@@ -176,82 +179,134 @@ def _point_triangle(qx, qy, a, b, c):
     return best, out
 
 
-def _nearest_triangles(xy, edges, tri_ids, width, height):
-    """Texels whose square overlaps triangles ``tri_ids`` of ``xy`` (T, 3, 2) with positive area (as
-    the bake's rasteriser covers them): for every such texel the nearest of those triangles to its
-    centre (ties: the lowest triangle index), as (texel flat index, triangle, distance from the
-    centre, barycentrics (n, 3) of the nearest point).
+def _interpolate(mesh, tri, bary):
+    """Surface point and unit shading normal (each (n, 3) float32) at barycentrics ``bary`` (n, 3)
+    of triangles ``tri``: the corners' sum written out, so that any subset of texels gets the same
+    bits as the whole (the guide from the bake's tiles and the one computed here agree exactly)."""
+    P = mesh.positions[mesh.triangles[tri]]
+    N = mesh.normals[tri]
+    b0, b1, b2 = bary[:, 0:1], bary[:, 1:2], bary[:, 2:3]
+    pos = b0 * P[:, 0] + b1 * P[:, 1] + b2 * P[:, 2]
+    n = b0 * N[:, 0] + b1 * N[:, 1] + b2 * N[:, 2]
+    length = np.sqrt(n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1] + n[:, 2] * n[:, 2])
+    n /= np.maximum(length, 1e-30)[:, None]
+    return pos.astype(np.float32), n.astype(np.float32)
 
-    The texels of each triangle's bounding box are tested for overlap by separating axes: the box's
-    own (the enumeration itself) and the triangle's edge normals (``edges`` (T, 3, 3), the edge
-    functions in texels of core.raster.UVTriangles: the square's corner farthest inside an edge is
-    half |a| + |b| beyond its centre). Their least value at the centre is its signed distance
-    inside: a centre inside some triangle takes the lowest such triangle (distance 0), and the
-    exact distance to a triangle is computed only for the centres inside none (islands' borders).
-    """
-    # Columns j whose square overlaps (x0, x1) by more than TOUCH: x0 - 1 + TOUCH < j < x1 - TOUCH.
-    lo = np.floor(xy[tri_ids].min(axis=1) - 1.0 + TOUCH).astype(np.int64) + 1
-    hi = np.ceil(xy[tri_ids].max(axis=1) - TOUCH).astype(np.int64)
-    lo = np.clip(lo, 0, [width, height])
-    hi = np.clip(hi, 0, [width, height])
-    nx, ny = np.maximum(hi[:, 0] - lo[:, 0], 0), np.maximum(hi[:, 1] - lo[:, 1], 0)
-    count = nx * ny
-    ends = np.cumsum(count)
-    start = 0
-    inside_t, inside_k, near_t, near_k = [], [], [], []
-    ecols = [np.ascontiguousarray(edges.reshape(len(edges), 9)[:, i]) for i in range(9)]
-    half = [0.5 * (np.abs(edges[:, j, 0]) + np.abs(edges[:, j, 1])) for j in range(3)]
-    while start < len(tri_ids):
-        stop = int(np.searchsorted(ends, (ends[start - 1] if start else 0) + _CHUNK_PAIRS, side="right"))
-        stop = max(stop, start + 1)
-        sel = np.arange(start, stop)
-        item, k = _ranges(np.zeros(len(sel), np.int64), count[sel])
-        item = sel[item]
-        q, r = np.divmod(k, nx[item])
-        col = lo[item, 0] + r
-        row = lo[item, 1] + q
-        t = tri_ids[item]
-        cx, cy = col + 0.5, row + 0.5
-        m, over = None, None
-        for j in range(3):  # column by column (numpy's gathers of (n, 3, 3) rows are slower)
-            v = np.take(ecols[3 * j], t) * cx
-            v += np.take(ecols[3 * j + 1], t) * cy
-            v += np.take(ecols[3 * j + 2], t)
-            o = v + np.take(half[j], t) > TOUCH
-            over = o if over is None else over & o
-            m = v if m is None else np.minimum(m, v, out=m)
-        texel = row * width + col
-        ins = m >= 0
-        inside_t.append(texel[ins])
-        inside_k.append(t[ins])
-        near = ~ins & over
-        near_t.append(texel[near])
-        near_k.append(t[near])
-        start = stop
-    texel, tri = np.concatenate(inside_t), np.concatenate(inside_k)
-    order = np.lexsort((tri, texel))
-    texel, tri = texel[order], tri[order]
-    first = np.ones(len(texel), bool)
-    first[1:] = texel[1:] != texel[:-1]
-    texel, tri = texel[first], tri[first]
+
+def _centre_barycentrics(xy, texel, tri, width):
+    """Barycentrics (n, 3) of the nearest point of triangle ``tri`` to each texel's centre (the
+    centre's own where it lies inside): :func:`_point_triangle`, measured only where needed."""
     row, col = np.divmod(texel, width)
-    dist, bary = _point_triangle(col + 0.5, row + 0.5, xy[tri, 0], xy[tri, 1], xy[tri, 2])
-    # Centres inside no triangle: the nearest of the triangles that overlap their square.
-    nt, nk = np.concatenate(near_t), np.concatenate(near_k)
-    keep = ~np.isin(nt, texel)
-    nt, nk = nt[keep], nk[keep]
-    row, col = np.divmod(nt, width)
-    nd, nb = _point_triangle(col + 0.5, row + 0.5, xy[nk, 0], xy[nk, 1], xy[nk, 2])
+    cx, cy = col + 0.5, row + 0.5
+    a, b, c = xy[tri, 0], xy[tri, 1], xy[tri, 2]
+    bary = _barycentrics(cx, cy, a, b, c)
+    out = ~(bary >= 0).all(axis=1)
+    if out.any():
+        bary[out] = _point_triangle(cx[out], cy[out], a[out], b[out], c[out])[1]
+    return bary
+
+
+def _choose(xy, edges, texel, tri, width):
+    """For candidate pairs (texel, triangle), sorted by texel: each texel's triangle by the guide's
+    rule (the lowest triangle whose edge functions all hold at the centre; where none does, the
+    nearest to the centre, ties the lowest). Returns (texels, triangles, barycentrics)."""
+    if not len(texel):
+        return texel, tri, np.zeros((0, 3))
+    row, col = np.divmod(texel, width)
+    cx, cy = col + 0.5, row + 0.5
+    m = None
+    for j in range(3):
+        v = np.take(np.ascontiguousarray(edges[:, j, 0]), tri) * cx
+        v += np.take(np.ascontiguousarray(edges[:, j, 1]), tri) * cy
+        v += np.take(np.ascontiguousarray(edges[:, j, 2]), tri)
+        m = v if m is None else np.minimum(m, v, out=m)
+    ins = m >= 0
+    it, ik = texel[ins], tri[ins]
+    order = np.lexsort((ik, it))
+    it, ik = it[order], ik[order]
+    first = np.ones(len(it), bool)
+    first[1:] = it[1:] != it[:-1]
+    it, ik = it[first], ik[first]
+    out = ~np.isin(texel, it)
+    nt, nk = texel[out], tri[out]
+    r, c = np.divmod(nt, width)
+    nd, nb = _point_triangle(c + 0.5, r + 0.5, xy[nk, 0], xy[nk, 1], xy[nk, 2])
     order = np.lexsort((nk, nd, nt))
-    nt, nk, nd, nb = nt[order], nk[order], nd[order], nb[order]
+    nt, nk, nb = nt[order], nk[order], nb[order]
     first = np.ones(len(nt), bool)
     first[1:] = nt[1:] != nt[:-1]
-    texel = np.concatenate([texel, nt[first]])
-    tri = np.concatenate([tri, nk[first]])
-    dist = np.concatenate([dist, nd[first]])
-    bary = np.concatenate([bary, nb[first]])
-    order = np.argsort(texel, kind="stable")
-    return texel[order], tri[order], dist[order], bary[order]
+    texel = np.concatenate([it, nt[first]])
+    tri = np.concatenate([ik, nk[first]])
+    bary = np.concatenate([_centre_barycentrics(xy, it, ik, width), nb[first]])
+    return texel, tri, bary
+
+
+#: Tiles (texels a side) in which :func:`surface_guide` rasterises a map when no bake gives it the texels.
+GUIDE_TILE = 256
+
+
+def _tile_guides(mesh, tris, w, h, threads=1):
+    """Per texel (triangle, position, normal) as :func:`surface_guide` takes them: the bake's
+    rasteriser and :func:`tile_guide` over tiles, as a bake finds them (the same texels as its mask)."""
+    from .raster import bin_triangles, rasterize_tile
+
+    triangle = np.full(h * w, -1, np.int32)
+    position = np.zeros((h * w, 3), np.float32)
+    normal = np.zeros((h * w, 3), np.float32)
+    bins = bin_triangles(tris, w, h, GUIDE_TILE)
+
+    def one(key):
+        (ty, tx), t = key, GUIDE_TILE
+        frag = rasterize_tile(tris, bins[key], w, h, tx * t, ty * t, min(tx * t + t, w), min(ty * t + t, h))
+        if len(frag.texels):
+            out = tile_guide(frag, tris, mesh, w)
+            for a, v in zip((triangle, position, normal), out):
+                a[frag.texels] = v
+
+    keys = sorted(bins)
+    if threads > 1 and len(keys) > 1:
+        with ThreadPoolExecutor(threads) as pool:
+            list(pool.map(one, keys))
+    else:
+        for key in keys:
+            one(key)
+    return triangle, position, normal
+
+
+def tile_guide(frag, uvtris, mesh, width):
+    """The guide's texels of one tile of the bake (:func:`core.raster.rasterize_tile`'s fragments
+    ``frag``): per covered texel its triangle, surface point and shading normal, by the same rule as
+    :func:`surface_guide` (the same bits), from what the rasteriser already found: a texel inside one
+    triangle takes it; a texel that several triangles cross takes the lowest that holds its centre,
+    else the nearest, among the triangles the rasteriser found overlapping it.
+
+    Returns (triangle (n,) int32, position (n, 3), normal (n, 3) float32), aligned with ``frag.texels``.
+    """
+    texels = frag.texels
+    n = len(texels)
+    xy = uvtris.corners
+    tri = np.asarray(frag.full_tri, np.int64).copy()
+    bary = np.zeros((n, 3))
+    full = np.flatnonzero(tri >= 0)
+    bary[full] = _centre_barycentrics(xy, texels[full], tri[full], width)
+    rest = np.flatnonzero(tri < 0)
+    if len(rest):
+        # Candidates: the located texels' triangles, the split texels' pieces' triangles.
+        ls = frag.loc_start if frag.loc_start is not None else np.zeros(n + 1, np.int64)
+        cnt = np.diff(ls)
+        idx = [np.repeat(np.arange(n), cnt), frag.sub_texel]
+        cand = [frag.loc_tri if frag.loc_tri is not None else np.zeros(0, np.int64), frag.sub_tri]
+        ci, ct = np.concatenate(idx).astype(np.int64), np.concatenate(cand).astype(np.int64)
+        keep = tri[ci] < 0
+        ci, ct = ci[keep], ct[keep]
+        order = np.lexsort((ct, ci))
+        ci, ct = ci[order], ct[order]
+        ct_t, ct_k, ct_b = _choose(xy, uvtris.edges, texels[ci], ct, width)
+        pos = np.searchsorted(texels, ct_t)
+        tri[pos] = ct_k
+        bary[pos] = ct_b
+    position, normal = _interpolate(mesh, tri, bary)
+    return tri.astype(np.int32), position, normal
 
 
 def _components(n, a, b):
@@ -364,7 +419,7 @@ def _apply_map(m, idx, px, py):
     return w.real, w.imag
 
 
-def surface_guide(mesh, resolution, radius=RADIUS):
+def surface_guide(mesh, resolution, radius=RADIUS, texels=None, threads=1):
     """Where every texel of a ``resolution`` map of ``mesh``'s UVs lies on the surface, and its
     neighbours across UV seams.
 
@@ -373,6 +428,10 @@ def surface_guide(mesh, resolution, radius=RADIUS):
     mesh : core.Mesh with UVs (world space; corner normals used if it has them).
     resolution : int or (width, height), as :func:`core.bake_ao` takes it.
     radius : how far (texels) the halo across seams reaches; the filter's window radius.
+    texels : None, or what the bake's tiles found (:func:`tile_guide`) laid out per texel:
+        (triangle (H * W,) int32, -1 where not covered; position, normal (H * W, 3) float32), used
+        (not copied) instead of finding every texel's triangle again. The same guide, bit for bit.
+    threads : tiles rasterised at the same time (the result does not depend on it).
 
     Returns
     -------
@@ -385,35 +444,59 @@ def surface_guide(mesh, resolution, radius=RADIUS):
     xy = tris.corners
     valid = tris.valid
     ids = np.flatnonzero(valid)
-    covered = np.zeros(h * w, bool)
-    triangle = np.full(h * w, -1, np.int32)
-    position = np.zeros((h * w, 3), np.float32)
-    normal = np.zeros((h * w, 3), np.float32)
-    scale = np.zeros(h * w, np.float32)
     island_t, pairs = _islands_and_seams(mesh, valid)
-    island = np.full(h * w, -1, np.int32)
     # World length of a texel per triangle: sqrt(area in space / area in texels).
     det = np.abs((xy[:, 1, 0] - xy[:, 0, 0]) * (xy[:, 2, 1] - xy[:, 0, 1])
                  - (xy[:, 1, 1] - xy[:, 0, 1]) * (xy[:, 2, 0] - xy[:, 0, 0]))
-    tscale = np.sqrt(mesh.areas / np.where(det > 0, det / 2.0, 1.0))
-    if len(ids):
-        texel, tri, _, bary = _nearest_triangles(xy, tris.edges, ids, w, h)
-        P = mesh.positions[mesh.triangles[tri]]
-        N = mesh.normals[tri]
-        covered[texel] = True
-        triangle[texel] = tri
-        position[texel] = np.einsum("nk,nkc->nc", bary, P)
-        n = np.einsum("nk,nkc->nc", bary, N)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-        normal[texel] = n
-        scale[texel] = tscale[tri]
-        island[texel] = island_t[tri]
+    tscale = np.sqrt(mesh.areas / np.where(det > 0, det / 2.0, 1.0)).astype(np.float32)
+    if texels is not None:
+        triangle, position, normal = texels
+        covered = triangle >= 0
+    else:
+        triangle, position, normal = _tile_guides(mesh, tris, w, h, threads)
+        covered = triangle >= 0
+    # Per texel from its triangle (-1 reads the appended entry: 0 scale, no island).
+    scale = np.append(tscale, np.float32(0))[triangle]
+    island = np.append(island_t, np.int32(-1))[triangle]
     halo, links = _halo(xy, mesh, pairs, island_t, island, w, h, radius)
     return SurfaceGuide(width=w, height=h, covered=covered.reshape(h, w), triangle=triangle.reshape(h, w),
                         position=position.reshape(h, w, 3), normal=normal.reshape(h, w, 3),
                         scale=scale.reshape(h, w), island=island.reshape(h, w),
                         halo_island=halo[0], halo_row=halo[1], halo_col=halo[2], halo_source=halo[3],
                         links=links, halo_radius=int(radius))
+
+
+def _near_segments(h0, h1, lo, hi, radius):
+    """The texels of the boxes [lo, hi) (per segment, (n, 2) each, columns then rows) whose centre
+    lies within ``radius`` of the segment h0 -> h1 (and a few more: the centres in the segment's
+    rectangle, ``radius`` either side and beyond its ends): (segment, column, row) of each, found
+    row by row in closed form, so a long slanted segment costs its rectangle, not its bounding box."""
+    ny = np.maximum(hi[:, 1] - lo[:, 1], 0)
+    seg, row = _ranges(lo[:, 1], lo[:, 1] + ny)
+    d = h1 - h0
+    L = np.hypot(d[:, 0], d[:, 1])
+    ux, uy = d[:, 0] / np.where(L > 0, L, 1.0), d[:, 1] / np.where(L > 0, L, 1.0)
+    eps = 1e-6
+    # Along the segment s = (p - h0) . u in [-R, L + R], across it q = (p - h0) . (-uy, ux) in [-R, R];
+    # on the row's centre line both are a x + b in the centre's x.
+    y = row + 0.5 - h0[seg, 1]
+    xlo = np.full(len(seg), -np.inf)
+    xhi = np.full(len(seg), np.inf)
+    for a, b, low, high in ((ux[seg], y * uy[seg], -radius - eps, L[seg] + radius + eps),
+                            (-uy[seg], y * ux[seg], -radius - eps, radius + eps)):
+        flat = np.abs(a) < 1e-12
+        safe = np.where(flat, 1.0, a)
+        x1, x2 = (low - b) / safe, (high - b) / safe
+        xlo = np.where(flat, np.where((b >= low) & (b <= high), xlo, np.inf), np.maximum(xlo, np.minimum(x1, x2)))
+        xhi = np.where(flat, np.where((b >= low) & (b <= high), xhi, -np.inf), np.minimum(xhi, np.maximum(x1, x2)))
+    x0 = h0[seg, 0]
+    with np.errstate(invalid="ignore"):
+        c0 = np.maximum(np.ceil(x0 + xlo - 0.5 - eps), lo[seg, 0])
+        c1 = np.minimum(np.floor(x0 + xhi - 0.5 + eps) + 1, hi[seg, 0])
+    keep = c1 > c0
+    seg, row, c0, c1 = seg[keep], row[keep], c0[keep].astype(np.int64), c1[keep].astype(np.int64)
+    part, col = _ranges(c0, c1)
+    return seg[part], col, row[part]
 
 
 def _halo(xy, mesh, pairs, island_t, island, w, h, radius):
@@ -428,10 +511,7 @@ def _halo(xy, mesh, pairs, island_t, island, w, h, radius):
     hi = np.floor(np.maximum(h0, h1) + radius - 0.5).astype(np.int64) + 1
     lo = np.clip(lo, -radius, [w + radius, h + radius])
     hi = np.clip(hi, -radius, [w + radius, h + radius])
-    nx, ny = np.maximum(hi[:, 0] - lo[:, 0], 0), np.maximum(hi[:, 1] - lo[:, 1], 0)
-    item, k = _ranges(np.zeros(len(nx), np.int64), nx * ny)
-    col = lo[item, 0] + k % nx[item]
-    row = lo[item, 1] + k // nx[item]
+    item, col, row = _near_segments(h0, h1, lo, hi, radius)
     cx, cy = col + 0.5, row + 0.5
     ex, ey = h1[item, 0] - h0[item, 0], h1[item, 1] - h0[item, 1]
     L2 = ex * ex + ey * ey
@@ -513,12 +593,38 @@ class _Features:
             self.n = [np.zeros_like(X), np.zeros_like(X), np.ones_like(X)]
             self.inv_s2 = np.ones_like(X)
 
-    def band(self, rows, dy, dx):
-        """(centre, neighbour) slices of the padded arrays for the band ``rows`` and offset (dy, dx)."""
+    def band(self, rows, dy, dx, cols=None):
+        """(centre, neighbour) slices of the padded arrays for the band ``rows`` (its columns ``cols``,
+        default all) and offset (dy, dx)."""
         r = self.r
-        c = (slice(rows.start + r, rows.stop + r), slice(r, r + self.w))
-        o = (slice(rows.start + r + dy, rows.stop + r + dy), slice(r + dx, r + dx + self.w))
+        a, b = (0, self.w) if cols is None else cols
+        c = (slice(rows.start + r, rows.stop + r), slice(r + a, r + b))
+        o = (slice(rows.start + r + dy, rows.stop + r + dy), slice(r + a + dx, r + b + dx))
         return c, o
+
+    def segments(self, rad):
+        """Per band of :data:`BAND_ROWS` rows, the column ranges [a, b) that hold its covered texels:
+        runs of columns with a covered texel in the band's rows, joined across gaps of fewer than
+        ``max(2 rad + 1, SEGMENT_GAP)`` columns. A pair of texels counts only when both are covered,
+        so the band's pairs all have their centre in a range, and with gaps of 2 rad + 1 or more no
+        texel is within ``rad`` columns of two ranges: filtering each range alone adds the same
+        terms to every texel in the same order as filtering the whole band (the same bits)."""
+        h, w, r = self.h, self.w, self.r
+        cov = self.island[r:r + h, r:r + w] >= 0
+        starts = np.arange(0, h, BAND_ROWS)
+        any_col = np.logical_or.reduceat(cov, starts, axis=0) if h else np.zeros((0, w), bool)
+        gap = max(2 * rad + 1, SEGMENT_GAP)
+        out = []
+        for row in any_col:
+            cols = np.flatnonzero(row)
+            if not len(cols):
+                out.append([])
+                continue
+            cut = np.flatnonzero(np.diff(cols) > gap) + 1
+            lo = cols[np.concatenate([[0], cut])]
+            hi = cols[np.concatenate([cut - 1, [len(cols) - 1]])] + 1
+            out.append(list(zip(lo.tolist(), hi.tolist())))
+        return out
 
     def direct(self, c, o):
         """Neighbours in the image window: on the centre's island, squared surface distance (in
@@ -597,46 +703,49 @@ def _filter(F, halo, weights, gathers, radius=None, threads=1):
     h, w, r = F.h, F.w, F.r
     rad = r if radius is None else radius
     flat = [None if x is None else x[r:r + h, r:r + w].reshape(-1) for _, x, _ in gathers]
-    rows_covered = np.flatnonzero((F.island[r:r + h, r:r + w] >= 0).any(axis=1))
+    segments = F.segments(rad)
     half = [(0, 0)] + [(dy, dx) for dy, dx in _offsets(rad) if dy > 0 or (dy == 0 and dx > 0)]
 
     def band(y0):
         rows = slice(y0, min(h, y0 + BAND_ROWS))
         n = rows.stop - rows.start
-        if not np.any((rows_covered >= rows.start) & (rows_covered < rows.stop)):
-            return None
-        loc = [np.zeros((n + 2 * rad, w + 2 * rad), np.float32) for _ in gathers]
-        lc = (slice(rad, rad + n), slice(rad, rad + w))
-        for dy, dx in half:
-            c, o = F.band(rows, dy, dx)
-            ws = weights(*F.direct(c, o), c, o)
-            lo = (slice(rad + dy, rad + dy + n), slice(rad + dx, rad + dx + w))
-            sq = {}
-            for acc, (k, x, power) in zip(loc, gathers):
-                if power == 1:
-                    g = ws[k]
-                else:
-                    if k not in sq:
-                        sq[k] = ws[k] * ws[k]
-                    g = sq[k]
-                if x is None:
-                    acc[lc] += g
-                    if dy or dx:
-                        acc[lo] += g
-                else:
-                    acc[lc] += g * x[o]
-                    if dy or dx:
-                        acc[lo] += g * x[c]
-        return loc
+        out = []
+        for a, b in segments[y0 // BAND_ROWS]:
+            m = b - a
+            loc = [np.zeros((n + 2 * rad, m + 2 * rad), np.float32) for _ in gathers]
+            tmp = np.empty((n, m), np.float32)
+            lc = (slice(rad, rad + n), slice(rad, rad + m))
+            for dy, dx in half:
+                c, o = F.band(rows, dy, dx, (a, b))
+                ws = weights(*F.direct(c, o), c, o)
+                lo = (slice(rad + dy, rad + dy + n), slice(rad + dx, rad + dx + m))
+                sq = {}
+                for acc, (k, x, power) in zip(loc, gathers):
+                    if power == 1:
+                        g = ws[k]
+                    else:
+                        if k not in sq:
+                            sq[k] = np.multiply(ws[k], ws[k])
+                        g = sq[k]
+                    if x is None:
+                        acc[lc] += g
+                        if dy or dx:
+                            acc[lo] += g
+                    else:
+                        acc[lc] += np.multiply(g, x[o], out=tmp)
+                        if dy or dx:
+                            acc[lo] += np.multiply(g, x[c], out=tmp)
+            out.append((a, loc))
+        return out
 
     total = [np.zeros((h + 2 * rad, w + 2 * rad), np.float32) for _ in gathers]
     starts = list(range(0, h, BAND_ROWS))
     pool = ThreadPoolExecutor(threads) if threads > 1 and len(starts) > 1 else None
     try:
-        for y0, loc in zip(starts, pool.map(band, starts) if pool else map(band, starts)):
-            if loc is not None:
+        for y0, parts in zip(starts, pool.map(band, starts) if pool else map(band, starts)):
+            for a, loc in parts:
                 for t, l in zip(total, loc):
-                    t[y0:y0 + len(l)] += l
+                    t[y0:y0 + l.shape[0], a:a + l.shape[1]] += l
     finally:
         if pool:
             pool.shutdown()
@@ -672,7 +781,7 @@ def _candidates_and_bias(F, halo, weights, K, yp, vp, y, var, threads=1, bias=Tr
     """
     h, w, r = F.h, F.w, F.r
     half = [(0, 0)] + [(dy, dx) for dy, dx in _offsets(r) if dy > 0 or (dy == 0 and dx > 0)]
-    rows_covered = np.flatnonzero((F.island[r:r + h, r:r + w] >= 0).any(axis=1))
+    segments = F.segments(r)
     tot = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(3 * K)]  # W, Y, V per candidate
     S = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(K)] if bias else None
     Fp = [np.zeros((h + 2 * r, w + 2 * r), np.float32) for _ in range(K)]
@@ -696,44 +805,54 @@ def _candidates_and_bias(F, halo, weights, K, yp, vp, y, var, threads=1, bias=Tr
     def sums(y0):
         rows = slice(y0, min(h, y0 + BAND_ROWS))
         n = rows.stop - rows.start
-        if not np.any((rows_covered >= rows.start) & (rows_covered < rows.stop)):
-            return None, None
-        loc = [np.zeros((n + 2 * r, w + 2 * r), np.float32) for _ in range(3 * K)]
-        lc = (slice(r, r + n), slice(r, r + w))
-        cache = []
-        for dy, dx in half:
-            c, o = F.band(rows, dy, dx)
-            ws = weights(*F.direct(c, o), c, o)
-            cache.append(ws)
-            lo = (slice(r + dy, r + dy + n), slice(r + dx, r + dx + w))
-            for k in range(K):
-                g = ws[k]
-                g2 = g * g
-                for j, (gg, x) in enumerate(((g, None), (g, yp), (g2, vp))):
-                    acc = loc[3 * k + j]
-                    if x is None:
-                        acc[lc] += gg
-                        if dy or dx:
-                            acc[lo] += gg
-                    else:
-                        acc[lc] += gg * x[o]
-                        if dy or dx:
-                            acc[lo] += gg * x[c]
-        return loc, cache
+        out = []
+        for a, b in segments[y0 // BAND_ROWS]:
+            m = b - a
+            loc = [np.zeros((n + 2 * r, m + 2 * r), np.float32) for _ in range(3 * K)]
+            tmp = np.empty((n, m), np.float32)
+            g2 = np.empty((n, m), np.float32)
+            lc = (slice(r, r + n), slice(r, r + m))
+            cache = []
+            for dy, dx in half:
+                c, o = F.band(rows, dy, dx, (a, b))
+                ws = weights(*F.direct(c, o), c, o)
+                cache.append(ws)
+                lo = (slice(r + dy, r + dy + n), slice(r + dx, r + dx + m))
+                for k in range(K):
+                    g = ws[k]
+                    np.multiply(g, g, out=g2)
+                    for j, (gg, x) in enumerate(((g, None), (g, yp), (g2, vp))):
+                        acc = loc[3 * k + j]
+                        if x is None:
+                            acc[lc] += gg
+                            if dy or dx:
+                                acc[lo] += gg
+                        else:
+                            acc[lc] += np.multiply(gg, x[o], out=tmp)
+                            if dy or dx:
+                                acc[lo] += np.multiply(gg, x[c], out=tmp)
+            out.append((a, loc, cache))
+        return out
 
-    def smooth(y0, cache):
+    def smooth(y0, parts):
         rows = slice(y0, min(h, y0 + BAND_ROWS))
         n = rows.stop - rows.start
-        loc = [np.zeros((n + 2 * r, w + 2 * r), np.float32) for _ in range(K)]
-        lc = (slice(r, r + n), slice(r, r + w))
-        for (dy, dx), ws in zip(half, cache):
-            c, o = F.band(rows, dy, dx)
-            lo = (slice(r + dy, r + dy + n), slice(r + dx, r + dx + w))
-            for k in range(K):
-                loc[k][lc] += ws[k] * Fp[k][o]
-                if dy or dx:
-                    loc[k][lo] += ws[k] * Fp[k][c]
-        return loc
+        out = []
+        for a, _, cache in parts:
+            b = a + cache[0][0].shape[1]
+            m = b - a
+            loc = [np.zeros((n + 2 * r, m + 2 * r), np.float32) for _ in range(K)]
+            tmp = np.empty((n, m), np.float32)
+            lc = (slice(r, r + n), slice(r, r + m))
+            for (dy, dx), ws in zip(half, cache):
+                c, o = F.band(rows, dy, dx, (a, b))
+                lo = (slice(r + dy, r + dy + n), slice(r + dx, r + dx + m))
+                for k in range(K):
+                    loc[k][lc] += np.multiply(ws[k], Fp[k][o], out=tmp)
+                    if dy or dx:
+                        loc[k][lo] += np.multiply(ws[k], Fp[k][c], out=tmp)
+            out.append((a, loc))
+        return out
 
     done = [0]  # rows whose F_k are final
 
@@ -747,9 +866,10 @@ def _candidates_and_bias(F, halo, weights, K, yp, vp, y, var, threads=1, bias=Tr
                 Fp[k][r + a:r + b, r:r + w] = np.where(W_ > 0, Y_ / W_, y[a:b])
         done[0] = b
 
-    def add_smooth(y0, loc):
-        for t, l in zip(S, loc):
-            t[y0:y0 + len(l)] += l
+    def add_smooth(y0, parts):
+        for a, loc in parts:
+            for t, l in zip(S, loc):
+                t[y0:y0 + l.shape[0], a:a + l.shape[1]] += l
 
     starts = list(range(0, h, BAND_ROWS))
     pool = ThreadPoolExecutor(threads) if threads > 1 and len(starts) > 1 else None
@@ -765,17 +885,17 @@ def _candidates_and_bias(F, halo, weights, K, yp, vp, y, var, threads=1, bias=Tr
             submit(i)
         previous = None
         for i, y0 in enumerate(starts):
-            loc, cache = futures.pop(i).result() if pool else sums(y0)
+            parts = futures.pop(i).result() if pool else sums(y0)
             submit(i + ahead)
-            if loc is not None:
+            for a, loc, _ in parts:
                 for t, l in zip(tot, loc):
-                    t[y0:y0 + len(l)] += l
+                    t[y0:y0 + l.shape[0], a:a + l.shape[1]] += l
             finalize(y0 + BAND_ROWS)
-            if bias and previous is not None and previous[1] is not None:
+            if bias and previous is not None:
                 add_smooth(previous[0], smooth(*previous))
-            previous = (y0, cache)
+            previous = (y0, parts)
         finalize(h)
-        if bias and previous is not None and previous[1] is not None:
+        if bias and previous is not None:
             add_smooth(previous[0], smooth(*previous))
     finally:
         if pool:
@@ -1149,5 +1269,5 @@ def denoise_udim(tile_maps, guide, margin=0, **kw):
     return result
 
 
-__all__ = ["surface_guide", "SurfaceGuide", "denoise", "DenoiseInfo", "BANDWIDTHS", "RADIUS", "udim_canvas",
+__all__ = ["surface_guide", "tile_guide", "SurfaceGuide", "denoise", "DenoiseInfo", "BANDWIDTHS", "RADIUS", "udim_canvas",
            "udim_guide", "denoise_udim", "denoise_vertices", "VERTEX_BANDWIDTHS"]

@@ -37,3 +37,9 @@ class FileWriteError(McAoError, OSError):
 
 class ImageWriteError(FileWriteError):
     """An image file could not be written; any existing file at the path is left as it was."""
+
+
+class ChannelError(SettingsError):
+    """An image one channel of which is to be written does not allow it: it is missing or unreadable,
+    has no such channel, has another size, or is in a format whose other channels could not be kept
+    exactly as they are."""

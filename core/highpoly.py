@@ -235,7 +235,8 @@ class SelectedToActive:
 
     def matching_scene(self):
         """The high-poly meshes as one committed Embree scene, robust (built once, shared by the
-        automatic extrusion and :class:`HighPolyScene`)."""
+        automatic extrusion and :class:`HighPolyScene`, which traces the AO rays in it too when
+        nothing else occludes)."""
         if self._match_scene is None:
             self._match_scene = embree_scene([_concatenate(self.highs, "high-poly")])[0]
         return self._match_scene
@@ -260,7 +261,7 @@ class SelectedToActive:
         it was not (a bake with a given extrusion asks for it only to say what would fit)."""
         if self.measure is None:
             high = _concatenate(self.highs, "high-poly")
-            self.measure = auto_extrusion(self._frame_target, self.matching_scene(), high.face_normals)
+            self.measure = auto_extrusion(self._frame_target, self.matching_scene(), high)
         return self.measure
 
     def metadata(self):
@@ -285,7 +286,15 @@ def _concatenate(meshes, name):
 
 class HighPolyScene:
     """The high-poly side of a bake in its normalised frame: the matching scene, the occlusion tracer,
-    and each high-poly triangle's corners and normals (to shade a hit).
+    and each high-poly triangle's corners and normals (to shade a hit), computed for the triangles
+    hit (nothing of the kind is kept per triangle: a high-poly has millions).
+
+    One Embree scene where that is all the bake needs: when nothing but the high-poly meshes occludes
+    (no other occluders, or a thickness map), the matching scene traces the AO rays too. It is built
+    in Embree's robust mode (the matching rays need it, :data:`core.tracing.OCCLUSION_ROBUST`), which
+    traces the AO rays somewhat slower than the fast mode a second scene would use, and answers a
+    few rays grazing its edges differently; a second scene of a ten-million-triangle high-poly is
+    about a gigabyte per process.
 
     Parameters
     ----------
@@ -298,22 +307,35 @@ class HighPolyScene:
     def __init__(self, s2a, occluders, ignore_backfaces, falloff, max_distance, ground=None, occluding=True):
         self.s2a = s2a
         highs = s2a.highs
-        self.owner = np.repeat(np.arange(len(highs)), [h.triangle_count for h in highs])
-        high = _concatenate(highs, "high-poly")
-        self.corners = corner_positions(high.positions, high.triangles)  # (T, 3, 3)
-        self.normals = high.normals                            # (T, 3, 3) unit corner normals
-        self.face_normals = high.face_normals
+        self.ends = np.cumsum([h.triangle_count for h in highs])  # owner of triangle t: searchsorted
+        self.high = high = _concatenate(highs, "high-poly")
+        # Matching: the high-poly meshes alone, in Embree's robust mode (a low-poly lying on the
+        # high-poly surface starts its rays on it, see core.tracing.OCCLUSION_ROBUST).
+        self.match_scene = s2a.matching_scene()
         # Occlusion: the high-poly meshes and the occluders, as one mesh (Tracer's contact scene is for a
         # single target; contact here is per high-poly mesh, below).
         if not occluding:
             occluders, ground = [], None
-        everything = _concatenate(highs + list(occluders), "high-poly and occluders")
-        self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance, ground=ground)
-        # Matching: the high-poly meshes alone, in Embree's robust mode (a low-poly lying on the
-        # high-poly surface starts its rays on it, see core.tracing.OCCLUSION_ROBUST).
-        self.match_scene = s2a.matching_scene()
+        if occluders:
+            everything = _concatenate(highs + list(occluders), "high-poly and occluders")
+            self.tracer = Tracer([everything], ignore_backfaces, falloff, max_distance, ground=ground)
+        else:
+            self.tracer = Tracer([high], ignore_backfaces, falloff, max_distance, ground=ground,
+                                 scene=self.match_scene)
         self.limit = np.float32(min(s2a.max_ray_distance, FAR) if s2a.max_ray_distance > 0 else FAR)
         self.contact = _Contact(highs if occluding else [], list(occluders), self.tracer)
+
+    def corners(self, tri):
+        """(n, 3, 3) corner positions of high-poly triangles ``tri``."""
+        return corner_positions(self.high.positions, self.high.triangles[tri])
+
+    def face_normals(self, tri):
+        """(n, 3) unit face normals of high-poly triangles ``tri``."""
+        return self.high.face_geometry_of(tri)[1]
+
+    def owner(self, tri):
+        """Which high-poly mesh each of triangles ``tri`` belongs to."""
+        return np.searchsorted(self.ends, tri, side="right")
 
     def match(self, origins, directions):
         """Cast matching rays (m, 3) float64; returns (hit (m,) bool, and for the hits: high-poly
@@ -328,10 +350,10 @@ class HighPolyScene:
         weights[:, 1] = out["u"][hit]
         weights[:, 2] = out["v"][hit]
         weights[:, 0] = 1.0 - weights[:, 1] - weights[:, 2]
-        q = np.einsum("ij,ijk->ik", weights, self.corners[tri])
-        n = np.einsum("ij,ijk->ik", weights, self.normals[tri])
+        q = np.einsum("ij,ijk->ik", weights, self.corners(tri))
+        n = np.einsum("ij,ijk->ik", weights, self.high.corner_normals(tri))
         ln = np.sqrt(np.einsum("ij,ij->i", n, n))
-        fn = self.face_normals[tri]
+        fn = self.face_normals(tri)
         good = (ln > 1e-12) & np.any(fn != 0, axis=1)  # a hit on a triangle of no area has no normal
         if not good.all():
             keep = np.flatnonzero(hit)[good]
@@ -513,6 +535,9 @@ def auto_extrusion(target, match_scene, face_normals, count=EXTRUSION_POINTS):
     tri, w = surface_points(target, count, _TAG_EXTRUSION)
     if not len(tri):
         return AutoExtrusion(0.0, np.zeros(0), np.zeros(0), 1.0)
+    # ``face_normals``: the high-poly's (T, 3), or the high-poly Mesh (its normals of the triangles hit).
+    fn_of = ((lambda i: face_normals.face_geometry_of(i)[1]) if isinstance(face_normals, Mesh)
+             else (lambda i: face_normals[i]))
     p = np.einsum("ij,ijk->ik", w, corner_positions(target.positions, target.triangles[tri]))
     _, n, _ = extruded(p, np.einsum("ij,ijk->ik", w, target.normals[tri]), target.face_normals[tri], 0.0)
     n = -n  # extruded() returns the ray direction, -n
@@ -534,7 +559,7 @@ def auto_extrusion(target, match_scene, face_normals, count=EXTRUSION_POINTS):
         prim = out["primID"]
         hit = prim >= 0
         t = at[todo] + out["tfar"].astype(np.float64)
-        behind = hit & (np.einsum("ij,ij->i", face_normals[np.maximum(prim, 0)], n[todo]) > 0)
+        behind = hit & (np.einsum("ij,ij->i", fn_of(np.maximum(prim, 0)), n[todo]) > 0)
         front = hit & ~behind
         limit[todo[front]] = np.maximum(t[front], 0.0)
         need[todo[behind]] = np.maximum(t[behind], 0.0)
@@ -634,10 +659,11 @@ class HighPolyStart:
             with inside:
                 found, htri, hq, hn, hgn = scene.match(origins[cast], directions[cast])
                 point = cast[found]  # index (piece * k + j) of every point that hit
-                behind = int(np.count_nonzero(np.einsum("ij,ij->i", scene.face_normals[htri], directions[point]) > 0))
+                behind = int(np.count_nonzero(np.einsum("ij,ij->i", scene.face_normals(htri), directions[point]) > 0))
+                hcorners = scene.corners(htri)
                 touch = None
                 if (scene.contact.scenes or scene.tracer.ground is not None) and len(point):
-                    touch = scene.contact.touching(scene.owner[htri], scene.corners[htri], hq, hgn)
+                    touch = scene.contact.touching(scene.owner(htri), hcorners, hq, hgn)
         nh = len(point)
         piece = point // k
         hits = np.bincount(piece, minlength=npieces)
@@ -654,7 +680,7 @@ class HighPolyStart:
                 vectors[...] = 0.0
             return ChunkSums(hits * g, zero, zero, vectors, work, len(cast), inside.wall, inside.cpu, hits)
         # The hits as units of constant points, in the smooth form (one call for all of them).
-        table = point_table(hq, hn, hgn, scene.corners[htri], smooth=True)
+        table = point_table(hq, hn, hgn, hcorners, smooth=True)
         ids = np.arange(nh, dtype=np.int64)
         hit_tile = TileContext(table, point_units(ids, units.texel[unit][piece]), tile.keys, tile.texel_ids,
                                np.zeros(tile.texels, bool), scene.tracer.offset, tris=ids, blocked=touch,

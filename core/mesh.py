@@ -13,6 +13,9 @@ from .errors import MeshError, MeshTypeError
 #: Largest |u| or |v| accepted. UV maps live in [0, 1] (UDIM tiles reach u = 10, v = 100); values far
 #: beyond come from broken importers or scripts, and texel coordinates of 1e17 lose all precision.
 MAX_UV = float(1 << 16)
+#: Triangles worked at a time where a whole-mesh temporary would scale with the mesh (its corners:
+#: 72 bytes a triangle); the results are the same bits as in one go (every operation is per triangle).
+SLICE = 1 << 18
 
 
 def _real_array(a, what, name):
@@ -114,6 +117,14 @@ def repeat_corners(face_values):
     return out
 
 
+def _own(arr, dtype):
+    """``arr`` as a C-ordered array of ``dtype``: the caller's own array where it already is one (no
+    copy: a mesh of ten million triangles is hundreds of megabytes), else a converted copy."""
+    if arr.dtype == dtype and arr.flags.c_contiguous:
+        return arr
+    return arr.astype(dtype, order="C")
+
+
 class Mesh:
     """A triangle mesh in world space.
 
@@ -129,9 +140,15 @@ class Mesh:
 
     Attributes
     ----------
-    positions : (V, 3) float64; triangles : (T, 3) int64; uvs : (T, 3, 2) float64 or None;
-    normals : (T, 3, 3) float64 unit corner normals; face_normals : (T, 3) float64 unit geometric
-    normals, from the winding (v1 - v0) x (v2 - v0), zero for degenerate triangles.
+    positions : (V, 3) float64; triangles : (T, 3) int64; uvs : (T, 3, 2) float64 or None. Arrays
+    given as C-ordered float64 (int64 for the triangles) are kept, not copied: the mesh shares
+    them with the caller, who must not change them while the mesh is in use.
+
+    areas : (T,) float64, face_normals : (T, 3) float64 unit geometric normals, from the winding
+    (v1 - v0) x (v2 - v0), zero for degenerate triangles; normals : (T, 3, 3) float64 unit corner
+    normals. All three are computed when first asked for and kept (:meth:`drop_face_geometry` lets
+    them go; they come back with the same bits); :meth:`face_geometry_of` and :meth:`corner_normals`
+    give them for some triangles without computing them for all.
     """
 
     def __init__(self, positions, triangles, uvs=None, normals=None, name="mesh"):
@@ -158,8 +175,8 @@ class Mesh:
                             f"(indices span {lo}..{hi}, the mesh has {len(p)} vertices)")
         # C order, whatever the input's (numpy's advanced indexing, e.g. corners reordered with a list,
         # may return another layout; astype keeps it): the core reshapes these arrays into views.
-        self.positions = p.astype(np.float64, order="C")
-        self.triangles = t.astype(np.int64, order="C")
+        self.positions = _own(p, np.float64)
+        self.triangles = _own(t, np.int64)
         T = len(t)
 
         self.uvs = None
@@ -175,38 +192,103 @@ class Mesh:
                     f"beyond +-{MAX_UV:g} (largest {float(np.abs(uv).max()):.3g}, first at triangle {tri}); "
                     "a UV map lies in [0, 1]: unwrap again or fix the UV map"
                 )
-            self.uvs = uv.astype(np.float64, order="C")
+            self.uvs = _own(uv, np.float64)
 
-        self.areas, self.face_normals = face_geometry(corner_positions(self.positions, self.triangles))
-
+        self._areas = self._face_normals = self._normals = None
+        #: The corner normals as given (None: flat shading); a transformed copy's source mesh.
+        self._corner_input, self._source = None, None
         if normals is None:
-            self.normals = repeat_corners(self.face_normals)
             self.has_corner_normals = False
         else:
             n = _real_array(normals, "normals", self.name)
             _check_shape(n, (T, 3, 3), "normals (one normal per triangle corner)", self.name)
             _check_finite(n, "normals", self.name)
-            self.normals = _unit_corner_normals(n.astype(np.float64, order="C"), self.face_normals)
+            self._corner_input = _own(n, np.float64)
             self.has_corner_normals = True
+
+    # -- face geometry and normals, on demand -----------------------------------------------------------
+
+    def face_geometry_of(self, tri=None):
+        """(areas, unit face normals) of triangles ``tri`` (all when None): :func:`face_geometry`
+        row by row, the same bits whichever triangles are asked for."""
+        if tri is None:
+            if self._face_normals is None:
+                self._areas, self._face_normals = self._face_geometry(None)
+            return self._areas, self._face_normals
+        if self._face_normals is not None:
+            return self._areas[tri], self._face_normals[tri]
+        return self._face_geometry(tri)
+
+    def _face_geometry(self, tri):
+        t = self.triangles if tri is None else self.triangles[tri]
+        if len(t) <= SLICE:
+            return face_geometry(corner_positions(self.positions, t))
+        areas, normals = np.empty(len(t)), np.empty((len(t), 3))
+        for lo in range(0, len(t), SLICE):  # a slice's corners at a time (72 bytes a triangle)
+            areas[lo:lo + SLICE], normals[lo:lo + SLICE] = face_geometry(corner_positions(self.positions,
+                                                                                          t[lo:lo + SLICE]))
+        return areas, normals
+
+    @property
+    def areas(self):
+        return self.face_geometry_of()[0]
+
+    @property
+    def face_normals(self):
+        return self.face_geometry_of()[1]
+
+    @property
+    def normals(self):
+        if self._normals is None:
+            self._normals = self.corner_normals()
+        return self._normals
+
+    @normals.setter
+    def normals(self, value):
+        self._normals = value
+
+    def corner_normals(self, tri=None):
+        """Unit corner normals (n, 3, 3) of triangles ``tri`` (all when None; kept ones when
+        :attr:`normals` was asked for): the same bits for any selection."""
+        if self._normals is not None:
+            return self._normals if tri is None else self._normals[tri]
+        if not self.has_corner_normals:
+            return repeat_corners(self.face_geometry_of(tri)[1])
+        fn = self.face_geometry_of(tri)[1]
+        if self._source is not None:
+            # A transformed copy: its source's unit normals, and its own face normal at corners
+            # that fell back to a zero one (column by column: see face_geometry).
+            n = self._source.corner_normals(tri)
+            nz = (n != 0).reshape(-1, 3)
+            lost = ~(nz[:, 0] | nz[:, 1] | nz[:, 2]).reshape(len(n), 3)
+            return np.where(lost[..., None], fn[:, None, :], n) if lost.any() else n
+        raw = self._corner_input if tri is None else self._corner_input[tri]
+        return _unit_corner_normals(raw, fn)
+
+    def given_normals(self):
+        """What the mesh's corner normals can be made again from (:class:`Mesh`'s ``normals``
+        argument): the array given, or the unit normals of a transformed copy; None when flat."""
+        if not self.has_corner_normals:
+            return None
+        return self._corner_input if self._corner_input is not None else self.normals
+
+    def drop_face_geometry(self):
+        """Let go of the areas, face normals and corner normals computed so far (hundreds of bytes a
+        triangle); asked for again, they are computed again, with the same bits."""
+        self._areas = self._face_normals = self._normals = None
 
     def transformed(self, centre, scale):
         """A copy with positions (p - centre) / scale: the same surface in another unit and origin.
 
-        Face normals and areas are recomputed from the new positions (they keep their precision
-        when the original coordinates were tiny or huge); corner normals and UVs are unchanged. No
+        Face normals and areas are those of the new positions (they keep their precision when the
+        original coordinates were tiny or huge); corner normals and UVs are unchanged. No
         validation is repeated.
         """
         out = copy.copy(self)
         out.positions = (self.positions - np.asarray(centre, dtype=np.float64)) / float(scale)
-        out.areas, out.face_normals = face_geometry(corner_positions(out.positions, self.triangles))
-        if not self.has_corner_normals:
-            out.normals = repeat_corners(out.face_normals)
-        else:
-            # Corners that fell back to a zero face normal (column by column: see face_geometry).
-            nz = (self.normals != 0).reshape(-1, 3)
-            lost = ~(nz[:, 0] | nz[:, 1] | nz[:, 2]).reshape(len(self.normals), 3)
-            if lost.any():
-                out.normals = np.where(lost[..., None], out.face_normals[:, None, :], self.normals)
+        out._areas = out._face_normals = out._normals = None
+        if self.has_corner_normals:
+            out._source, out._corner_input = self, None
         return out
 
     def same_geometry(self, other):

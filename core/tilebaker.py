@@ -129,13 +129,21 @@ class TileBaker:
         self.bent = bent
         self.seeds = allocation_seeds(settings)
 
-    def bake(self, key, tri_ids):
-        """(fragments, estimates, direction sums or None) of the tile ``key``'s texels."""
+    def layout(self, key, tri_ids):
+        """(fragments, sample units or None) of the tile ``key``'s texels: what the tile's texels are,
+        whatever is traced from them. Bakes of several quantities over one layout (:func:`core.bake_maps`)
+        take it once for all of them; nothing here depends on the tracer."""
         s = self.s
         frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, *s.tile_bounds(key), locate=self.start.locate)
+        return frag, (build_units(frag, self.table, s.width) if len(frag.texels) else None)
+
+    def bake(self, key, tri_ids, layout=None):
+        """(fragments, estimates, direction sums or None) of the tile ``key``'s texels; ``layout``:
+        the tile's :meth:`layout`, when it was taken already."""
+        s = self.s
+        frag, units = self.layout(key, tri_ids) if layout is None else layout
         if len(frag.texels) == 0:
             return frag, self.start.estimates(0, s.replicates), None
-        units = build_units(frag, self.table, s.width)
         contact = self.start.contact(frag, s.width, s.samples)
         est, sums = self.trace(units, frag.texels, contact, frag.texels % s.width, frag.texels // s.width,
                                tris=tri_ids)

@@ -10,6 +10,8 @@ grows with the scene's size and with the point's distance from the origin (float
 absolute precision with both).
 """
 
+import copy
+import functools
 import time
 from dataclasses import dataclass
 
@@ -73,9 +75,12 @@ def embree_scene(meshes, robust=True):
     robust mode (see :data:`OCCLUSION_ROBUST`)."""
     from embreex import rtcore_scene
 
-    positions = np.concatenate([m.positions for m in meshes])
-    offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
-    tris = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
+    if len(meshes) == 1:  # no copies of one mesh's arrays (hundreds of MB for millions of triangles)
+        positions, tris = meshes[0].positions, meshes[0].triangles
+    else:
+        positions = np.concatenate([m.positions for m in meshes])
+        offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
+        tris = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
     scene = rtcore_scene.EmbreeScene(robust=bool(robust))
     geometry = add_triangles(scene, positions, tris)
     # Commit (build the BVH) now, once, before any worker thread traces.
@@ -136,18 +141,24 @@ class Tracer:
     meshes : the target first, then its occluders (in the baker's normalised frame).
     ignore_backfaces, falloff, max_distance : as in :func:`core.bake_ao` (max_distance in the same frame).
     ground : None, or the height (in the same frame) of the analytic ground plane z = ground.
+    scene : None, or a committed Embree scene of exactly ``meshes`` (one geometry, in their order) to
+        trace in, instead of building one (a selected-to-active bake's matching scene).
     """
 
-    def __init__(self, meshes, ignore_backfaces=False, falloff=0.0, max_distance=float("inf"), ground=None):
-        self.scene, self._mesh, positions = embree_scene(meshes, robust=OCCLUSION_ROBUST)
-        self.face_normals = np.concatenate([m.face_normals for m in meshes])
+    def __init__(self, meshes, ignore_backfaces=False, falloff=0.0, max_distance=float("inf"), ground=None,
+                 scene=None):
+        if scene is None:
+            self.scene, self._mesh, _ = embree_scene(meshes, robust=OCCLUSION_ROBUST)
+        else:
+            self.scene, self._mesh = scene, None
+        self._meshes = list(meshes)
         self.contact_scene = embree_scene(meshes[1:])[0] if len(meshes) > 1 else None
         if len(meshes) > 1:
             corners = np.concatenate([corner_positions(m.positions, m.triangles) for m in meshes[1:]])  # (m, 3, 3)
             self._occ_lo, self._occ_hi = corners.min(axis=1), corners.max(axis=1)
         # Column by column: numpy's reductions over the long axis of a (V, 3) array are slow.
-        lo = np.array([positions[:, k].min() for k in range(3)])
-        hi = np.array([positions[:, k].max() for k in range(3)])
+        lo = np.array([min(m.positions[:, k].min() for m in meshes) for k in range(3)])
+        hi = np.array([max(m.positions[:, k].max() for m in meshes) for k in range(3)])
         self.extent = float(np.linalg.norm(hi - lo))
         self.ignore_backfaces = ignore_backfaces
         self.falloff = falloff
@@ -159,6 +170,22 @@ class Tracer:
         #: measures its own work alone (``bake_ao(..., constant_answer=True)``; the result is not AO).
         self.constant_answer = False
         self.ground = None if ground is None else float(ground)
+
+    def sharing(self, ignore_backfaces=False, falloff=0.0, max_distance=float("inf"), ground=None):
+        """A tracer of the same meshes (the same Embree scenes, built once) asked with other settings:
+        the quantities of one bake whose rays see the same meshes (:func:`core.bake_maps`)."""
+        out = copy.copy(self)
+        out.ignore_backfaces, out.falloff, out.max_distance = ignore_backfaces, falloff, max_distance
+        out.tfar = np.float32(min(max_distance, FAR))
+        out.simple = not ignore_backfaces and falloff == 0
+        out.constant_answer = False
+        out.ground = None if ground is None else float(ground)
+        return out
+
+    @functools.cached_property
+    def face_normals(self):
+        """(T, 3) unit face normals of every triangle of the scene (asked for by back-face culling only)."""
+        return np.concatenate([m.face_normals for m in self._meshes])
 
     @property
     def touches(self):

@@ -204,6 +204,34 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
     -------
     BakeResult with ``tiles`` (see :class:`core.BakeResult`)
     """
+    quantity = kwargs.pop("quantity", "ao")
+    return _bake_udim(target, occluders, resolution, samples, None, tiles, seed, progress, cancel, on_tile,
+                      dict(kwargs, quantity=quantity))[None]
+
+
+def bake_udim_maps(target, occluders=(), resolution=(1024, 1024), samples=256, *, quantities=("ao", "thickness"),
+                   tiles=None, seed=0, progress=None, cancel=None, on_tile=None, **kwargs):
+    """Several quantities of every UDIM tile in one pass per tile (:func:`core.bake_maps` per tile).
+
+    ``quantities`` as for :func:`core.bake_maps`; ``on_tile`` is called as on_tile(quantity, tile,
+    rows, cols, block); the others as for :func:`bake_udim`.
+
+    Returns
+    -------
+    {quantity: BakeResult with ``tiles``}: each bit for bit :func:`bake_udim` of that quantity with the
+    same settings.
+    """
+    from .maps import check_quantities
+
+    return _bake_udim(target, occluders, resolution, samples, check_quantities(quantities), tiles, seed, progress,
+                      cancel, on_tile, kwargs)
+
+
+def _bake_udim(target, occluders, resolution, samples, quantities, tiles, seed, progress, cancel, on_tile, kwargs):
+    """The UDIM bake of ``quantities`` (None: the one quantity of ``kwargs``, by :func:`core.bake_ao`;
+    else by :func:`core.bake_maps`): {quantity (None for the one): BakeResult with ``tiles``}."""
+    from .bake import bake_maps
+
     if not isinstance(target, Mesh):
         raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
     # Denoised across the tiles' seams once every tile is baked (each tile alone would stop at its border).
@@ -218,18 +246,33 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
     weight = np.array([coverage.area.get(t, 0.0) for t in todo]) + 1e-12
     weight /= weight.sum()
     done = np.concatenate([[0.0], np.cumsum(weight)])
-    results = {}
+    names = [None] if quantities is None else list(quantities)
+    results = {q: {} for q in names}
     for i, tile in enumerate(todo):
         def tile_progress(f, i=i):
             if progress is not None:
                 progress(min(done[i] + weight[i] * f, 1.0))
 
-        def tile_block(rows, cols, block, tile=tile):
-            on_tile(tile, rows, cols, block)
+        def tile_block(*args, tile=tile):
+            if quantities is None:
+                on_tile(tile, *args)
+            else:
+                on_tile(args[0], tile, *args[1:])
 
-        results[tile] = bake_ao(shifted(target, tile), occluders, resolution, samples, seed=tile_seed(seed, tile),
-                                progress=tile_progress, cancel=cancel,
-                                on_tile=None if on_tile is None else tile_block, empty_ok=True, **tile_kwargs)
+        common = dict(seed=tile_seed(seed, tile), progress=tile_progress, cancel=cancel,
+                      on_tile=None if on_tile is None else tile_block, empty_ok=True)
+        if quantities is None:
+            baked = {None: bake_ao(shifted(target, tile), occluders, resolution, samples, **common, **tile_kwargs)}
+        else:
+            baked = bake_maps(shifted(target, tile), occluders, resolution, samples, quantities=quantities, **common,
+                              **tile_kwargs)
+        for q in names:
+            results[q][tile] = baked[q]
+    return {q: _assemble(target, resolution, results[q], todo, coverage, denoise, margin) for q in names}
+
+
+def _assemble(target, resolution, results, todo, coverage, denoise, margin):
+    """One quantity's UDIM result from its tiles' results."""
     if denoise and results:
         _denoise_tiles(target, resolution, results, margin)
     report = {}
@@ -239,6 +282,12 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
                 report[key] = value  # the same in every tile (the extrusion is measured on the whole mesh)
             elif key == "warnings":
                 report[key] = report.get(key, []) + [w for w in value if w not in report.get(key, [])]
+            elif key == "worker_memory":  # per process, the tile bake of its largest peak
+                best = {e["process"]: e for e in report.get(key, [])}
+                for e in value:
+                    if ((best.get(e["process"]) or {}).get("peak") or 0) <= (e.get("peak") or 0):
+                        best[e["process"]] = e
+                report[key] = list(best.values())
             elif key != "uv_outside_triangles":
                 report[key] = report.get(key, 0) + value
     report["uv_outside_udim_triangles"] = coverage.outside
@@ -264,5 +313,5 @@ def bake_udim(target, occluders=(), resolution=(1024, 1024), samples=256, *, til
                       raw_stderr=stack("raw_stderr") if parts[0].raw_stderr is not None else None)
 
 
-__all__ = ["bake_udim", "covered_tiles", "UdimResult", "TileCoverage", "tile_origin", "tile_of", "tile_seed",
+__all__ = ["bake_udim", "bake_udim_maps", "covered_tiles", "UdimResult", "TileCoverage", "tile_origin", "tile_of", "tile_seed",
            "check_tiles", "shifted", "FIRST_TILE", "LAST_TILE"]

@@ -208,10 +208,64 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     ------
     MeshError, MeshTypeError, SettingsError, BakeCancelled.
     """
+    return _bake_corners(target, occluders, corners, samples, (quantity,), **_corner_options(locals()))[quantity]
+
+
+_CORNER_OPTIONS = ("min_samples", "target_error", "max_distance", "distribution", "source", "seed", "threads",
+                   "ignore_backfaces", "falloff", "replicates", "progress", "cancel", "chunk_rays", "on_rays", "merge",
+                   "bent_normals", "workers", "ground", "denoise")
+
+
+def _corner_options(arguments):
+    return {k: arguments[k] for k in _CORNER_OPTIONS}
+
+
+def bake_vertex_maps(target, occluders=(), corners=None, samples=256, *, quantities=("ao", "thickness"),
+                     min_samples=16, target_error=0.0, max_distance=float("inf"), distribution="cosine",
+                     source="sobol", seed=0, threads=None, ignore_backfaces=False, falloff=0.0, replicates=2,
+                     progress=None, cancel=None, chunk_rays=1 << 16, on_rays=None, merge=True, bent_normals=False,
+                     workers=1, ground=None, denoise=False):
+    """Several quantities at the face corners of ``target`` in one pass (:mod:`core.maps`): one set-up
+    (sample points, neighbours, pattern, scene where shared), each quantity its own rays.
+
+    ``quantities``, ``ground``, ``ignore_backfaces``, ``bent_normals`` as for :func:`core.bake_maps`;
+    the others as for :func:`bake_vertex_ao`.
+
+    Returns
+    -------
+    {quantity: BakeResult}: each bit for bit :func:`bake_vertex_ao` of that quantity with the same
+    settings, ``metadata['quantities']`` the quantities baked together.
+    """
+    from .maps import check_quantities
+
+    return _bake_corners(target, occluders, corners, samples, check_quantities(quantities), maps=True,
+                         **_corner_options(locals()))
+
+
+def vertex_bake(pro, s, corners, quantities, merge=True, bent_normals=False, block=None):
+    """The corner bake of ``quantities`` (a :class:`VertexBake`, or a :class:`core.maps.MapsBake` of
+    lanes over one's sample points), as :func:`core.bake.texel_bake`."""
+    root = VertexBake(pro, s, corners, merge, bent_normals and s.quantity == "ao", block)
+    if tuple(quantities) == (s.quantity,):
+        return root
+    from .maps import MapsBake, lane_settings
+
+    return MapsBake({q: root if q == s.quantity else root.lane(lane_settings(s, q), bent_normals and q == "ao")
+                     for q in quantities})
+
+
+def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False, min_samples=16, target_error=0.0,
+                  max_distance=float("inf"), distribution="cosine", source="sobol", seed=0, threads=None,
+                  ignore_backfaces=False, falloff=0.0, replicates=2, progress=None, cancel=None, chunk_rays=1 << 16,
+                  on_rays=None, merge=True, bent_normals=False, workers=1, ground=None, denoise=False):
+    """:func:`bake_vertex_ao` of every quantity of ``quantities`` over one set-up: {quantity: BakeResult}."""
+    from .maps import base_quantity
+
     t_start = time.perf_counter()
+    base = base_quantity(quantities)
     s = BakeSettings.from_arguments(1, samples, min_samples, target_error, max_distance, distribution, source,
                                     0, seed, threads, ignore_backfaces, falloff, None, chunk_rays, replicates,
-                                    ground=ground, quantity=quantity)
+                                    ground=ground, quantity=base)
     if bent_normals and s.quantity != "ao":
         raise SettingsError(f"bent normals come with quantity='ao' only, not {s.quantity!r}: bake them in an AO bake")
     if denoise and s.replicates < 2:
@@ -221,52 +275,65 @@ def bake_vertex_ao(target, occluders=(), corners=None, samples=256, *, min_sampl
     occluders = list(occluders or ())
     pro = Prologue(target, occluders, s, cancel, uvs=False)
     corners = all_corners(pro.target) if corners is None else _check_corners(corners, pro.target)
-    bake = VertexBake(pro, s, corners, merge, bent_normals)
+    bake = vertex_bake(pro, s, corners, quantities, merge, bent_normals)
+    lanes = bake.lanes if len(quantities) > 1 else {base: bake}
+    root = lanes[base]
     pro.check_cancel()
-    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
-    m = len(bake.p)
-    ao = np.zeros(m, np.float32)
-    se = np.zeros(m, np.float32)
-    count = np.zeros(m, np.int32)
-    bent = np.zeros((m, 3), np.float32) if bent_normals else None
+    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_counts)
+    m = len(root.p)
+    values = {q: dict(ao=np.zeros(m, np.float32), se=np.zeros(m, np.float32), count=np.zeros(m, np.int32),
+                      bent=np.zeros((m, 3), np.float32) if b.bent_normals else None) for q, b in lanes.items()}
+
+    def store_one(v, out):
+        ids = out.texels
+        v["ao"][ids], v["se"][ids], v["count"][ids] = out.ao, out.stderr, out.samples
+        if v["bent"] is not None:
+            v["bent"][ids] = out.bent
 
     def store(out):
-        ids = out.texels
-        ao[ids], se[ids], count[ids] = out.ao, out.stderr, out.samples
-        if bent is not None:
-            bent[ids] = out.bent
+        for q, o in (bake.outs(out) if len(quantities) > 1 else {base: out}).items():
+            store_one(values[q], o)
 
-    keys = list(range(len(bake.blocks)))
+    keys = list(range(len(root.blocks)))
     def job():
         """What a worker rebuilds this bake from (plain data)."""
         return dict(kind="vertex", target=_workers.mesh_data(target), occluders=[_workers.mesh_data(o) for o in occluders],
                     settings=dataclasses.asdict(s), corners=corners, merge=bool(merge), bent_normals=bool(bent_normals),
-                    block=bake.block)
+                    block=root.block, quantities=list(quantities))
 
-    rays, trace_s, trace_cpu, _, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store, progress,
-                                                                cancel, on_rays)
-    unit = bake.unit
-    metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
-    for key in ("margin", "resolution"):
-        metadata.pop(key, None)
-    metadata["sample_points"] = m
-    if s.ground is not None:
-        metadata["ground_height"] = pro.ground_height(s)[0]
-    report = {"corners": len(corners), "sample_points": m, "degenerate_corners": bake.flat}
-    if fallback is not None:
-        report.setdefault("warnings", []).append(
-            f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
-    out_ao, out_se, raw_ao, raw_se = ao[unit], se[unit], None, None
-    if denoise:
-        from . import denoise as _denoise
+    rays, trace_s, trace_cpu, counters, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store,
+                                                                       progress, cancel, on_rays)
+    if len(quantities) == 1:
+        counters = {base: dict(rays=rays, trace_seconds=trace_s, trace_cpu_seconds=trace_cpu)}
+    unit = root.unit
+    results = {}
+    for q in quantities:
+        ls, v, c = lanes[q].s, values[q], counters[q]
+        metadata = dict(ls.metadata(ls.max_distance), version=__version__, rays=c["rays"])
+        for key in ("margin", "resolution"):
+            metadata.pop(key, None)
+        metadata["sample_points"] = m
+        if maps:
+            metadata["quantities"] = list(quantities)
+        if ls.ground is not None:
+            metadata["ground_height"] = pro.ground_height(ls)[0]
+        report = {"corners": len(corners), "sample_points": m, "degenerate_corners": root.flat}
+        if fallback is not None:
+            report.setdefault("warnings", []).append(
+                f"baked on {ls.threads} threads of this process, not in worker processes: {fallback}")
+        out_ao, out_se, raw_ao, raw_se = v["ao"][unit], v["se"][unit], None, None
+        if denoise:
+            from . import denoise as _denoise
 
-        raw_ao, raw_se = out_ao, out_se
-        out_ao, out_se, _ = _denoise.denoise_vertices(pro.target, raw_ao, raw_se, unit, corners)
-        metadata["denoise"] = True
-    return BakeResult(ao=out_ao, mask=np.ones(len(unit), bool), stderr=out_se, samples=count[unit], unit=unit,
-                      raw_ao=raw_ao, raw_stderr=raw_se, rays=rays, seconds=time.perf_counter() - t_start, trace_seconds=trace_s,
-                      threads=s.threads, trace_cpu_seconds=trace_cpu, metadata=metadata,
-                      report=report, bent=None if bent is None else bent[unit])
+            raw_ao, raw_se = out_ao, out_se
+            out_ao, out_se, _ = _denoise.denoise_vertices(pro.target, raw_ao, raw_se, unit, corners)
+            metadata["denoise"] = True
+        results[q] = BakeResult(ao=out_ao, mask=np.ones(len(unit), bool), stderr=out_se, samples=v["count"][unit],
+                                unit=unit, raw_ao=raw_ao, raw_stderr=raw_se, rays=c["rays"],
+                                seconds=time.perf_counter() - t_start, trace_seconds=c["trace_seconds"],
+                                threads=ls.threads, trace_cpu_seconds=c["trace_cpu_seconds"], metadata=metadata,
+                                report=report, bent=None if v["bent"] is None else v["bent"][unit])
+    return results
 
 
 class VertexBake:
@@ -287,26 +354,45 @@ class VertexBake:
         self.blocks = [np.arange(b, min(b + block, m)) for b in range(0, m, block)]
         self.planned = m * s.samples
 
-    def trace_setup(self, shared, cancel, on_rays=None):
+    def lane(self, s, bent_normals=False):
+        """The bake of another quantity over these sample points (taken once), with settings ``s``
+        (:func:`core.maps.lane_settings` of this bake's)."""
+        out = object.__new__(VertexBake)
+        out.__dict__.update({k: getattr(self, k) for k in ("pro", "block", "unit", "p", "n", "gn", "flat", "table",
+                                                           "pairs", "blocks", "planned")})
+        out.s, out.bent_normals = s, bool(bent_normals)
+        return out
+
+    def trace_setup(self, shared, cancel, on_rays=None, pattern=None):
+        """The tracing: scene, sample pattern (``pattern``: another quantity's of the same bake, the
+        same points), kernel, start stage and block baker."""
         s, m = self.s, len(self.p)
         self.tracer = self.pro.tracer(s)
-        span = pattern_span(s.source, s.replicate_samples)
-        pool = max(span * s.replicates, min(POOL_POINTS, (1 << max(0, (m * s.replicates - 1).bit_length())) * span))
-        pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=pool)
+        if pattern is None:
+            span = pattern_span(s.source, s.replicate_samples)
+            pool = max(span * s.replicates, min(POOL_POINTS, (1 << max(0, (m * s.replicates - 1).bit_length())) * span))
+            pattern = TexelPattern(s.source, s.seed, s.replicate_samples, pool_points=pool)
+        self.pattern = pattern
         kernel = Kernel(pattern, self.tracer, s.distribution, on_rays=on_rays)
         self.start = SurfaceStart(self.table, self.tracer)
         self.baker = TileBaker(None, self.table, kernel, self.tracer, pattern, s, shared, self.start,
                                bent=self.bent_normals)
         self.errors = ErrorModel(s)
 
-    def tile(self, key, directions=True):
-        """Bake block ``key`` of the sample points: a :class:`core.bake.TileOut` whose ``texels`` are
-        the points' numbers (bent normals are world directions already)."""
+    def layout(self, key):
+        """Block ``key``'s points and where each pools its variance (the same for every quantity)."""
         ids = self.blocks[key]
+        near = None if self.pairs is None else _block_neighbours(self.pairs, int(ids[0]), int(ids[-1]) + 1)
+        return ids, near
+
+    def tile(self, key, directions=True, layout=None):
+        """Bake block ``key`` of the sample points: a :class:`core.bake.TileOut` whose ``texels`` are
+        the points' numbers (bent normals are world directions already); ``layout``: the block's
+        :meth:`layout`, taken already for another quantity."""
+        ids, near = self.layout(key) if layout is None else layout
         contact = np.zeros(len(ids), bool)
         if self.tracer.touches:
             contact = self.tracer.contact(self.p[ids], self.gn[ids])
-        near = None if self.pairs is None else _block_neighbours(self.pairs, int(ids[0]), int(ids[-1]) + 1)
         est, sums = self.baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None)
         out = TileOut(key, ids, np.clip(est.mean, 0.0, 1.0).astype(np.float32),
                       self.errors.stderr(est, near, None).astype(np.float32), est.n.astype(np.int32),
@@ -318,5 +404,5 @@ class VertexBake:
         return out
 
 
-__all__ = ["VertexBakeResult", "bake_vertex_ao", "VertexBake", "all_corners", "vertex_means", "sample_points", "NUDGE",
+__all__ = ["VertexBakeResult", "bake_vertex_ao", "bake_vertex_maps", "VertexBake", "all_corners", "vertex_means", "sample_points", "NUDGE",
            "Neighbours", "unit_pairs"]

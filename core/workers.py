@@ -75,35 +75,57 @@ class BakeWorkerError(McAoError, RuntimeError):
 
 
 def send(stream, obj):
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    stream.write(_HEADER.pack(len(data)))
+    """Write ``obj`` as a message: a pickle (protocol 5) whose arrays travel out of band, each
+    array's bytes written straight from its memory after the pickle (no copy of them into the
+    pickle, none on the way in: a worker's scene arrives in the buffers its arrays then use)."""
+    buffers = []
+    data = pickle.dumps(obj, protocol=5, buffer_callback=buffers.append)
+    views = [b.raw() for b in buffers]
+    stream.write(_HEADER.pack(len(data)) + _HEADER.pack(len(views)) + b"".join(_HEADER.pack(v.nbytes) for v in views))
     stream.write(data)
+    for v in views:
+        stream.write(v)
     stream.flush()
 
 
 def receive(stream):
     """The next message, or None at the end of the stream."""
-    head = _read(stream, _HEADER.size)
+    head = _read(stream, 2 * _HEADER.size)
     if head is None:
         return None
-    data = _read(stream, _HEADER.unpack(head)[0])
-    return None if data is None else pickle.loads(data)
+    size, count = _HEADER.unpack(head[:_HEADER.size])[0], _HEADER.unpack(head[_HEADER.size:])[0]
+    sizes = _read(stream, count * _HEADER.size) if count else b""
+    if sizes is None:
+        return None
+    data = _read(stream, size)
+    if data is None:
+        return None
+    buffers = []
+    for i in range(count):
+        buf = _read(stream, _HEADER.unpack_from(sizes, i * _HEADER.size)[0])
+        if buf is None:
+            return None
+        buffers.append(buf)
+    return pickle.loads(data, buffers=buffers)
 
 
 def _read(stream, n):
-    parts, left = [], n
-    while left:
-        b = stream.read(left)
-        if not b:
+    """``n`` bytes of ``stream`` in one writable buffer (an array unpickled from it uses it as it
+    is), or None at the end of the stream."""
+    out = bytearray(n)
+    view, got = memoryview(out), 0
+    while got < n:
+        k = stream.readinto(view[got:])
+        if not k:
             return None
-        parts.append(b)
-        left -= len(b)
-    return b"".join(parts)
+        got += k
+    return out
 
 
 def mesh_data(mesh):
-    """A :class:`core.Mesh` as plain data for a worker."""
-    return dict(positions=mesh.positions, triangles=mesh.triangles, uvs=mesh.uvs, normals=mesh.normals,
+    """A :class:`core.Mesh` as plain data for a worker (its corner normals as given: the worker
+    computes the unit ones, the same bits; none for a flat-shaded mesh)."""
+    return dict(positions=mesh.positions, triangles=mesh.triangles, uvs=mesh.uvs, normals=mesh.given_normals(),
                 name=mesh.name)
 
 
@@ -122,6 +144,91 @@ def _error(name, message):
     if builtin is not None:
         return builtin(message)
     return BakeWorkerError(f"a worker process failed: {name}: {message}")
+
+
+# -- memory: what each process holds -----------------------------------------------------------------
+
+def process_memory():
+    """(resident bytes now, peak resident bytes) of this process: VmRSS and VmHWM from
+    /proc/self/status (Linux); elsewhere (None, the peak from getrusage where there is one)."""
+    now = peak = None
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    now = int(line.split()[1]) * 1024
+                elif line.startswith("VmHWM:"):
+                    peak = int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    if peak is None:
+        try:
+            import resource
+
+            # ru_maxrss: bytes on macOS, KiB elsewhere.
+            peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * (1 if sys.platform == "darwin" else 1024)
+        except (ImportError, OSError, AttributeError):
+            pass
+    return now, peak
+
+
+def reset_peak():
+    """Start this process's peak (VmHWM) afresh, where Linux allows it (writing 5 to
+    /proc/self/clear_refs); a worker does it before each bake, so its peak is that bake's."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def held_bytes(*roots, depth=8):
+    """Bytes of the numpy arrays reachable from ``roots`` through attributes, dicts, lists and
+    tuples (each memory block counted once, views and slices by their base): what a bake holds in
+    its meshes, tables and scenes' arrays. Embree's own scene memory is not an array and is not
+    counted here."""
+    seen_obj, blocks = set(), {}
+    todo = [(r, 0) for r in roots]
+    while todo:
+        obj, d = todo.pop()
+        if obj is None or id(obj) in seen_obj:
+            continue
+        seen_obj.add(id(obj))
+        if isinstance(obj, np.ndarray):
+            base = obj
+            while isinstance(base.base, np.ndarray):
+                base = base.base
+            if base.base is None or isinstance(base.base, (bytes, bytearray, memoryview)):
+                blocks[id(base)] = base.nbytes
+            else:  # a view of memory numpy does not own (a buffer, a pickle's): its own size
+                blocks[id(obj)] = max(blocks.get(id(obj), 0), obj.nbytes)
+            continue
+        if d >= depth or isinstance(obj, (str, bytes, int, float, bool, type)) or callable(obj) and not hasattr(obj, "__dict__"):
+            continue
+        if isinstance(obj, dict):
+            todo.extend((v, d + 1) for v in obj.values())
+        elif isinstance(obj, (list, tuple, set, frozenset)):
+            todo.extend((v, d + 1) for v in obj)
+        else:
+            attrs = getattr(obj, "__dict__", None)
+            if isinstance(attrs, dict):
+                todo.extend((v, d + 1) for v in attrs.values())
+            for name in getattr(type(obj), "__slots__", ()):
+                todo.append((getattr(obj, name, None), d + 1))
+    return int(sum(blocks.values()))
+
+
+def memory_entry(process, held_from=(), start=None, ready=None):
+    """One process's line of ``report['worker_memory']``: its resident bytes now, its peak, and the
+    bytes of the arrays its bake holds (see :func:`core.bake.bake_ao`)."""
+    now, peak = process_memory()
+    out = {"process": process, "pid": os.getpid(), "rss": now, "peak": peak, "held": held_bytes(*held_from)}
+    if start is not None:
+        out["start"] = start
+    if ready is not None:
+        out["ready"] = ready
+    return out
 
 
 # -- the worker process ---------------------------------------------------------------------------------
@@ -167,8 +274,11 @@ def main():
             if kind == "setup":
                 bake = shared = None  # the last bake's scene goes before the next one is built
                 job = args.pop()  # only the bake keeps what it needs of the input: the job's arrays go
+                reset_peak()
+                start = process_memory()[0]
                 bake, shared, threads = _setup(job, current["cancel"], lambda work: reply("progress", bake_id, work))
                 del job
+                ready = process_memory()[0]
                 reply("ready", bake_id)
             elif kind == "tile":
                 outs = []
@@ -178,7 +288,8 @@ def main():
                 shared.flush()
                 reply("finish", bake_id, dict(rays=shared.rays, trace_seconds=shared.trace_seconds,
                                              trace_cpu_seconds=shared.trace_cpu_seconds,
-                                             counters=bake.start.counters()))
+                                             counters=bake.start.counters(),
+                                             memory=memory_entry("worker", (bake,), start, ready)))
                 bake = shared = None
             elif kind == "exit":
                 return
@@ -204,15 +315,16 @@ def self_test():
 
 
 def _setup(job, cancel, progress):
-    from .bake import Prologue, TexelBake
+    from .bake import Prologue, texel_bake
     from .settings import BakeSettings
 
     s = BakeSettings(**job["settings"])
     if job.get("kind") == "vertex":
-        from .vertices import VertexBake
+        from .vertices import vertex_bake
 
         pro = Prologue(_mesh(job["target"]), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=False)
-        bake = VertexBake(pro, s, job["corners"], job["merge"], job["bent_normals"], job["block"])
+        bake = vertex_bake(pro, s, job["corners"], job.get("quantities", [s.quantity]), job["merge"],
+                           job["bent_normals"], job["block"])
         shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
         bake.trace_setup(shared, cancel)
         return bake, shared, s.threads
@@ -220,7 +332,8 @@ def _setup(job, cancel, progress):
                    highpoly=None if job["highpoly"] is None else [_mesh(m) for m in job["highpoly"]],
                    extrusion=job["extrusion"], max_ray_distance=job["max_ray_distance"], cage=_mesh(job["cage"]),
                    bent_normals=job["bent_normals"])
-    bake = TexelBake(pro, s, job["bent_normals"])
+    bake = texel_bake(pro, s, job.get("quantities", [s.quantity]), job["bent_normals"],
+                      guide=job.get("guide", False))
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)
     return bake, shared, s.threads
@@ -431,6 +544,8 @@ class Pool:
                 progress(1.0)
             parts = list(finished.values())
             counters = _sum_counters(parts)
+            counters["worker_memory"] = [dict(p["memory"], process=f"worker {w.index}") for w, p in
+                                         sorted(finished.items(), key=lambda item: item[0].index) if "memory" in p]
             return (sum(p["rays"] for p in parts), sum(p["trace_seconds"] for p in parts),
                     sum(p["trace_cpu_seconds"] for p in parts), counters)
 
@@ -521,15 +636,22 @@ def run_dask(client, job, keys, planned, store, progress, cancel, threads=1):
 
 
 def _sum_counters(parts):
-    """The start stages' counters of several processes, added up (texts: the first given)."""
+    """The start stages' counters of several processes, added up (texts: the first given; a bake of
+    several quantities has each quantity's counters under its name, added up the same way)."""
     counters = {}
     for p in parts:
-        for k, v in p["counters"].items():
-            if isinstance(v, (int, float)) and k != "directions_per_point":
-                counters[k] = counters.get(k, 0) + v
-            elif counters.get(k) is None:
-                counters[k] = v
+        _add_counters(counters, p["counters"])
     return counters
+
+
+def _add_counters(into, counters):
+    for k, v in counters.items():
+        if isinstance(v, dict):
+            _add_counters(into.setdefault(k, {}), v)
+        elif isinstance(v, (int, float)) and k != "directions_per_point":
+            into[k] = into.get(k, 0) + v
+        elif into.get(k) is None:
+            into[k] = v
 
 
 _POOL = None
@@ -563,14 +685,19 @@ def memory_limit():
 
 
 def auto_workers(triangles, cores=None, memory=None):
-    """(workers, threads each) for a bake of ``triangles`` (every mesh it holds): one worker a core,
-    fewer with more threads each where memory holds fewer copies of the scene (threads share one)."""
+    """(workers, threads each) for a bake of ``triangles``: a count (every mesh, costed as the
+    target's) or (target, occluder, high-poly) triangles. One worker a core, fewer with more threads
+    each where memory holds fewer copies of the scene (threads share one): the workers and what the
+    parent adds while they bake within 80% of ``memory`` (None: :func:`memory_limit`, the machine's
+    available memory or what its container's cgroup has left, whichever is less)."""
     cores = cpu_count() if cores is None else cores
     memory = memory_limit() if memory is None else memory
-    # A worker's memory: what core.cost estimates for a process holding the scene (measured 770-830
-    # bytes a triangle per worker with its Embree scene, beside its interpreter and sample pool).
-    per_worker = _cost.BYTES_PER_PROCESS + triangles * _cost.BYTES_PER_TRIANGLE
-    workers = cores if memory is None else max(1, min(cores, int(memory * 0.8 // per_worker)))
+    target, occluders, highpoly = (int(triangles), 0, 0) if np.ndim(triangles) == 0 else map(int, triangles)
+    # core.cost's measured figures: each worker's peak (its tables and Embree scenes, its interpreter
+    # and sample pool), and the parent's share while they bake.
+    per_worker = _cost.process_bytes(target, occluders, highpoly)
+    parent = _cost.parent_bytes(target, occluders + highpoly)
+    workers = cores if memory is None else max(1, min(cores, int((memory * 0.8 - parent) // per_worker)))
     return workers, max(1, cores // workers)
 
 
@@ -628,16 +755,21 @@ def bake_tiles(bake, keys, processes, threads, job, store, progress, cancel, on_
     when they bake). Where a local pool cannot be used (its self-test failed), this process bakes.
 
     Returns (rays, trace seconds, trace CPU seconds, the start stage's counters, the reason the pool
-    was not used or None)."""
+    was not used or None). The counters hold ``worker_memory``: a :func:`memory_entry` of this
+    process, then one of each worker process that baked."""
     fallback = usable_pool(processes, threads)
     if fallback is None and not in_process(processes):
         if on_rays is not None:
             raise SettingsError("on_rays sees the rays of this process only: bake with workers=1 to record them")
-        return (*run_tiles(processes, threads, job(), keys, bake.planned, store, progress, cancel), None)
+        rays, seconds, cpu, counters = run_tiles(processes, threads, job(), keys, bake.planned, store, progress, cancel)
+        counters["worker_memory"] = [memory_entry("parent", (bake,))] + counters.get("worker_memory", [])
+        return rays, seconds, cpu, counters, None
     shared = Scheduler(bake.planned, progress, cancel)
     bake.trace_setup(shared, cancel, on_rays)
     run_all(lambda key: store(bake.tile(key)), keys, bake.s.threads, shared, progress)
-    return shared.rays, shared.trace_seconds, shared.trace_cpu_seconds, bake.start.counters(), fallback
+    counters = bake.start.counters()
+    counters["worker_memory"] = [memory_entry("parent", (bake,))]
+    return shared.rays, shared.trace_seconds, shared.trace_cpu_seconds, counters, fallback
 
 
 def usable_pool(processes, threads):

@@ -16,6 +16,8 @@ def register(addon_name="mc_ao"):
 
     properties.McAoPreferences.bl_idname = addon_name
     _classes = (
+        properties.McAoCollectionRef,
+        properties.McAoObjectSettings,
         properties.McAoSettings,
         properties.McAoPreferences,
         operators.OBJECT_OT_mc_ao_bake,
@@ -24,6 +26,9 @@ def register(addon_name="mc_ao"):
         panel.VIEW3D_PT_mc_ao_target,
         panel.VIEW3D_PT_mc_ao_sampling,
         panel.VIEW3D_PT_mc_ao_occlusion,
+        panel.MC_AO_OT_collection_add,
+        panel.MC_AO_OT_collection_remove,
+        panel.VIEW3D_PT_mc_ao_object,
         panel.VIEW3D_PT_mc_ao_selected_to_active,
         panel.VIEW3D_PT_mc_ao_image,
         panel.VIEW3D_PT_mc_ao_output,
@@ -31,6 +36,7 @@ def register(addon_name="mc_ao"):
     for cls in _classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.mc_ao = bpy.props.PointerProperty(type=properties.McAoSettings)
+    bpy.types.Object.mc_ao = bpy.props.PointerProperty(type=properties.McAoObjectSettings)
     for name, handler in operators.HANDLERS.items():
         getattr(bpy.app.handlers, name).append(handler)
 
@@ -63,6 +69,7 @@ def unregister():
     if workers is not None:
         workers.shutdown()
     del bpy.types.Scene.mc_ao
+    del bpy.types.Object.mc_ao
     for cls in reversed(_classes):
         bpy.utils.unregister_class(cls)
     _classes = ()

@@ -23,17 +23,18 @@ class BakeRun:
     """Runs the jobs one after another on a worker thread and reports through ``messages``.
 
     Messages are tuples: ("progress", job, fraction), ("tile", job, rows, cols, block),
-    ("done", job, {quantity: result}), ("cancelled", job), ("error", job, exception),
+    ("done", job, {quantity: result}) (None: the job's own bake), ("cancelled", job), ("error", job, exception),
     ("crash", job, exception, traceback text), and ("end",) last. A job that fails does not stop
     the ones after it; a cancel does. ``started[job]`` is the time.monotonic() at which the worker
     began that job.
     """
 
-    def __init__(self, jobs, settings, threads, live, quantities=("ao",)):
+    def __init__(self, jobs, settings, threads, live, quantities=(None,)):
         self.jobs = jobs
-        # The core quantities each job is baked for: the settings' own first, then the others that
-        # an output needs (each one more core bake of the job); "done" carries {quantity: result}.
-        self.quantities = list(quantities) or ["ao"]
+        # What each job is baked for: None, its own bake (Job.quantity), then each other core
+        # quantity an output needs (one more core bake of the job, unless it is the job's own);
+        # "done" carries {quantity: result}, None for the job's own.
+        self.quantities = [None] + [q for q in quantities if q is not None]
         self.settings = settings
         self.threads = threads
         self.live = live
@@ -83,15 +84,19 @@ class BakeRun:
 
             results = {}
             try:
-                for k, quantity in enumerate(self.quantities):
-                    def progress(fraction, i=i, k=k):
-                        put(("progress", i, (k + fraction) / len(self.quantities)))
+                own = getattr(job, "quantity", "ao")
+                runs = [q for q in self.quantities if q != own]
+                for k, quantity in enumerate(runs):
+                    def progress(fraction, i=i, k=k, n=len(runs)):
+                        put(("progress", i, (k + fraction) / n))
 
                     results[quantity] = job.run(
                         self.settings, self.threads, progress=progress, cancel=self.cancel,
                         on_tile=on_tile if self.live and k == 0 else None,
                         **({"quantity": quantity} if k else {}),
                     )
+                if own in self.quantities:
+                    results[own] = results[None]
             except self.core.BakeCancelled:
                 put(("cancelled", i))
                 break
@@ -101,7 +106,7 @@ class BakeRun:
             except Exception as exc:  # a bug, or the machine out of memory: report it, keep the trace
                 put(("crash", i, exc, traceback.format_exc()))
                 continue
-            problem = empty_bake_problem(results[self.quantities[0]])
+            problem = empty_bake_problem(results[None])
             if problem is not None:  # never a success that baked nothing (nor its all-zero files)
                 put(("error", i, self.core.MeshError(problem)))
                 continue

@@ -91,6 +91,27 @@ class Job:
     extrusion: float = 0.0
     max_ray_distance: float = 0.0
     notes: list = field(default_factory=list)
+    # What this job bakes (core.bake_ao's quantity): 'ao' or 'thickness'; an object baked for both has a
+    # job for each, each with its own image.
+    quantity: str = "ao"
+
+    def bake_kwargs(self, settings, threads=None, quantity=None):
+        """core.bake_ao's keyword arguments for this job: the settings' (BakeSettings.bake_kwargs), and
+        for a thickness map its quantity, without the ground (only the object itself occludes it).
+        ``quantity``: another quantity than the job's own (an output that needs a second one), which
+        comes without bent normals (the core makes them with the job's own bake)."""
+        kw = settings.bake_kwargs(threads)
+        quantity = quantity or self.quantity
+        if quantity != "ao":
+            kw.pop("ground", None)
+            kw["quantity"] = quantity
+        if quantity != self.quantity:
+            kw.pop("bent_normals", None)
+        return kw
+
+    def occluders_for(self, quantity=None):
+        """The occluders of its bake of ``quantity`` (its own by default): none for a thickness map."""
+        return self.occluders if (quantity or self.quantity) == "ao" else []
 
     @property
     def selected_to_active(self):
@@ -100,7 +121,7 @@ class Job:
         """core.bake_ao of this job; returns its result. Needs no bpy (safe in a worker thread).
 
         ``quantity``: bake this core quantity (core.bake_ao's ``quantity``, e.g. "thickness") instead
-        of the settings' own, without bent normals (an output that needs a second quantity).
+        of the job's own (an output that needs a second quantity; see bake_kwargs()).
         Raises core.McAoError subclasses (core.BakeCancelled when ``cancel`` fires).
         """
         if settings.vertex_colors or settings.use_udim or settings.bent_normals:
@@ -124,8 +145,8 @@ class Job:
                          cage=None if self.cage is None else mesh(self.cage))
         return core.bake_ao(
             mesh(self.target),
-            occluders=[mesh(o) for o in self.occluders],
-            **_kwargs(settings, threads, quantity),
+            occluders=[mesh(o) for o in self.occluders_for(quantity)],
+            **self.bake_kwargs(settings, threads, quantity),
             progress=progress,
             cancel=cancel,
             on_tile=on_tile,
@@ -168,16 +189,6 @@ _TARGET_NOTES = {
 }
 
 
-def _kwargs(settings, threads, quantity=None):
-    """The core's keyword arguments of a job's bake; another ``quantity`` than the settings' comes
-    without bent normals (the core makes them with the AO only)."""
-    kw = settings.bake_kwargs(threads)
-    if quantity is not None:
-        kw["quantity"] = quantity
-        kw.pop("bent_normals", None)
-    return kw
-
-
 def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None, quantity=None):
     """The core's bake of ``job`` for a colour-attribute, UDIM or bent-normal bake (Job.run's)."""
     core = corelink.load()
@@ -186,8 +197,8 @@ def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None,
         return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
                          normals=arrays.normals, name=arrays.name)
 
-    kw = _kwargs(settings, threads, quantity)
-    occluders = [mesh(o) for o in job.occluders]
+    kw = job.bake_kwargs(settings, threads, quantity)
+    occluders = [mesh(o) for o in job.occluders_for(quantity)]
     if settings.vertex_colors:
         for key in ("resolution", "margin", "bent_normals"):
             kw.pop(key, None)
@@ -323,30 +334,6 @@ def input_notes(result):
     return notes + miss_notes(result) + [str(w) for w in report.get("warnings", ())]
 
 
-def visible_geometry(depsgraph, view_layer):
-    """(original object name or None for an instance, MeshArrays) of everything visible in the view layer."""
-    for inst in depsgraph.object_instances:
-        obj = inst.object
-        if obj.type not in GEOMETRY_TYPES:
-            continue
-        key = None
-        if not inst.is_instance:
-            if not obj.original.visible_get(view_layer=view_layer):
-                continue
-            key = obj.original.name
-        arrays = object_arrays(obj, matrix=inst.matrix_world.copy())
-        if arrays is not None:
-            yield key, arrays
-
-
-def _selected_geometry(depsgraph, objects):
-    for obj in objects:
-        if obj.type in GEOMETRY_TYPES:
-            arrays = object_arrays(obj.evaluated_get(depsgraph))
-            if arrays is not None:
-                yield obj.name, arrays
-
-
 def id_name_max_bytes():
     """The longest datablock name this Blender keeps, in bytes of UTF-8 (63 up to 4.4, 255 from 5.0).
 
@@ -371,19 +358,26 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     selected : list of bpy.types.Object
         The occluders when ``settings.occluders == "SELECTED"`` (each target is left out of its own list).
     view_layer : bpy.types.ViewLayer, optional
-        Whose visibility counts for ``settings.occluders == "VISIBLE"``; the depsgraph's by default.
+        Whose rendered objects occlude for ``settings.occluders == "VISIBLE"`` (All Rendered); the
+        depsgraph's by default. Include, Exclude, Only Local and each object's Occludes Other Objects
+        narrow the occluders (mc_ao.occluders).
+
+    Returns one Job per target and quantity (AO, thickness), in that order.
 
     Raises
     ------
     ExtractError
-        A target has no faces or no such UV map, or two targets would bake into one image.
+        A target has no faces or no such UV map, two targets would bake into one image, a bad Include
+        or Exclude collection, or a Channel the Into image does not have.
     """
+    from . import occluders as occluder_sets
+
     max_bytes = id_name_max_bytes()
     image_names = {}
     for obj in targets:
-        names = [settings.image_name_for(obj.name, max_bytes)]
+        names = [settings.quantity_image_name_for(obj.name, q, max_bytes) for q in settings.quantities]
         if settings.error_map and not settings.vertex_colors:
-            names.append(settings.stderr_image_name_for(obj.name, max_bytes))
+            names += [settings.quantity_image_name_for(obj.name, q, max_bytes, "_stderr") for q in settings.quantities]
         if settings.bent_normals and not settings.vertex_colors:
             names.append(settings.bent_image_name_for(obj.name, max_bytes))
         for name in names:
@@ -394,12 +388,9 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
                 )
             image_names[name] = obj.name
 
-    if settings.occluders == "VISIBLE":
-        pool = list(visible_geometry(depsgraph, view_layer or depsgraph.view_layer))
-    elif settings.occluders == "SELECTED":
-        pool = list(_selected_geometry(depsgraph, selected))
-    else:
-        pool = []
+    check_channel(settings)
+    notes = []
+    pool = occluder_sets.pool(depsgraph, settings, selected=selected, view_layer=view_layer, notes=notes)
 
     extra = extra_for(settings)
     jobs = []
@@ -411,9 +402,70 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
         if target is None:
             raise ExtractError(f"{obj.name} has no faces to bake")
         occluders = [arrays for key, arrays in pool if key != obj.name]
-        jobs.append(Job(obj.name, settings.image_name_for(obj.name, max_bytes), target, occluders))
+        for quantity in settings.quantities:  # a thickness map: the object alone occludes it
+            jobs.append(Job(obj.name, settings.quantity_image_name_for(obj.name, quantity, max_bytes), target,
+                            occluders if quantity == "ao" else [], quantity=quantity))
+    if jobs:
+        jobs[0].notes.extend(notes)
     check_plan(jobs, settings, {obj.name: obj for obj in targets})
     return jobs
+
+
+# Channel index of each Channel setting.
+CHANNELS = {"R": 0, "G": 1, "B": 2, "A": 3}
+
+
+def channel_problem(settings, images=None):
+    """Why AO cannot go into ``settings.channel`` of the image ``settings.into`` (bpy.data.images, or
+    ``images``: name -> image), or None (Channel off, or it can)."""
+    if settings.channel == "NONE":
+        return None
+    if images is None:
+        import bpy
+
+        images = bpy.data.images
+    image = images.get(settings.into)
+    if image is None:
+        import os
+
+        if os.path.splitext(settings.into)[1].lower() not in (".png", ".exr", ".tif", ".tiff"):
+            return f"Into: there is no image named {settings.into!r} to write the AO into"
+        # a file (the script's --into PATH): core.imageio checks it, naming it and what it has
+        try:
+            corelink.load("imageio").check_channel(settings.into, settings.channel, settings.size)
+        except corelink.load().SettingsError as exc:
+            return str(exc)
+        return _CHANNEL_WRITER_MISSING.format(channel=settings.channel, into=settings.into)
+    channels = image_channels(image)
+    # An image of 3 channels has no alpha; one of 1 or 2 (grey, grey and alpha) no separate green or blue.
+    has = {4: "RGBA", 3: "RGB", 2: "RA", 1: "R"}.get(channels, "")
+    if settings.channel not in has:
+        return (f"image {settings.into!r} has no {settings.channel} channel (it has {channels}: "
+                f"{', '.join(has) or 'none'}); choose one of them")
+    # The writer that puts one channel into an existing image is not part of this version: refuse
+    # rather than bake into the object's own image instead.
+    return _CHANNEL_WRITER_MISSING.format(channel=settings.channel, into=settings.into)
+
+
+_CHANNEL_WRITER_MISSING = ("Channel {channel} into {into!r}: writing the AO into one channel of an existing image "
+                           "is not available in this version; set Channel to Own Image")
+
+
+def image_channels(image):
+    """How many channels ``image`` holds (its file's or its buffer's): Blender's Image.channels says 4
+    for every loaded image, its depth (bits per pixel) tells: 8 bits a channel, 32 in a float image."""
+    depth = getattr(image, "depth", 0)
+    per = 32 if getattr(image, "is_float", False) else 8
+    if depth and depth % per == 0 and 1 <= depth // per <= 4:
+        return depth // per
+    return image.channels
+
+
+def check_channel(settings, images=None):
+    """Raise ExtractError with :func:`channel_problem`'s reason, before any work."""
+    problem = channel_problem(settings, images)
+    if problem is not None:
+        raise ExtractError(problem)
 
 
 def miss_summary(result):

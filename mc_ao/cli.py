@@ -128,17 +128,28 @@ def _add_setting(parser, setting):
     option, dest = setting.option, setting.option_key
     default = setting.default
     help_text = setting.help.replace("%", "%%")  # argparse formats help with %
-    if setting.kind == "bool":
+    if setting.kind == "bool" or setting.flag is not None:
         parser.add_argument(option, dest=dest, action="store_true", help=help_text)
         return
     kwargs = {"dest": dest, "help": f"{help_text} (default: {default!r})"}
-    if setting.kind == "enum":
-        kwargs.update(choices=[schema.cli_value(i) for i in setting.identifiers], default=schema.cli_value(default))
-        kwargs["help"] = f"{help_text} (default: {schema.cli_value(default)})"
+    if setting.sets:  # not given: None, so that giving it can set another setting
+        kwargs["default"] = None
+    if setting.kind in ("enum", "flags"):
+        # any case: --channel R
+        kwargs.update(choices=[schema.cli_value(i) for i in setting.identifiers], type=str.lower)
+        if setting.kind == "enum":
+            kwargs["default"] = schema.cli_value(default)
+            kwargs["help"] = f"{help_text} (default: {schema.cli_value(default)})"
+        else:
+            kwargs.update(nargs="+", default=[schema.cli_value(d) for d in default])
+            kwargs["help"] = f"{help_text} (default: {' '.join(schema.cli_value(d) for d in default)})"
+    elif setting.kind == "collections":
+        kwargs.update(nargs="+", default=[], metavar="COLLECTION", help=f"{help_text} (default: none)")
     elif setting.kind == "int":
         kwargs.update(type=int, default=default, metavar="N")
     elif setting.kind in ("float", "distance"):
-        kwargs.update(type=float, default=default, metavar="D" if setting.kind == "distance" else "X")
+        kwargs.setdefault("default", default)
+        kwargs.update(type=float, metavar="D" if setting.kind == "distance" else "X")
     else:
         kwargs.update(default=default, metavar="NAME")
     parser.add_argument(option, **kwargs)
@@ -446,15 +457,14 @@ def settings_from(args):
     from .settings import BakeSettings
 
     width, height = args.resolution
-    values = {setting.name: schema.from_cli(setting, getattr(args, setting.option_key))
-              for setting in schema.SETTINGS if setting.option_key is not None}
+    values, problems = schema.from_options(args)
     values.update(
         resolution=width, height=height, float_buffer=args.attribute_type == "float",
         use_selected_to_active=bool(args.selected_to_active or args.match_suffix),
         use_cage=args.cage is not None, cage_object=args.cage or "",
     )
     settings = BakeSettings(**values)
-    problems = selected_to_active_problems(args)
+    problems += selected_to_active_problems(args)
     for field, message in schema.problems(settings):
         if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
             message = f"--resolution must be at most {corelink.load('settings').MAX_RESOLUTION} a side, not {width}x{height}"
@@ -786,7 +796,7 @@ class ScriptRun:
         name = escape(job.object_name)
         if outcome.trace:
             print(outcome.trace, file=sys.stderr, end="")
-        result = outcome.results and outcome.results[self.plan.quantities[0]]
+        result = outcome.result
         for note in outcome.notes:
             print(f"bake_ao: {name}: warning: {escape(note)}", file=sys.stderr)
         if result is not None and job.selected_to_active:

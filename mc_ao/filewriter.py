@@ -56,6 +56,14 @@ def settings_record(settings):
             "domain": settings.attribute_domain.lower()} if settings.target == "VERTEX_COLORS" else {}),
         **({"bent_normals": settings.bent_space.lower()} if settings.bent_normals else {}),
         **({"denoise": True} if settings.denoise else {}),
+        # which objects occlude, the ground and the quantities: recorded only where not the default
+        **({"occluder_collections": ", ".join(settings.occluder_collections)}
+           if settings.occluder_collections else {}),
+        **({"exclude_collections": ", ".join(settings.exclude_collections)} if settings.exclude_collections else {}),
+        **({"only_local": True} if settings.only_local else {}),
+        **({"ground": settings.ground.lower()} if settings.ground != "OFF" else {}),
+        **({"ground_height": float(settings.ground_height)} if settings.ground == "HEIGHT" else {}),
+        **({"quantity": " ".join(settings.quantities)} if settings.quantities != ("ao",) else {}),
         "replicates": int(kw["replicates"]),
     }
     if getattr(settings, "use_selected_to_active", False):
@@ -72,6 +80,8 @@ def file_metadata(settings, job, blend_path):
     objects and cage. One dict for all three, so that they write the same bytes."""
     metadata = dict(settings_record(settings), object=job.object_name,
                     blend=os.path.basename(os.fspath(blend_path or "")))
+    if getattr(job, "quantity", "ao") != "ao":
+        metadata["map"] = job.quantity  # what this file holds, where the bake made more than AO
     if getattr(job, "selected_to_active", False):
         metadata.update(highpoly=", ".join(h.name for h in job.highpoly),
                         cage=job.cage.name if job.cage is not None else "")

@@ -350,7 +350,7 @@ class BakeSession:
             self.report({"ERROR"}, f"{name}: {outcome.error}" + ("; see the console" if outcome.trace else ""))
             return
         self.finished.append(outcome.index)
-        self.results.append(outcome.results[self.run.plan.quantities[0]])
+        self.results.append(outcome.result)
         if outcome.file_error:
             self.file_errors += 1
             self.unsummarised_errors += 1

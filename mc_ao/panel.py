@@ -122,7 +122,8 @@ def draw_targets(layout, context):
         else:
             wrapped_label(layout, context, f"{len(targets)} objects, each into its {what}", icon="GROUP_VCOL")
     elif len(targets) == 1:
-        image_name = settings.image_name_for(targets[0].name, baking.id_name_max_bytes())
+        image_name = " and ".join(settings.quantity_image_name_for(targets[0].name, q, baking.id_name_max_bytes())
+                                  for q in settings.quantities)
         extra = " (UDIM tiles)" if settings.use_udim else ""
         if settings.bent_normals:
             extra += f" and {settings.bent_image_name_for(targets[0].name, baking.id_name_max_bytes())}"
@@ -169,10 +170,12 @@ class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):
         layout.prop(settings, "target")
         col = layout.column()
         if settings.target == "VERTEX_COLORS":
+            col.prop(settings, "quantity")
             col.prop(settings, "attribute_name", icon="GROUP_VCOL")
             col.prop(settings, "attribute_domain")
             col.prop(settings, "float_buffer", text="Float Color")
             return
+        col.prop(settings, "quantity")
         col.prop(settings, "use_udim")
         col.prop(settings, "bent_normals")
         sub = col.column()
@@ -242,6 +245,65 @@ class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
         col.prop(settings, "denoise")
 
 
+# The scene settings that are lists of collections (Include, Exclude).
+COLLECTION_SETTINGS = ("occluder_collections", "exclude_collections")
+
+
+class MC_AO_OT_collection_add(bpy.types.Operator):
+    """Add a collection to the list (the active collection, if it is not listed yet)"""
+
+    bl_idname = "mc_ao.collection_add"
+    bl_label = "Add Collection"
+    bl_options = {"REGISTER", "UNDO", "INTERNAL"}
+
+    setting: bpy.props.EnumProperty(items=[(n, n, "") for n in COLLECTION_SETTINGS], options={"HIDDEN"})
+
+    def execute(self, context):
+        items = getattr(context.scene.mc_ao, self.setting)
+        item = items.add()
+        active = getattr(context, "collection", None)
+        listed = {i.collection for i in items}
+        if active is not None and active is not context.scene.collection and active not in listed:
+            item.collection = active
+        return {"FINISHED"}
+
+
+class MC_AO_OT_collection_remove(bpy.types.Operator):
+    """Remove this collection from the list"""
+
+    bl_idname = "mc_ao.collection_remove"
+    bl_label = "Remove Collection"
+    bl_options = {"REGISTER", "UNDO", "INTERNAL"}
+
+    setting: bpy.props.EnumProperty(items=[(n, n, "") for n in COLLECTION_SETTINGS], options={"HIDDEN"})
+    index: bpy.props.IntProperty(options={"HIDDEN"})
+
+    def execute(self, context):
+        items = getattr(context.scene.mc_ao, self.setting)
+        if 0 <= self.index < len(items):
+            items.remove(self.index)
+        return {"FINISHED"}
+
+
+def draw_collections(layout, settings, name):
+    """A list of collection pickers under the setting's label, each with a remove button, and an add button."""
+    label = settings.bl_rna.properties[name].name
+    items = getattr(settings, name)
+    col = layout.column(align=True)
+    for i, item in enumerate(items):
+        row = col.row(align=True)
+        row.prop(item, "collection", text=label if i == 0 else " ")
+        op = row.operator(MC_AO_OT_collection_remove.bl_idname, text="", icon="X")
+        op.setting, op.index = name, i
+    row = col.row(align=True)
+    row.use_property_split = False
+    split = row.split(factor=0.4, align=True)
+    left = split.row()
+    left.alignment = "RIGHT"
+    left.label(text="" if len(items) else label)
+    split.operator(MC_AO_OT_collection_add.bl_idname, text="Add Collection", icon="ADD").setting = name
+
+
 class VIEW3D_PT_mc_ao_occlusion(_McAoPanel, bpy.types.Panel):
     bl_label = "Occlusion"
     bl_parent_id = "VIEW3D_PT_mc_ao"
@@ -250,9 +312,39 @@ class VIEW3D_PT_mc_ao_occlusion(_McAoPanel, bpy.types.Panel):
         settings = context.scene.mc_ao
         layout = self.split_layout()
         col = layout.column()
-        col.prop(settings, "occluders")
+        col.prop(settings, "only_local")
+        sub = col.column()
+        sub.active = not settings.only_local
+        sub.prop(settings, "occluders")
+        for name in COLLECTION_SETTINGS:
+            draw_collections(sub, settings, name)
+        col = layout.column()
+        col.prop(settings, "ground")
+        sub = col.column()
+        sub.active = settings.ground == "HEIGHT"
+        sub.prop(settings, "ground_height")
+        col = layout.column()
         col.prop(settings, "max_distance")
         col.prop(settings, "ignore_backfaces")
+
+
+class VIEW3D_PT_mc_ao_object(_McAoPanel, bpy.types.Panel):
+    """The active object's own part in others' bakes."""
+
+    bl_label = "Object"
+    bl_parent_id = "VIEW3D_PT_mc_ao"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None
+
+    def draw(self, context):
+        obj = context.active_object
+        layout = self.split_layout()
+        if obj is None or getattr(obj, "mc_ao", None) is None:
+            return
+        layout.prop(obj.mc_ao, "occlude_others")
 
 
 class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
@@ -279,6 +371,11 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
         col.prop(settings, "image_name", **_placeholder("<object>_AO"))
         col.prop(settings, "float_buffer")
         col.prop(settings, "error_map")
+        col = layout.column()
+        col.prop(settings, "channel")
+        sub = col.column()
+        sub.active = settings.channel != "NONE"
+        sub.prop(settings, "into")
 
 
 class VIEW3D_PT_mc_ao_output(_McAoPanel, bpy.types.Panel):

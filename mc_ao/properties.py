@@ -1,7 +1,8 @@
 """The bake settings on every scene (``scene.mc_ao``), made from mc_ao.schema, and the add-on preferences."""
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
+                       StringProperty)
 
 from . import schema
 
@@ -12,6 +13,24 @@ _BLEND_RELATIVE = (
     if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties
     else set()
 )
+
+
+class McAoCollectionRef(bpy.types.PropertyGroup):
+    """One entry of a list of collections (Include, Exclude): a pointer, so that renaming the
+    collection keeps it chosen."""
+
+    collection: PointerProperty(type=bpy.types.Collection, name="Collection",
+                                description="A collection of this scene")
+
+
+class McAoObjectSettings(bpy.types.PropertyGroup):
+    """What one object does in others' bakes (``object.mc_ao``)."""
+
+    occlude_others: BoolProperty(
+        name="Occludes Other Objects", default=True,
+        description="This object darkens the other objects baked beside it. Off, it occludes only itself "
+                    "when it is baked (a floor or a helper that should leave no shadow on the props)",
+    )
 
 
 def _property(setting):
@@ -25,7 +44,9 @@ def _property(setting):
             ui["max"] = hi
         return IntProperty(default=setting.default, min=setting.lo, **common, **ui)
     if kind in ("float", "distance"):
-        return FloatProperty(default=setting.default, min=setting.lo or 0.0, **common, **ui)
+        if setting.lo is not None or kind == "distance":
+            ui.setdefault("min", setting.lo or 0.0)
+        return FloatProperty(default=setting.default, **common, **ui)
     if kind == "bool":
         return BoolProperty(default=setting.default, **common)
     if kind == "enum":
@@ -34,6 +55,13 @@ def _property(setting):
         if ui.pop("blend_relative", False):
             ui["options"] = _BLEND_RELATIVE
         return StringProperty(default=setting.default, **common, **ui)
+    if kind == "flags":
+        return EnumProperty(items=list(setting.items), default=set(setting.default), options={"ENUM_FLAG"},
+                            **common)
+    if kind == "collections":
+        return CollectionProperty(type=McAoCollectionRef, **common)
+    if kind == "image":
+        return PointerProperty(type=bpy.types.Image, **common)
     if kind == "object":
         return PointerProperty(type=bpy.types.Object, poll=lambda _self, obj: obj.type == "MESH", **common)
     raise AssertionError(f"unknown kind {kind!r}")

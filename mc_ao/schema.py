@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["Setting", "SETTINGS", "BY_NAME", "BY_KEY", "problems", "unlimited", "limit", "cli_value",
-           "from_cli", "MAX_THREADS"]
+           "from_cli", "from_options", "MAX_THREADS"]
 
 #: The most threads a bake may ask for: far above any machine's cores, far below what would exhaust
 #: the process starting them.
@@ -28,9 +28,12 @@ class Setting:
 
     name : the BakeSettings field and the scene property (``scene.mc_ao.<name>``).
     kind : "int", "float", "distance" (a float where 0 and inf mean no limit), "bool", "enum", "str",
-        or "object" (an object's name; a pointer on the scene).
+        "object" (an object's name; a pointer on the scene), "image" (an image's name; a pointer on the
+        scene), "collections" (collection names; a list of collection pointers on the scene) or "flags"
+        (a set of an enum's identifiers: a tuple here, an enum-flag property on the scene).
     default, label (the UI's name), help (the UI's tooltip and the option's help).
-    lo, hi : limits of an int or float; ``hi`` may name a core.settings constant ("MAX_SAMPLES").
+    lo, hi : limits of an int or float (a float with ``lo`` None takes any finite number); ``hi`` may
+        name a core.settings constant ("MAX_SAMPLES").
     zero : what 0 means, said in messages ("every core").
     items : an enum's ``(identifier, UI name, description)``; the script's choice for an identifier is
         it in lower case with '-' for '_' (``VERTEX_COLORS`` -> ``vertex-colors``).
@@ -38,6 +41,10 @@ class Setting:
         panel only (the script sets it another way, e.g. ``--format``, or not at all).
     targets : where it applies: "image", "vertex", "udim", "bent", "selected_to_active", "all".
     ui : further keyword arguments of the Blender property (soft limits, subtype, unit, ...).
+    flag : for an enum, the identifier that its script option, a flag (``--ground``), chooses; absent,
+        the default. None: the option takes the choice as a value.
+    sets : ``(name, identifier)``: giving this setting's option also sets that enum setting
+        (``--ground-height H`` sets Ground to Height); its option's default is then None (not given).
     """
 
     name: str
@@ -52,6 +59,8 @@ class Setting:
     key: object = ""  # "" = the name
     targets: tuple = ("all",)
     ui: dict = field(default_factory=dict)
+    flag: object = None
+    sets: tuple = ()
 
     @property
     def option_key(self):
@@ -73,10 +82,39 @@ def cli_value(identifier):
 
 
 def from_cli(setting, value):
-    """A script option's value as the setting holds it (an enum's identifier from its choice)."""
+    """A script option's value as the setting holds it (an enum's identifier from its choice, a flag's
+    identifier from True or False, a tuple from a list, the default for an option not given)."""
+    if value is None and setting.sets:
+        return setting.default
+    if setting.kind == "enum" and setting.flag is not None:
+        return setting.flag if value is True else (setting.default if value is False else value)
+    choices = {cli_value(i): i for i in setting.identifiers}
     if setting.kind == "enum":
-        return {cli_value(i): i for i in setting.identifiers}.get(value, value)
+        return choices.get(value, value)
+    if setting.kind == "flags":
+        return tuple(choices.get(v, v) for v in ([value] if isinstance(value, str) else value))
+    if setting.kind == "collections":
+        return tuple([value] if isinstance(value, str) else value)
     return value
+
+
+def from_options(namespace):
+    """The settings the script's options give: ``({name: value}, [problem, ...])`` for every setting
+    with an option. An option that ``sets`` another setting (``--ground-height H``: Ground is Height)
+    sets it; given beside that setting's own flag it is a problem."""
+    values, out = {}, []
+    for setting in SETTINGS:
+        if setting.option_key is not None:
+            values[setting.name] = from_cli(setting, getattr(namespace, setting.option_key))
+    for setting in SETTINGS:
+        if setting.sets and setting.option_key is not None and getattr(namespace, setting.option_key) is not None:
+            name, identifier = setting.sets
+            other = BY_NAME[name]
+            if other.flag is not None and getattr(namespace, other.option_key) is True:
+                out.append(f"{other.option} and {setting.option} both place the {other.label.lower()}: give one "
+                           f"({other.option} at each object's lowest point, {setting.option} at a fixed height)")
+            values[name] = identifier
+    return values, out
 
 
 SETTINGS = (
@@ -107,12 +145,44 @@ SETTINGS = (
     Setting("distribution", "enum", "COSINE", "Directions", "How ray directions are spread over the hemisphere",
             items=(("COSINE", "Cosine", "Cosine-weighted: no noise on open surfaces"),
                    ("UNIFORM", "Uniform", "Uniform over the hemisphere"))),
+    # "VISIBLE" (the script's "visible") is the stored value of All Rendered: files and manifests that
+    # chose it keep it.
     Setting("occluders", "enum", "VISIBLE", "Occluders",
-            "What casts occlusion onto the baked objects: every visible object (default), the baked "
-            "objects (selected), or each object alone (self)", items=(
+            "What casts occlusion onto the baked objects: every object that renders (default), the baked "
+            "objects (selected), or each object alone (self); Include and Exclude narrow it to collections",
+            items=(
                 ("SELF", "Object Alone", "Each object occludes only itself"),
                 ("SELECTED", "Selected", "The selected objects occlude each other"),
-                ("VISIBLE", "All Visible", "Every visible object in the view layer"))),
+                ("VISIBLE", "All Rendered",
+                 "Every object that renders in the view layer, as Cycles' bake counts them: hidden ones too, "
+                 "not those disabled in renders"))),
+    Setting("occluder_collections", "collections", (), "Include",
+            "Only objects in these collections (and the collections inside them) occlude; none listed: "
+            "every object of the Occluders choice. An instance belongs to its instancer's collections"),
+    Setting("exclude_collections", "collections", (), "Exclude",
+            "Objects in these collections (and the collections inside them) do not occlude other objects. "
+            "Where an object lies in both an included and an excluded collection, the collection nearer to "
+            "it decides (exclude a collection inside an included one to carve it out)"),
+    Setting("only_local", "bool", False, "Only Local",
+            "Each object is occluded by itself alone, as Cycles' Ambient Occlusion node's Only Local: no "
+            "other object darkens it (Occluders and the collections are then not used)"),
+    Setting("ground", "enum", "OFF", "Ground",
+            "A ground plane that occludes as an endless floor mesh would, without a mesh: contact shadow for "
+            "props baked without their floor", flag="AUTO", items=(
+                ("OFF", "Off", "No ground"),
+                ("AUTO", "Lowest Point", "At each baked object's own lowest point (each prop of a batch "
+                                         "gets its own contact)"),
+                ("HEIGHT", "Height", "At the height below (world Z)"))),
+    Setting("ground_height", "float", 0.0, "Height",
+            "World Z of the ground plane when Ground is Height (the script's --ground-height H sets both)",
+            lo=None, sets=("ground", "HEIGHT"),
+            ui={"soft_min": -100.0, "soft_max": 100.0, "subtype": "DISTANCE", "unit": "LENGTH"}),
+    Setting("quantity", "flags", ("AO",), "Quantity",
+            "What to bake: ambient occlusion into \"<object>_AO\", thickness into \"<object>_Thickness\" "
+            "(rays into the mesh up to Distance: black is thin, white thick), or both (shift-click)", items=(
+                ("AO", "AO", "Ambient occlusion, into \"<object>_AO\""),
+                ("THICKNESS", "Thickness", "How thick the mesh is behind each point (black thin, white thick), "
+                                           "into \"<object>_Thickness\"; only the object itself counts"))),
     Setting("uv_map", "str", "", "UV Map", "UV map to bake into; empty for each mesh's active render UV map",
             targets=("image", "udim", "bent")),
     Setting("margin", "int", 16, "Margin", "Extend the baked islands by this many pixels, against seams",
@@ -121,6 +191,15 @@ SETTINGS = (
             'Image to bake into; empty for "<object>_AO"; "{object}" is replaced by the object name. An '
             "existing image is reused, resized to the bake's size; files are named after it, made safe",
             targets=("image", "udim", "vertex")),
+    Setting("channel", "enum", "NONE", "Channel",
+            "Write the AO into one channel of an existing image (Into) and leave its other channels as they "
+            "are, e.g. red of a glTF occlusion-roughness-metallic texture", items=(
+                ("NONE", "Own Image", "Bake into the object's own image"),
+                ("R", "Red", "The red channel of the Into image"),
+                ("G", "Green", "The green channel of the Into image"),
+                ("B", "Blue", "The blue channel of the Into image"),
+                ("A", "Alpha", "The alpha channel of the Into image")), targets=("image",)),
+    Setting("into", "image", "", "Into", "The existing image whose Channel receives the AO", targets=("image",)),
     Setting("float_buffer", "bool", True, "32-bit Float",
             "Bake into a float image (else 8-bit); files get 16-bit PNG or float EXR/TIFF when on",
             key=None, targets=("image", "udim", "vertex")),
@@ -247,6 +326,8 @@ def _problem(setting, value):
         return None
     if kind == "float":
         number = _number(value)
+        if setting.lo is None:
+            return None if number is not None and math.isfinite(number) else f"must be a finite number, not {value!r}"
         if number is None or not math.isfinite(number) or number < setting.lo:
             what = f"a finite number >= 0 (0 = {setting.zero})" if setting.zero else "a finite distance >= 0"
             return f"must be {what}, not {value!r}"
@@ -262,8 +343,19 @@ def _problem(setting, value):
         return None
     if kind == "bool":
         return None if isinstance(value, bool) else f"must be true or false, not {value!r}"
-    if kind in ("str", "object"):
+    if kind in ("str", "object", "image"):
         return None if isinstance(value, str) else f"must be text, not {value!r}"
+    if kind == "flags":
+        values = (value,) if isinstance(value, str) else tuple(value)
+        wrong = [v for v in values if v not in setting.identifiers]
+        if wrong or not values or len(set(values)) != len(values):
+            return f"must be one or more of {', '.join(setting.identifiers)}, each once, not {value!r}"
+        return None
+    if kind == "collections":
+        values = (value,) if isinstance(value, str) else tuple(value)
+        if not all(isinstance(v, str) and v for v in values):
+            return f"must be collection names, not {value!r}"
+        return None
     raise AssertionError(f"unknown kind {kind!r}")
 
 
@@ -277,7 +369,35 @@ def problems(settings):
             out.append((setting.name, problem))
     if settings.target == "VERTEX_COLORS" and not str(settings.attribute_name).strip():
         out.append(("attribute_name", "must name the color attribute to bake into, not be empty"))
+    out += _occlusion_problems(settings)
     if settings.target == "VERTEX_COLORS" and settings.error_map:
         out.append(("error_map", "is for image textures: a color-attribute bake has no image to hold the "
                                  "standard error; turn it off (adaptive sampling still uses the error)"))
+    return out
+
+
+def _occlusion_problems(settings):
+    """The rules between the occluder, ground, quantity and channel settings."""
+    out = []
+    both = sorted(set(settings.occluder_collections) & set(settings.exclude_collections))
+    if both:
+        out.append(("exclude_collections", f"names {', '.join(repr(n) for n in both)}, which the included "
+                                           "collections name too: a collection either occludes or not; remove "
+                                           "it from one list"))
+    quantity = (settings.quantity,) if isinstance(settings.quantity, str) else tuple(settings.quantity)
+    if "THICKNESS" in quantity and settings.bent_normals:
+        out.append(("bent_normals", "come from the AO's rays: bake Thickness without Bent Normals"))
+    if len(quantity) > 1 and settings.target == "VERTEX_COLORS":
+        out.append(("quantity", "bakes one quantity into a color attribute: choose AO or Thickness"))
+    if len(quantity) > 1 and settings.use_selected_to_active:
+        out.append(("quantity", "bakes one quantity with Selected to Active: choose AO or Thickness"))
+    if settings.channel != "NONE":
+        if not settings.into:
+            out.append(("into", "must name the image whose channel receives the AO"))
+        if settings.target == "VERTEX_COLORS" or settings.use_udim:
+            out.append(("channel", "writes into one image: not with color attributes or UDIM tiles"))
+        if quantity != ("AO",):
+            out.append(("channel", "takes the AO alone: set Quantity to AO"))
+    elif settings.into:
+        out.append(("into", f"names {settings.into!r} but Channel is off: choose the channel to write into"))
     return out

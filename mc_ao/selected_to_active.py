@@ -18,14 +18,15 @@ How Blender's objects become the core's input, as Cycles does it (``object_bake_
 - a cage object must have the low-poly's topology after modifiers (the same faces, corners and the
   same vertices at every corner: a copy with its vertices moved); its vertices are read in world
   space through its own transform, on the low-poly's triangles;
-- Occluders: All Visible adds every other visible object (as Cycles, which renders the view layer);
-  Selected and Object Alone leave the high-poly objects alone. The low-poly and the cage never
-  occlude.
+- Occluders: All Rendered adds every other object that renders (as Cycles, which renders the view
+  layer), narrowed by Include, Exclude, Only Local and each object's Occludes Other Objects
+  (mc_ao.occluders); Selected and Object Alone leave the high-poly objects alone. The low-poly and
+  the cage never occlude.
 """
 
 import numpy as np
 
-from .baking import Job, visible_geometry, id_name_max_bytes, kind_of, skip_reason
+from .baking import Job, check_channel, id_name_max_bytes, kind_of, skip_reason
 from .extract import GEOMETRY_TYPES, ExtractError, MeshArrays, object_arrays
 
 
@@ -138,10 +139,13 @@ def plan(depsgraph, active, selected, settings, *, view_layer=None, max_bytes=No
     """The Job of a Selected to Active bake: ``active`` (original object) from the other objects of
     ``selected``, with ``settings`` (mc_ao.settings.BakeSettings). Raises ExtractError naming the
     objects (no faces, a cage of another topology, high-poly objects without faces)."""
+    from . import occluders as occluder_sets
+
     cage = cage_of(settings)
     reason = why_not(selected, active, cage)
     if reason is not None:
         raise ExtractError(reason)
+    check_channel(settings)
     highs = high_objects(selected, active, cage)
     active_eval = active.evaluated_get(depsgraph)
     use_vertex_normals = settings.use_cage and cage is None
@@ -167,12 +171,17 @@ def plan(depsgraph, active, selected, settings, *, view_layer=None, max_bytes=No
                      f"scaled by {scale:.4g} (Cycles scales it per axis); apply the scale (Ctrl A) for the same "
                      "result as Cycles")
     occluders = []
-    if settings.occluders == "VISIBLE":
+    if settings.occluders == "VISIBLE" and settings.quantities == ("ao",):  # Selected: the high-poly objects alone, as Object Alone
         skip = {active.name, *(o.name for o in highs)} | ({cage.name} if cage is not None else set())
-        occluders = [arrays for key, arrays in visible_geometry(depsgraph, view_layer or depsgraph.view_layer)
+        occluders = [arrays for key, arrays in occluder_sets.pool(depsgraph, settings, view_layer=view_layer,
+                                                                 notes=notes)
                      if key not in skip]
+    elif settings.occluder_collections or settings.exclude_collections:
+        occluder_sets.Chooser(depsgraph.scene, settings.occluder_collections, settings.exclude_collections)
     max_bytes = id_name_max_bytes() if max_bytes is None else max_bytes
-    job = Job(active.name, settings.image_name_for(active.name, max_bytes), target, occluders)
+    (quantity,) = settings.quantities  # one: mc_ao.schema refuses both with Selected to Active
+    job = Job(active.name, settings.quantity_image_name_for(active.name, quantity, max_bytes), target, occluders,
+              quantity=quantity)
     job.highpoly = sources
     job.cage = cage_mesh
     job.extrusion = 0.0 if cage is not None else settings.cage_extrusion * scale

@@ -66,7 +66,7 @@ class Outcome:
     index: int
     job: object
     status: str  # "ok", "failed", "crashed", "cancelled"
-    results: dict = None  # {quantity: core result} of a baked object
+    results: dict = None  # {quantity: core result} of a baked object (None: the job's own bake)
     error: str = None  # why it failed (without the object's name)
     trace: str = None  # a crash's traceback
     files: list = field(default_factory=list)  # the paths written
@@ -78,6 +78,11 @@ class Outcome:
     @property
     def object_name(self):
         return self.job.object_name
+
+    @property
+    def result(self):
+        """The core's result of the job's own bake, or None."""
+        return self.results.get(None) if self.results else None
 
     @property
     def baked(self):
@@ -247,7 +252,7 @@ class Bake:
         if self.store is not None:
             self.store.finished(i)
             self.store.notes = None
-        outcome.notes.extend(baking.input_notes(results[self.plan.quantities[0]]))
+        outcome.notes.extend(baking.input_notes(results[None]))
         outcome.summary = next((s for s in (k.summarise(job, results) for k in kinds) if s), None)
         return outcome
 

@@ -6,7 +6,8 @@ import hashlib
 
 from .schema import BY_NAME, SETTINGS, unlimited
 
-_TYPES = {"int": int, "float": float, "distance": float, "bool": bool, "enum": str, "str": str, "object": str}
+_TYPES = {"int": int, "float": float, "distance": float, "bool": bool, "enum": str, "str": str, "object": str,
+          "image": str, "collections": tuple, "flags": tuple}
 
 
 def _identifiers(name):
@@ -20,6 +21,8 @@ OCCLUDERS = _identifiers("occluders")
 TARGETS = _identifiers("target")  # named as Cycles names them (scene.render.bake.target)
 DOMAINS = _identifiers("attribute_domain")
 BENT_SPACES = _identifiers("bent_space")
+GROUNDS = _identifiers("ground")
+QUANTITIES = {i: i.lower() for i in _identifiers("quantity")}  # identifier -> core.bake_ao's quantity
 # file format -> (extension, bits for an 8-bit image, bits for a float image), as core.imageio takes them
 FILE_FORMATS = {
     "PNG": (".png", 8, 16),
@@ -39,11 +42,20 @@ class _BakeSettingsMethods:
         An object pointer (``cage_object``) becomes the object's name ("" for none).
         """
         values = {f.name: getattr(props, f.name) for f in dataclasses.fields(cls)}
-        cage = values.get("cage_object")
-        if cage is None:
-            values["cage_object"] = ""
-        elif not isinstance(cage, str):
-            values["cage_object"] = cage.name
+        for name in ("cage_object", "into"):  # pointers on the scene: the datablock's name
+            value = values.get(name)
+            if value is None:
+                values[name] = ""
+            elif not isinstance(value, str):
+                values[name] = value.name
+        for setting in SETTINGS:
+            value = values.get(setting.name)
+            if setting.kind == "collections" and not isinstance(value, (tuple, str)):
+                # scene.mc_ao's list of collection pointers: the names of those that are set
+                values[setting.name] = tuple(item.collection.name for item in value
+                                             if getattr(item, "collection", None) is not None)
+            elif setting.kind == "flags" and not isinstance(value, tuple):
+                values[setting.name] = tuple(i for i in setting.identifiers if i in value)
         values.update(overrides)
         return cls(**values)
 
@@ -83,6 +95,24 @@ class _BakeSettingsMethods:
     def vertex_colors(self):
         """Whether the bake goes into colour attributes (no images, no UV map needed)."""
         return self.target == "VERTEX_COLORS"
+
+    @property
+    def quantities(self):
+        """core.bake_ao's quantities of this bake, in the schema's order: ('ao',), ('thickness',) or both."""
+        chosen = (self.quantity,) if isinstance(self.quantity, str) else self.quantity
+        return tuple(q for i, q in QUANTITIES.items() if i in chosen)
+
+    def ground_value(self):
+        """core.bake_ao's ground: None (off), 'auto' (each object's lowest point) or a height."""
+        return {"OFF": None, "AUTO": "auto"}.get(self.ground, float(self.ground_height))
+
+    def quantity_image_name_for(self, object_name, quantity, max_bytes=None, suffix=""):
+        """The image of ``object_name``'s bake of ``quantity`` (core's name): image_name_for() for 'ao',
+        "<object>_Thickness" for 'thickness', made to fit the same way; ``suffix`` as image_name_for's."""
+        if quantity == "ao":
+            return self.image_name_for(object_name, max_bytes, suffix)
+        template = "{object}_" + quantity.capitalize()
+        return dataclasses.replace(self, image_name=template).image_name_for(object_name, max_bytes, suffix)
 
     def bent_image_name_for(self, object_name, max_bytes=None):
         """The image of ``object_name``'s bent normals: "<object>_BentNormal", made to fit as
@@ -128,6 +158,8 @@ class _BakeSettingsMethods:
             # 0: from the cores and the memory (core.workers.auto_workers); the same bits for any count
             workers="auto" if self.processes == 0 else self.processes,
             **({"denoise": True} if self.denoise else {}),
+            # the ground only when on: a bake without one passes what it passed before
+            **({"ground": self.ground_value()} if self.ground != "OFF" else {}),
         )
 
 

@@ -45,7 +45,8 @@ _RUNNER_OPTIONS = {"output", "summary_json", "quiet", "blend"}
 _NO_EFFECT = {"threads", "processes", "quiet", "output", "summary_json", "blend"}
 # Settings added after fingerprints were first recorded: left out while at their default, so that a
 # library baked before them is still found done.
-_ADDED_AT_DEFAULT = {"denoise": False}
+_ADDED_AT_DEFAULT = {"denoise": False, "occluder_collections": [], "exclude_collections": [], "only_local": False,
+                     "ground": False, "ground_height": None, "quantity": ["ao"], "channel": "none", "into": ""}
 _ENTRY_KEYS = {"blend"}
 # bake_ao.py options a batch task cannot take, and why (one --save path for every task
 # would have each task replace the last one's file).

@@ -62,3 +62,52 @@ def test_vertex_bakes_are_denoised_over_the_mesh_and_keep_the_raw_values():
     assert np.array_equal(r.raw_ao, raw.ao) and np.array_equal(r.raw_stderr, raw.stderr)
     want, want_se, _ = D.denoise_vertices(grid, raw.ao, raw.stderr, raw.unit)
     assert np.allclose(r.ao, want) and not np.array_equal(r.ao, raw.ao)
+
+
+def _fine_mesh():
+    """A bumpy 24 x 24 grid (smooth normals) in two UV islands: the left half as is, the right half
+    turned and scaled down so that its triangles are smaller than a texel at 32^2, overlapping the
+    left half's corner (texels inside one triangle, located among several, split by island borders
+    and by overlapping islands)."""
+    n = 24
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    z = 0.1 * np.sin(5 * x) * np.cos(4 * y)
+    P = np.stack([x, y, z], -1).reshape(-1, 3)
+    i = np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]
+    F = np.concatenate([np.stack([i, i + 1, i + n + 2], -1).reshape(-1, 3),
+                        np.stack([i, i + n + 2, i + n + 1], -1).reshape(-1, 3)])
+    UV = P[F][:, :, :2] * 0.55
+    right = P[F][:, :, 0].mean(axis=1) > 0.5
+    UV[right] = 0.4 + 0.3 * (P[F][right][:, :, [1, 0]] - 0.5)
+    N = np.stack([-0.5 * np.cos(5 * x) * np.cos(4 * y), 0.4 * np.sin(5 * x) * np.sin(4 * y), np.ones_like(x)], -1)
+    N = (N / np.linalg.norm(N, axis=-1, keepdims=True)).reshape(-1, 3)[F]
+    return Mesh(P, F, UV, N, name="fine")
+
+
+def _suzanne():
+    from pathlib import Path
+
+    z = np.load(Path(__file__).resolve().parents[1] / "bench" / "data" / "scene_suzanne.npz")
+    return Mesh(z["P"], z["F"], z["UV"], z["N"], name="Suzanne")
+
+
+@pytest.mark.parametrize("target, res", [("fine", 32), ("fine", 45), ("suzanne", 96), ("suzanne", 157)])
+def test_the_guide_the_bake_builds_from_its_tiles_is_the_one_computed_from_the_mesh(monkeypatch, target, res):
+    mesh = _fine_mesh() if target == "fine" else _suzanne()
+    seen = []
+    compute = D.surface_guide
+
+    def record(m, resolution, radius=D.RADIUS, texels=None, threads=1):
+        seen.append((m, texels))
+        return compute(m, resolution, radius, texels=texels)
+
+    monkeypatch.setattr(D, "surface_guide", record)
+    r = bake_ao(mesh, resolution=res, samples=2, seed=1, threads=2, tile_size=16, denoise=True)
+    (baked, texels), = seen
+    assert texels is not None  # the bake passed what its tiles found
+    assert np.array_equal(texels[0].reshape(res, res) >= 0, r.mask)
+    from_tiles = compute(baked, res, texels=texels)
+    from_mesh = compute(baked, res)
+    for field in ("covered", "triangle", "position", "normal", "scale", "island", "halo_island", "halo_row",
+                  "halo_col", "halo_source", "links"):
+        assert np.array_equal(getattr(from_tiles, field), getattr(from_mesh, field)), field

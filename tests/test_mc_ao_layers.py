@@ -17,7 +17,7 @@ LAYERS = [
     {"cli"},
     {"service"},
     {"outputs", "outputs.*"},
-    {"selected_to_active", "baking"},
+    {"selected_to_active", "baking", "occluders"},
     {"udim", "vertex_colors", "bent"},
     {"bakerun", "filewriter", "filecheck"},
     {"images"},

@@ -102,6 +102,35 @@ def test_a_new_map_kind_is_one_subclass_and_a_line_in_kinds(tmp_path, monkeypatc
     np.testing.assert_array_equal(inverted, 1.0 - ao)
 
 
+class ThicknessBeside(maps.MapOutput):
+    """A map of another core quantity than the job's own: baked once more for it."""
+
+    name = "thickness_beside"
+    quantity = "thickness"
+    content = "thickness"
+
+    @classmethod
+    def applies(cls, settings):
+        return True
+
+    def image_name(self, job):
+        return f"{job.object_name}_Beside"
+
+
+def test_a_kind_of_another_quantity_gets_that_quantitys_bake(tmp_path, monkeypatch):
+    monkeypatch.setattr(outputs, "KINDS", outputs.KINDS + (ThicknessBeside,))
+    plan = service.plan(SETTINGS, [PlaneJob()], str(tmp_path), [("OPEN_EXR", "float")])
+    assert plan.quantities == [None, "thickness"]
+    (outcome,) = run(plan)
+    assert set(outcome.results) == {None, "thickness"}
+    assert outcome.results["thickness"].metadata["quantity"] == "thickness"
+    assert outcome.result.metadata.get("quantity", "ao") == "ao"
+    direct = PlaneJob().run(SETTINGS, threads=1, quantity="thickness")
+    beside, meta = read_image(tmp_path / "Plane_Beside.exr")
+    np.testing.assert_array_equal(beside, direct.ao)  # the same bits: counter-based randomness
+    assert meta["content"] == "thickness"
+
+
 # -- all or none -------------------------------------------------------------------------------------
 
 def writer(pixels, bits):

@@ -31,8 +31,10 @@ def kinds_for(settings):
 
 
 def quantities(kinds):
-    """The core quantities the kinds need, the first kind's first (what the service bakes, in order)."""
-    return list(dict.fromkeys(q for k in kinds for q in (k.quantity, *k.extra_quantities) if q is not None))
+    """The core results the kinds need, in the order the service bakes them: None (each job's own
+    bake) first, then each other quantity a kind names."""
+    return [None] + [q for q in dict.fromkeys(q for k in kinds for q in (k.quantity, *k.extra_quantities))
+                     if q is not None]
 
 
 def check(kinds, job):

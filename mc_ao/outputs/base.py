@@ -7,8 +7,9 @@ for each object (a job) of the bake:
    will write can take the bake (an image of another kind, a tile of another size, a colour
    attribute of another type raise), and none of its planned files would replace a file of another
    kind (a list of problems);
-2. ``quantity``: the core result it needs ("ao"; a thickness map names "thickness"): the service
-   bakes each quantity the kinds of a bake need once per object;
+2. ``quantity`` (and ``extra_quantities``): the core results it needs: None is the job's own bake
+   (each job bakes one quantity, mc_ao.baking.Job.quantity); a named one is baked once more per
+   job for it (mc_ao.bakerun.BakeRun);
 3. ``store(run, job, results)``: the finished bake into Blender's data (images, tiles, a colour
    attribute), for the operator (and the script's ``--save``);
 4. ``writes(job, results, files, metadata)``: its files as :class:`FileWrite` s, which
@@ -16,7 +17,7 @@ for each object (a job) of the bake:
    stored image loads from its saved file (Link to File) or is packed into the .blend file;
 5. ``summarise(job, results)``: its part of the object's summary line, or None.
 
-``results`` maps each quantity to the core's result for it. ``run`` is what the service lends a
+``results`` maps each quantity to the core's result for it (None: the job's own). ``run`` is what the service lends a
 kind to touch Blender data with: ``run.image(name, w, h, float_buffer)`` (an image created or
 reused, put back as it was when the object does not finish), ``run.warn(text)``, ``run.folder``
 (the output folder, or None), ``run.link_relative`` (store linked paths relative to the .blend).
@@ -39,9 +40,10 @@ class OutputKind:
     """
 
     name = "output"
-    #: The core result this kind is made from (None: none of its own).
+    #: The core result this kind is made from: None for the job's own bake (its ``quantity``, "ao"
+    #: or "thickness"), else a core quantity baked once more for it.
     quantity = None
-    #: Other core results it reads too (a channel-packed image: "thickness" beside "ao").
+    #: Other core results it reads too (a channel-packed image: "thickness" beside the AO).
     extra_quantities = ()
 
     def __init__(self, settings):

@@ -10,7 +10,6 @@ from .base import FileWrite, OutputKind
 
 class ColorAttributeOutput(OutputKind):
     name = "color_attribute"
-    quantity = "ao"
     #: Its files' formats, whatever the Format setting.
     file_formats = [("PLY", None)]
 

@@ -18,7 +18,8 @@ class ErrorMapOutput(MapOutput):
         return settings.error_map and not settings.vertex_colors
 
     def image_name(self, job):
-        return self.settings.stderr_image_name_for(job.object_name, self.max_name_bytes())
+        return self.settings.quantity_image_name_for(job.object_name, getattr(job, "quantity", "ao"), self.max_name_bytes(),
+                                                     "_stderr")
 
     def source(self, result):
         return result.stderr

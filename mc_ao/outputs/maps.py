@@ -2,8 +2,8 @@
 
 :class:`MapOutput` is every map's steps (check, store, save, keep) for a plain image and for UDIM
 tiles alike (:mod:`.udim_tiles` does the tiles); a kind of map says only which plane it writes
-(``source(result)``: the AO, its standard error, the encoded bent normals), from which quantity
-(``quantity``), under which image name (``image_name(job)``) and what its files' metadata calls it
+(``source(result)``: the AO, its standard error, the encoded bent normals), from which core result
+(``quantity``: None for the job's own bake), under which image name (``image_name(job)``) and what its files' metadata calls it
 (``content``). A thickness map or a channel-packed image is a subclass in a file of its own, and a
 line in mc_ao.outputs.KINDS.
 """
@@ -18,7 +18,6 @@ class MapOutput(OutputKind):
     """An image over the object's UVs (a tiled one for a UDIM bake) and its files."""
 
     name = "map"
-    quantity = "ao"
     #: The files' metadata "content" (core.imageio reads it back).
     content = "ao"
     #: The image's float buffer: None for the settings' 32-bit Float, else always this.

@@ -132,7 +132,11 @@ def test_every_schema_setting_is_a_property_with_its_default(bpy, addon):
     for setting in schema.SETTINGS:
         prop = rna[setting.name]
         assert (prop.name, prop.description) == (setting.label, setting.help), setting.name
-        if setting.kind != "object":
+        if setting.kind == "flags":  # an enum-flag property: its default is a set
+            assert prop.default_flag == set(setting.default) and BakeSettings().quantity == setting.default
+        elif setting.kind == "collections":  # a list, empty by default
+            assert len(getattr(bpy.context.scene.mc_ao, setting.name)) == 0 and setting.default == ()
+        elif setting.kind not in ("object", "image"):
             assert prop.default == setting.default == getattr(BakeSettings(), setting.name), setting.name
     assert BakeSettings.from_properties(bpy.context.scene.mc_ao) == BakeSettings()
 
