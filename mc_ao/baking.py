@@ -414,7 +414,16 @@ def channel_problem(settings, images=None):
         images = bpy.data.images
     image = images.get(settings.into)
     if image is None:
-        return f"Into: there is no image named {settings.into!r} to write the AO into"
+        import os
+
+        if os.path.splitext(settings.into)[1].lower() not in (".png", ".exr", ".tif", ".tiff"):
+            return f"Into: there is no image named {settings.into!r} to write the AO into"
+        # a file (the script's --into PATH): core.imageio checks it, naming it and what it has
+        try:
+            corelink.load("imageio").check_channel(settings.into, settings.channel, settings.size)
+        except corelink.load().SettingsError as exc:
+            return str(exc)
+        return _CHANNEL_WRITER_MISSING.format(channel=settings.channel, into=settings.into)
     channels = image_channels(image)
     # An image of 3 channels has no alpha; one of 1 or 2 (grey, grey and alpha) no separate green or blue.
     has = {4: "RGBA", 3: "RGB", 2: "RA", 1: "R"}.get(channels, "")
@@ -423,8 +432,11 @@ def channel_problem(settings, images=None):
                 f"{', '.join(has) or 'none'}); choose one of them")
     # The writer that puts one channel into an existing image is not part of this version: refuse
     # rather than bake into the object's own image instead.
-    return (f"Channel {settings.channel} into {settings.into!r}: writing the AO into one channel of an existing "
-            "image is not available in this version; set Channel to Own Image")
+    return _CHANNEL_WRITER_MISSING.format(channel=settings.channel, into=settings.into)
+
+
+_CHANNEL_WRITER_MISSING = ("Channel {channel} into {into!r}: writing the AO into one channel of an existing image "
+                           "is not available in this version; set Channel to Own Image")
 
 
 def image_channels(image):

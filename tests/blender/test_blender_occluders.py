@@ -451,7 +451,11 @@ def test_quantity_thickness_and_both_from_the_panel(bpy, scene, capfd):
 
 
 def test_a_channel_is_checked_against_the_image_before_any_work(bpy, scene, capfd, tmp_path):
+    import dataclasses
+
     from core import imageio
+    from mc_ao import baking
+    from mc_ao.settings import BakeSettings
 
     floor = add_plane(bpy, "Floor", size=4)
     s = scene.mc_ao
@@ -467,6 +471,10 @@ def test_a_channel_is_checked_against_the_image_before_any_work(bpy, scene, capf
     # the image has a red channel; writing into it is refused, rather than baking somewhere else
     assert result is None and "writing the AO into one channel of an existing image is not available" in error
     assert "Floor_AO" not in bpy.data.images
+    # a file: core.imageio's check names it and the channels it has
+    settings = BakeSettings(channel="A", into=str(rgb), resolution=8)
+    assert "orm.png" in baking.channel_problem(settings, {}) and "A" in baking.channel_problem(settings, {})
+    assert "not available" in baking.channel_problem(dataclasses.replace(settings, channel="G"), {})
     s.into = None
     result, error, _ = run(bpy, capfd)
     assert result is None and "into" in error.lower(), error
@@ -527,6 +535,7 @@ def test_the_script_takes_collections_only_local_ground_and_both_quantities(blen
     (["--occluder-collections", "Nope"], "occluder collection 'Nope' does not exist"),
     (["--exclude-collections", "Occ", "--occluder-collections", "Occ"], "remove it from one list"),
     (["--channel", "R", "--into", "Nope"], "there is no image named 'Nope'"),
+    (["--channel", "R", "--into", "missing.png"], "missing.png"),
     (["--ground", "--ground-height", "1"], "--ground and --ground-height both place the ground"),
 ])
 def test_the_script_refuses_bad_input_with_exit_2_naming_it(blend_file, tmp_path, args, message):
