@@ -333,7 +333,6 @@ class VIEW3D_PT_mc_ao_object(_McAoPanel, bpy.types.Panel):
 
     bl_label = "Object"
     bl_parent_id = "VIEW3D_PT_mc_ao"
-    bl_options = {"DEFAULT_CLOSED"}
 
     @classmethod
     def poll(cls, context):
