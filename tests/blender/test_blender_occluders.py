@@ -591,3 +591,22 @@ def test_the_panel_adds_and_removes_collections_and_shows_every_new_setting(bpy,
                  "channel", "into"):
         assert len(rna[name].description) > 20, name
     assert len(floor.mc_ao.bl_rna.properties["occlude_others"].description) > 20
+
+
+def test_instances_agree_with_cycles_also_under_a_hidden_instancer(bpy, scene, capfd):
+    # B as a collection instance whose instancer is hidden by eye (the viewport makes no instances for
+    # it; mc_ao places them) and A as a geometry-nodes instance: Cycles renders both.
+    floor, a, b = floor_and_boxes(bpy, scene)
+    bpy.data.objects.remove(b)
+    instancer = box_instance(bpy, bpy.data.collections["Carve"], (1, 0, 0.5))
+    instancer.hide_set(True)
+    a.hide_render = True  # A itself does not occlude; its instance does
+    geometry_nodes_instancer(bpy, a, (-1, 0, 0.5))
+    bpy.context.view_layer.update()
+    s = scene.mc_ao
+    s.resolution, s.samples, s.max_distance = RES, SPP, DISTANCE
+    cyc = cycles_floor_ao(bpy, floor)
+    left, right = bake_halves(bpy, capfd, floor)
+    mc, _ = image_ao(bpy.data.images["Floor_AO"])
+    assert dark(left) and dark(right)
+    assert_agrees(mc, cyc)
