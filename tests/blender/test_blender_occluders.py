@@ -610,3 +610,14 @@ def test_instances_agree_with_cycles_also_under_a_hidden_instancer(bpy, scene, c
     mc, _ = image_ao(bpy.data.images["Floor_AO"])
     assert dark(left) and dark(right)
     assert_agrees(mc, cyc)
+
+
+def test_a_skipped_object_that_occludes_only_itself_is_not_said_to_occlude(bpy, scene, capfd):
+    floor, a, b = floor_and_boxes(bpy, scene)
+    while a.data.uv_layers:
+        a.data.uv_layers.remove(a.data.uv_layers[0])
+    a.mc_ao.occlude_others = False
+    select_only(bpy, floor, a)
+    result, error, reports = run(bpy, capfd)
+    assert result == {"FINISHED"}
+    assert ("Warning", "A: skipped, it has no UV map (unwrap it first: Edit Mode, U)") in reports, reports
