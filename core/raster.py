@@ -186,37 +186,43 @@ def uv_centres(tris):
 
 def bin_triangles(tris, width, height, tile):
     """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array (ascending), for tiles
-    touched; ``tile`` the side of square tiles or (columns, rows)."""
+    touched; ``tile`` the side of square tiles or (columns, rows). Binned :data:`SLICE` triangles
+    at a time (the temporaries stay a slice's), each tile's parts joined in order."""
     tile = np.broadcast_to(np.asarray(tile, dtype=np.int64), (2,))
-    idx = np.flatnonzero(tris.valid)
-    # The corners in the mesh's order: the same bounds as counter-clockwise (min and max are exact).
-    lo, hi = _corner_bounds(np.take(tris.corners, idx, axis=0))
-    lo = np.maximum(np.floor(lo).astype(np.int64), 0)
-    hi = np.ceil(hi).astype(np.int64) - 1  # last texel the bbox reaches
-    # Column by column (numpy is slow over an inner axis of 2).
-    np.minimum(hi[:, 0], width - 1, out=hi[:, 0])
-    np.minimum(hi[:, 1], height - 1, out=hi[:, 1])
-    ok = np.flatnonzero((hi[:, 0] >= lo[:, 0]) & (hi[:, 1] >= lo[:, 1]))
-    idx, lo, hi = idx[ok], lo[ok], hi[ok]
-    lx, ly = lo[:, 0] // tile[0], lo[:, 1] // tile[1]  # (x, y) tile coordinates
-    nx = hi[:, 0] // tile[0] - lx + 1
-    ny = hi[:, 1] // tile[1] - ly + 1
-    count = nx * ny
-    rep = np.repeat(np.arange(len(idx)), count)
-    k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
-    nr = nx[rep]
-    tx = lx[rep] + k % nr
-    ty = ly[rep] + k // nr
+    valid = np.flatnonzero(tris.valid)
     tiles_x = -(-width // int(tile[0]))
-    key = ty * tiles_x + tx
-    order = np.argsort(key, kind="stable")
-    key, tri = key[order], idx[rep[order]]
-    bounds = np.flatnonzero(np.diff(key)) + 1
-    out = {}
-    for part_key, part in zip(np.split(key, bounds), np.split(tri, bounds)):
-        if part_key.size:
-            out[(int(part_key[0] // tiles_x), int(part_key[0] % tiles_x))] = part
-    return out
+    parts = {}
+    for s0 in range(0, len(valid), SLICE):
+        idx = valid[s0:s0 + SLICE]
+        # The corners in the mesh's order: the same bounds as counter-clockwise (min and max are exact).
+        lo, hi = _corner_bounds(np.take(tris.corners, idx, axis=0))
+        lo = np.maximum(np.floor(lo).astype(np.int64), 0)
+        hi = np.ceil(hi).astype(np.int64) - 1  # last texel the bbox reaches
+        # Column by column (numpy is slow over an inner axis of 2).
+        np.minimum(hi[:, 0], width - 1, out=hi[:, 0])
+        np.minimum(hi[:, 1], height - 1, out=hi[:, 1])
+        ok = np.flatnonzero((hi[:, 0] >= lo[:, 0]) & (hi[:, 1] >= lo[:, 1]))
+        idx, lo, hi = idx[ok], lo[ok], hi[ok]
+        lx, ly = lo[:, 0] // tile[0], lo[:, 1] // tile[1]  # (x, y) tile coordinates
+        nx = hi[:, 0] // tile[0] - lx + 1
+        ny = hi[:, 1] // tile[1] - ly + 1
+        count = nx * ny
+        rep = np.repeat(np.arange(len(idx)), count)
+        k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
+        nr = nx[rep]
+        tx = lx[rep] + k % nr
+        ty = ly[rep] + k // nr
+        key = ty * tiles_x + tx
+        order = np.argsort(key, kind="stable")
+        key, tri = key[order], idx[rep[order]]
+        bounds = np.flatnonzero(np.diff(key)) + 1
+        for part_key, part in zip(np.split(key, bounds), np.split(tri, bounds)):
+            if part_key.size:
+                parts.setdefault((int(part_key[0] // tiles_x), int(part_key[0] % tiles_x)), []).append(part)
+    # Each tile's triangles ascending: its parts come slice by slice, each ascending.
+    return {key: p[0] if len(p) == 1 else np.concatenate(p) for key, p in sorted(parts.items(),
+                                                                               key=lambda item: item[0][0] * tiles_x
+                                                                               + item[0][1])}
 
 
 def _clip(X, Y, count, a, b, c):

@@ -93,8 +93,10 @@ class SurfaceTable:
         xy = uvtris.corners
         T = len(xy)
         FN = mesh.face_normals
-        origin = np.empty((T, 2))
         maps = {name: (np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 3))) for name in ("P", "N")}
+        if not mesh.has_corner_normals:
+            # Flat: the corner normals are the face normal, N0 is FN itself (its bits, not a copy).
+            maps["N"] = (None,) + maps["N"][1:]
         smooth = np.empty(T, bool)
         for lo in range(0, T, SLICE):
             hi = min(lo + SLICE, T)
@@ -103,9 +105,10 @@ class SurfaceTable:
             smooth[lo:hi] = _smooth(mesh, N, FN[lo:hi])
             cls._slice(xy[lo:hi], uvtris.valid[lo:hi], corner_positions(mesh.positions, mesh.triangles[lo:hi]), N,
                        maps, lo, hi)
-            origin[lo:hi] = xy[lo:hi, 0]
-        return cls(origin=origin, P0=maps["P"][0], corners_xy=xy, Px=maps["P"][1], Py=maps["P"][2],
-                   N0=maps["N"][0], Nx=maps["N"][1], Ny=maps["N"][2], FN=FN, smooth=smooth,
+        # origin: the first corners, a view of the corners the UV triangles keep (not a copy).
+        return cls(origin=xy[:, 0], P0=maps["P"][0], corners_xy=xy, Px=maps["P"][1], Py=maps["P"][2],
+                   N0=FN if maps["N"][0] is None else maps["N"][0], Nx=maps["N"][1], Ny=maps["N"][2], FN=FN,
+                   smooth=smooth,
                    positions=mesh.positions, triangles=mesh.triangles)
 
     @staticmethod
@@ -123,7 +126,8 @@ class SurfaceTable:
         for name, V in (("P", P), ("N", N)):
             v0_out, vx_out, vy_out = maps[name]
             vx, vy = vx_out[lo:hi], vy_out[lo:hi]
-            v0_out[lo:hi] = V[:, 0]
+            if v0_out is not None:
+                v0_out[lo:hi] = V[:, 0]
             for c in range(3):
                 v0 = V[:, 0, c]
                 dv1, dv2 = V[:, 1, c] - v0, V[:, 2, c] - v0

@@ -49,8 +49,10 @@ def skip_note(obj, occluders, needs_uvs=True):
     ``occluders`` is the Occluders setting: a skipped object with a surface still occludes the others
     unless each object is baked alone.
     """
+    from .occluders import occlude_others
+
     note = f"{obj.name}: skipped, it {skip_reason(obj, needs_uvs)}"
-    if obj.type in GEOMETRY_TYPES and occluders != "SELF":
+    if obj.type in GEOMETRY_TYPES and occluders != "SELF" and occlude_others(obj):
         note += "; it still occludes the baked objects"
     return note
 

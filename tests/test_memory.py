@@ -110,7 +110,7 @@ def test_a_mesh_shares_the_callers_float64_arrays_and_copies_others():
 def test_slices_of_triangles_change_no_pixel(monkeypatch):
     P, F, UV, N = wavy()
     target = Mesh(P, F, uvs=UV, normals=N, name="wavy")
-    args = dict(resolution=40, samples=16, max_distance=1.0, margin=2, threads=1)
+    args = dict(resolution=40, samples=16, max_distance=1.0, margin=2, threads=1, tile_size=16)
     ref = bake_ao(target, [lid()], bent_normals=True, **args)
     vref = bake_vertex_ao(target, [lid()], samples=16, threads=1)
     small_slices(monkeypatch)
@@ -153,6 +153,11 @@ def test_uv_triangles_per_tile_are_the_whole_arrays_rows(monkeypatch):
     assert (sliced.degenerate, sliced.degenerate_space, sliced.outside) == (whole.degenerate, whole.degenerate_space,
                                                                             whole.outside)
     assert np.array_equal(sliced.valid, whole.valid)
+    bins = raster.bin_triangles(whole, 33, 17, 8)
+    monkeypatch.setattr(raster, "SLICE", 3)
+    sliced_bins = raster.bin_triangles(whole, 33, 17, 8)
+    assert list(sliced_bins) == list(bins) and len(bins) > 4
+    assert all(np.array_equal(sliced_bins[k], bins[k]) for k in bins)
 
 
 def test_messages_carry_arrays_out_of_band_unchanged():
