@@ -774,7 +774,8 @@ class ScriptRun:
             store = Store(plan.settings, plan.folder, plan.files,
                           lambda kind, text: print(f"bake_ao: {escape(text)}", file=sys.stderr))
         self.run = service.Bake(plan, args.threads or None, live=False, store=store,
-                                store_kinds={"color_attribute"}, blend=bpy.data.filepath, hold_interrupts=True)
+                                store_kinds={"color_attribute"}, blend=bpy.data.filepath, hold_interrupts=True,
+                                store_after_save=True)
         self.progress = Progress(enabled=not args.quiet)
         self.rows, self.failures = [], 0
 

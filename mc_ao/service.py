@@ -105,14 +105,17 @@ class Bake:
         With a store, the kinds that use it (None: every kind).
     blend : str
         The .blend file's path, for the files' metadata.
+    store_after_save : bool
+        Store into Blender only once the object's files are written (see finish()).
     hold_interrupts : bool
         Finish each object with Ctrl-C held off (the script): an interrupt then comes after its
         files are written and its outcome handed over, never between two of its files.
     """
 
     def __init__(self, plan, threads=None, live=False, store=None, store_kinds=None, blend="",
-                 hold_interrupts=False):
+                 hold_interrupts=False, store_after_save=False):
         self.plan = plan
+        self.store_after_save = store_after_save
         self.store = store
         self.store_kinds = store_kinds
         self.blend = blend
@@ -207,54 +210,73 @@ class Bake:
 
     def finish(self, i, results):
         """Job ``i`` baked: every output kind stores it into Blender, its files are saved (all or
-        none), the stored data is kept; its Outcome."""
-        from . import images
-
+        none), the stored data is kept; its Outcome. With ``store_after_save``, the kinds store only
+        after the files were written (the script: nothing goes into the .blend it saves for an
+        object whose files failed)."""
         job = self.jobs[i]
-        settings = self.plan.settings
         outcome = Outcome(i, job, "ok", results)
-        kinds = self.plan.kinds
-        stored = []
         if self.store is not None:
             self.store.current, self.store.object_name, self.store.notes = i, job.object_name, outcome.notes
-        for kind in kinds:
-            if not self._stores(kind):
-                continue
-            try:
-                kind.store(self.store, job, results)
-            except (images.ImageError, ExtractError, RuntimeError) as exc:
-                if getattr(kind, "optional", False):
-                    outcome.notes.append(f"the {kind.name.replace('_', ' ')} was not kept: {exc}")
-                    continue
-                self._restore(i)
-                outcome.status, outcome.error = "failed", str(exc)
+        stored = [] if self.store_after_save else self._store_all(i, outcome)
+        if stored is None:
+            return outcome
+        saved = self._save(outcome) if self.plan.folder is not None else {}
+        if self.store_after_save and not outcome.file_error:
+            stored = self._store_all(i, outcome)
+            if stored is None:
                 return outcome
-            stored.append(kind)
-        if stored:
-            outcome.where = (f"color attribute {settings.attribute_name!r}" if settings.vertex_colors
-                             else f"image {job.image_name!r}")
-        saved = {}
-        if self.plan.folder is not None:
-            metadata = filewriter.file_metadata(settings, job, self.blend)
-            writes = [(kind, w) for kind in kinds for w in kind.writes(job, results, self.plan.files, metadata)]
-            # in the planned order (each image's files with its standard error), tile by tile
-            rank = {p: k for k, p in enumerate(self.plan.paths())}
-            writes.sort(key=lambda kw: (kw[1].tile or 0, rank.get(kw[1].planned or kw[1].path, len(rank))))
-            try:
-                outcome.files = outputs.save_files([w for _, w in writes])
-            except outputs.SaveError as exc:
-                outcome.file_error = str(exc)
-            else:
-                for kind, w in writes:
-                    saved.setdefault(kind, []).append(w.path)
         for kind in stored:
             kind.keep(self.store, job, results, saved.get(kind, []))
         if self.store is not None:
             self.store.finished(i)
             self.store.notes = None
         outcome.notes.extend(baking.input_notes(results[None]))
-        outcome.summary = next((s for s in (k.summarise(job, results) for k in kinds) if s), None)
+        outcome.summary = next((s for s in (k.summarise(job, results) for k in self.plan.kinds) if s), None)
         return outcome
+
+    def _store_all(self, i, outcome):
+        """The kinds that store into Blender, stored; None when one failed (the outcome then says
+        why, and the images of the object are put back)."""
+        from . import images
+
+        job, settings, stored = outcome.job, self.plan.settings, []
+        for kind in self.plan.kinds:
+            if not self._stores(kind):
+                continue
+            try:
+                kind.store(self.store, job, outcome.results)
+            except (images.ImageError, ExtractError, RuntimeError) as exc:
+                if getattr(kind, "optional", False):
+                    outcome.notes.append(f"the {kind.name.replace('_', ' ')} was not kept: {exc}")
+                    continue
+                self._restore(i)
+                outcome.status, outcome.error = "failed", str(exc)
+                if self.store is not None:
+                    self.store.notes = None
+                return None
+            stored.append(kind)
+        if stored:
+            outcome.where = (f"color attribute {settings.attribute_name!r}" if settings.vertex_colors
+                             else f"image {job.image_name!r}")
+        return stored
+
+    def _save(self, outcome):
+        """Write the object's files, all or none; {kind: its paths written}."""
+        job, results = outcome.job, outcome.results
+        metadata = filewriter.file_metadata(self.plan.settings, job, self.blend)
+        writes = [(kind, w) for kind in self.plan.kinds for w in kind.writes(job, results, self.plan.files, metadata)]
+        # in the planned order (each image's files with its standard error), tile by tile
+        rank = {p: k for k, p in enumerate(self.plan.paths())}
+        writes.sort(key=lambda kw: (kw[1].tile or 0, rank.get(kw[1].planned or kw[1].path, len(rank))))
+        saved = {}
+        try:
+            outcome.files = outputs.save_files([w for _, w in writes])
+        except outputs.SaveError as exc:
+            outcome.file_error = str(exc)
+        else:
+            for kind, w in writes:
+                saved.setdefault(kind, []).append(w.path)
+        return saved
 
 
 def file_error_message(outcome):
