@@ -189,7 +189,8 @@ def instance_memory(bpy, count=100):
     triangles = sum(len(o.triangles) for o in job.occluders)
     held = sum(o.positions.nbytes + o.triangles.nbytes + (o.normals.nbytes if o.normals is not None else 0)
                for o in job.occluders)
-    per_triangle = corelink.load("cost").BYTES_PER_TRIANGLE
+    cost = corelink.load("cost")
+    per_triangle = getattr(cost, "BYTES_PER_OCCLUDER_TRIANGLE", None) or cost.BYTES_PER_TRIANGLE
     print(f"{count} instances of a {len(ball.data.polygons)}-triangle sphere: {len(job.occluders)} occluder "
           f"meshes, {triangles} triangles, gathered in {gathered:.2f} s")
     print(f"  arrays the plan holds: {held / 2 ** 20:.1f} MiB ({held / triangles:.0f} B a triangle)")

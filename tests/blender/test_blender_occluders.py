@@ -543,3 +543,81 @@ def test_the_script_refuses_bad_input_with_exit_2_naming_it(blend_file, tmp_path
     proc = run_script(blend_file, "--objects", "Floor", "--samples", "4", "--resolution", "8", "--output", out, *args)
     assert proc.returncode == 2 and message in proc.stderr, proc.stderr
     assert not out.exists() or not any(out.iterdir())
+
+
+# -- the panel -----------------------------------------------------------------------------------------
+
+def test_the_panel_adds_and_removes_collections_and_shows_every_new_setting(bpy, scene):
+    import types
+
+    from mc_ao import panel
+
+    occ = new_collection(bpy, "Occ")
+    new_collection(bpy, "Other")
+    bpy.context.view_layer.active_layer_collection = bpy.context.view_layer.layer_collection.children["Occ"]
+    s = scene.mc_ao
+    assert bpy.ops.mc_ao.collection_add(setting="occluder_collections") == {"FINISHED"}
+    assert [i.collection for i in s.occluder_collections] == [occ]  # the active collection, to start with
+    assert bpy.ops.mc_ao.collection_add(setting="occluder_collections") == {"FINISHED"}
+    assert [i.collection for i in s.occluder_collections] == [occ, None]  # listed already: an empty picker
+    s.occluder_collections[1].collection = bpy.data.collections["Other"]
+    assert bpy.ops.mc_ao.collection_remove(setting="occluder_collections", index=0) == {"FINISHED"}
+    assert [i.collection.name for i in s.occluder_collections] == ["Other"]
+    from mc_ao.settings import BakeSettings
+
+    assert BakeSettings.from_properties(s).occluder_collections == ("Other",)
+    drawn = []
+
+    class Recorder:
+        def __getattr__(self, name):
+            if name == "prop":
+                return lambda data, prop, **kw: drawn.append(prop)
+            return lambda *a, **k: self
+
+        def __setattr__(self, name, value):
+            pass
+
+    floor = add_plane(bpy, "Floor")
+    select_only(bpy, floor)
+    for cls in (panel.VIEW3D_PT_mc_ao_occlusion, panel.VIEW3D_PT_mc_ao_target, panel.VIEW3D_PT_mc_ao_image,
+                panel.VIEW3D_PT_mc_ao_object):
+        cls.draw(types.SimpleNamespace(layout=Recorder(), split_layout=lambda: Recorder()), bpy.context)
+    for name in ("only_local", "occluders", "collection", "ground", "ground_height", "quantity", "channel", "into",
+                 "occlude_others"):
+        assert name in drawn, name
+    # every new setting has a tooltip (its description)
+    rna = type(s).bl_rna.properties
+    for name in ("occluder_collections", "exclude_collections", "only_local", "ground", "ground_height", "quantity",
+                 "channel", "into"):
+        assert len(rna[name].description) > 20, name
+    assert len(floor.mc_ao.bl_rna.properties["occlude_others"].description) > 20
+
+
+def test_instances_agree_with_cycles_also_under_a_hidden_instancer(bpy, scene, capfd):
+    # B as a collection instance whose instancer is hidden by eye (the viewport makes no instances for
+    # it; mc_ao places them) and A as a geometry-nodes instance: Cycles renders both.
+    floor, a, b = floor_and_boxes(bpy, scene)
+    bpy.data.objects.remove(b)
+    instancer = box_instance(bpy, bpy.data.collections["Carve"], (1, 0, 0.5))
+    instancer.hide_set(True)
+    a.hide_render = True  # A itself does not occlude; its instance does
+    geometry_nodes_instancer(bpy, a, (-1, 0, 0.5))
+    bpy.context.view_layer.update()
+    s = scene.mc_ao
+    s.resolution, s.samples, s.max_distance = RES, SPP, DISTANCE
+    cyc = cycles_floor_ao(bpy, floor)
+    left, right = bake_halves(bpy, capfd, floor)
+    mc, _ = image_ao(bpy.data.images["Floor_AO"])
+    assert dark(left) and dark(right)
+    assert_agrees(mc, cyc)
+
+
+def test_a_skipped_object_that_occludes_only_itself_is_not_said_to_occlude(bpy, scene, capfd):
+    floor, a, b = floor_and_boxes(bpy, scene)
+    while a.data.uv_layers:
+        a.data.uv_layers.remove(a.data.uv_layers[0])
+    a.mc_ao.occlude_others = False
+    select_only(bpy, floor, a)
+    result, error, reports = run(bpy, capfd)
+    assert result == {"FINISHED"}
+    assert ("Warning", "A: skipped, it has no UV map (unwrap it first: Edit Mode, U)") in reports, reports
