@@ -375,6 +375,8 @@ def assert_agrees(mc, cyc):
     se = np.sqrt(np.sum(2 * (mc * (1 - mc)) / SPP)) / d.size
     assert abs(d.mean()) < 4 * se + 2e-3, (d.mean(), se)
     noise = np.mean(np.sqrt(2 * mc * (1 - mc) / SPP)) * math.sqrt(2 / math.pi)
+    print(f"against Cycles: mean difference {d.mean():.5f} (standard error {se:.5f}), mean absolute difference "
+          f"{np.abs(d).mean():.5f} (noise {noise:.5f})")
     assert np.abs(d).mean() < 1.3 * noise + 0.005, (np.abs(d).mean(), noise)
 
 
