@@ -23,14 +23,18 @@ class BakeRun:
     """Runs the jobs one after another on a worker thread and reports through ``messages``.
 
     Messages are tuples: ("progress", job, fraction), ("tile", job, rows, cols, block),
-    ("done", job, result), ("cancelled", job), ("error", job, exception),
+    ("done", job, {quantity: result}) (None: the job's own bake), ("cancelled", job), ("error", job, exception),
     ("crash", job, exception, traceback text), and ("end",) last. A job that fails does not stop
     the ones after it; a cancel does. ``started[job]`` is the time.monotonic() at which the worker
     began that job.
     """
 
-    def __init__(self, jobs, settings, threads, live):
+    def __init__(self, jobs, settings, threads, live, quantities=(None,)):
         self.jobs = jobs
+        # What each job is baked for: None, its own bake (Job.quantity), then each other core
+        # quantity an output needs (one more core bake of the job, unless it is the job's own);
+        # "done" carries {quantity: result}, None for the job's own.
+        self.quantities = [None] + [q for q in quantities if q is not None]
         self.settings = settings
         self.threads = threads
         self.live = live
@@ -75,17 +79,24 @@ class BakeRun:
                 break
             self.started[i] = time.monotonic()
 
-            def progress(fraction, i=i):
-                put(("progress", i, fraction))
-
             def on_tile(rows, cols, block, i=i):
                 put(("tile", i, rows, cols, np.array(block, dtype=np.float32)))
 
+            results = {}
             try:
-                result = job.run(
-                    self.settings, self.threads, progress=progress, cancel=self.cancel,
-                    on_tile=on_tile if self.live else None,
-                )
+                own = getattr(job, "quantity", "ao")
+                runs = [q for q in self.quantities if q != own]
+                for k, quantity in enumerate(runs):
+                    def progress(fraction, i=i, k=k, n=len(runs)):
+                        put(("progress", i, (k + fraction) / n))
+
+                    results[quantity] = job.run(
+                        self.settings, self.threads, progress=progress, cancel=self.cancel,
+                        on_tile=on_tile if self.live and k == 0 else None,
+                        **({"quantity": quantity} if k else {}),
+                    )
+                if own in self.quantities:
+                    results[own] = results[None]
             except self.core.BakeCancelled:
                 put(("cancelled", i))
                 break
@@ -95,11 +106,11 @@ class BakeRun:
             except Exception as exc:  # a bug, or the machine out of memory: report it, keep the trace
                 put(("crash", i, exc, traceback.format_exc()))
                 continue
-            problem = empty_bake_problem(result)
+            problem = empty_bake_problem(results[None])
             if problem is not None:  # never a success that baked nothing (nor its all-zero files)
                 put(("error", i, self.core.MeshError(problem)))
                 continue
-            put(("done", i, result))
+            put(("done", i, results))
 
 
 def empty_bake_problem(result):
@@ -134,7 +145,7 @@ def dispatch(message, handler):
     """Hand one BakeRun message to ``handler``; True at the end of the run ("end").
 
     The operator's modal session and the script's loop are both handlers: ``on_progress(i, fraction)``,
-    ``on_tile(i, rows, cols, block)``, ``on_done(i, result)``, ``on_failed(i, error)`` (the core refused
+    ``on_tile(i, rows, cols, block)``, ``on_done(i, results)``, ``on_failed(i, error)`` (the core refused
     the object's input, or it baked nothing), ``on_crashed(i, exc, trace)``, ``on_cancelled(i)``; a
     handler without a method ignores that kind.
     """

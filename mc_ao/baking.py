@@ -97,26 +97,38 @@ class Job:
     # job for each, each with its own image.
     quantity: str = "ao"
 
-    def bake_kwargs(self, settings, threads=None):
+    def bake_kwargs(self, settings, threads=None, quantity=None):
         """core.bake_ao's keyword arguments for this job: the settings' (BakeSettings.bake_kwargs), and
-        for a thickness map its quantity, without the ground (only the object itself occludes it)."""
+        for a thickness map its quantity, without the ground (only the object itself occludes it).
+        ``quantity``: another quantity than the job's own (an output that needs a second one), which
+        comes without bent normals (the core makes them with the job's own bake)."""
         kw = settings.bake_kwargs(threads)
-        if self.quantity != "ao":
+        quantity = quantity or self.quantity
+        if quantity != "ao":
             kw.pop("ground", None)
-            kw["quantity"] = self.quantity
+            kw["quantity"] = quantity
+        if quantity != self.quantity:
+            kw.pop("bent_normals", None)
         return kw
+
+    def occluders_for(self, quantity=None):
+        """The occluders of its bake of ``quantity`` (its own by default): none for a thickness map."""
+        return self.occluders if (quantity or self.quantity) == "ao" else []
 
     @property
     def selected_to_active(self):
         return bool(self.highpoly)
 
-    def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None):
+    def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None, quantity=None):
         """core.bake_ao of this job; returns its result. Needs no bpy (safe in a worker thread).
 
+        ``quantity``: bake this core quantity (core.bake_ao's ``quantity``, e.g. "thickness") instead
+        of the job's own (an output that needs a second quantity; see bake_kwargs()).
         Raises core.McAoError subclasses (core.BakeCancelled when ``cancel`` fires).
         """
         if settings.vertex_colors or settings.use_udim or settings.bent_normals:
-            return _run_other(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile)
+            return _run_other(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile,
+                              quantity=quantity)
         core = corelink.load()
 
         def mesh(arrays):
@@ -135,8 +147,8 @@ class Job:
                          cage=None if self.cage is None else mesh(self.cage))
         return core.bake_ao(
             mesh(self.target),
-            occluders=[mesh(o) for o in self.occluders],
-            **self.bake_kwargs(settings, threads),
+            occluders=[mesh(o) for o in self.occluders_for(quantity)],
+            **self.bake_kwargs(settings, threads, quantity),
             progress=progress,
             cancel=cancel,
             on_tile=on_tile,
@@ -179,7 +191,7 @@ _TARGET_NOTES = {
 }
 
 
-def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None):
+def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None, quantity=None):
     """The core's bake of ``job`` for a colour-attribute, UDIM or bent-normal bake (Job.run's)."""
     core = corelink.load()
 
@@ -187,14 +199,14 @@ def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None)
         return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
                          normals=arrays.normals, name=arrays.name)
 
-    kw = job.bake_kwargs(settings, threads)
-    occluders = [mesh(o) for o in job.occluders]
+    kw = job.bake_kwargs(settings, threads, quantity)
+    occluders = [mesh(o) for o in job.occluders_for(quantity)]
     if settings.vertex_colors:
         for key in ("resolution", "margin", "bent_normals"):
             kw.pop(key, None)
         return core.bake_vertex_ao(mesh(job.target, uvs=False), occluders, corners=job.target.extra["corners"],
                                    progress=progress, cancel=cancel, **kw)
-    if settings.bent_normals:
+    if kw.get("bent_normals"):
         kw["bent_space"] = (job.target.extra or {}).get("bent_space")
     if settings.use_udim:
         return core.bake_udim(mesh(job.target), occluders, progress=progress, cancel=cancel, **kw)

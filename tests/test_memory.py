@@ -230,3 +230,30 @@ def test_the_memory_estimate_prices_the_parent_and_each_worker():
         cost.BYTES_PER_CHUNK_RAY
     high = cost.estimate(1000, 16, 2, highpoly_triangles=10_000)
     assert high.bytes < cost.estimate(1000, 16, 10_002).bytes
+
+
+def test_a_large_high_poly_alone_is_one_embree_scene_that_matches_and_occludes(monkeypatch):
+    from core import highpoly
+
+    P, F, UV, N = wavy(16)
+    lowp = np.array([[10, 10, 9.8], [12, 10, 9.8], [12, 12, 9.8], [10, 12, 9.8]], float)
+    low = Mesh(lowp, np.array([[0, 1, 2], [0, 2, 3]]), uvs=(lowp[[[0, 1, 2], [0, 2, 3]]][:, :, :2] - 10) / 2,
+               name="low")
+    args = dict(resolution=24, samples=64, max_distance=1.0, margin=0, threads=1, extrusion=0.5)
+    scenes = []
+    real = highpoly.HighPolyScene.__init__
+
+    def spy(self, *a, **k):
+        real(self, *a, **k)
+        scenes.append(self.tracer.scene is self.match_scene)
+
+    monkeypatch.setattr(highpoly.HighPolyScene, "__init__", spy)
+    two = bake_ao(low, [], highpoly=[Mesh(P, F, normals=N, name="high")], **args)
+    monkeypatch.setattr(highpoly, "ONE_SCENE_TRIANGLES", len(F))
+    one = bake_ao(low, [], highpoly=[Mesh(P, F, normals=N, name="high")], **args)
+    with_lid = bake_ao(low, [lid()], highpoly=[Mesh(P, F, normals=N, name="high")], **args)
+    assert scenes == [False, True, False]  # another occluder: the occlusion scene holds both
+    # The same rays; the robust scene may answer a ray grazing an edge differently, nothing more.
+    assert np.array_equal(one.mask, two.mask) and np.mean(one.ao == two.ao) > 0.95
+    assert np.abs(one.ao - two.ao).max() <= 2.0 / 64
+    assert with_lid.mask.any()
