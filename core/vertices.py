@@ -303,6 +303,7 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
 
     rays, trace_s, trace_cpu, counters, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store,
                                                                        progress, cancel, on_rays)
+    memory = counters.get("worker_memory", [])
     if len(quantities) == 1:
         counters = {base: dict(rays=rays, trace_seconds=trace_s, trace_cpu_seconds=trace_cpu)}
     unit = root.unit
@@ -317,7 +318,8 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
             metadata["quantities"] = ",".join(quantities)
         if ls.ground is not None:
             metadata["ground_height"] = pro.ground_height(ls)[0]
-        report = {"corners": len(corners), "sample_points": m, "degenerate_corners": root.flat}
+        report = {"corners": len(corners), "sample_points": m, "degenerate_corners": root.flat,
+                  "worker_memory": memory}
         if fallback is not None:
             report.setdefault("warnings", []).append(
                 f"baked on {ls.threads} threads of this process, not in worker processes: {fallback}")
