@@ -315,7 +315,7 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
             metadata.pop(key, None)
         metadata["sample_points"] = m
         if maps:
-            metadata["quantities"] = list(quantities)
+            metadata["quantities"] = ",".join(quantities)
         if ls.ground is not None:
             metadata["ground_height"] = pro.ground_height(ls)[0]
         report = {"corners": len(corners), "sample_points": m, "degenerate_corners": root.flat,
