@@ -558,9 +558,9 @@ def bake_maps(target, occluders=(), resolution=(1024, 1024), samples=256, *, qua
     Returns
     -------
     {quantity: BakeResult}, in the order of ``quantities``: each bit for bit the :func:`bake_ao` of
-    that quantity with the same settings; ``metadata['quantities']`` lists the quantities baked
-    together, ``seconds`` is the whole bake's wall time, ``rays`` and the Embree seconds the quantity's
-    own.
+    that quantity with the same settings; ``metadata['quantities']`` names the quantities baked
+    together (comma-separated, 'ao,thickness': image files keep it), ``seconds`` is the whole
+    bake's wall time, ``rays`` and the Embree seconds the quantity's own.
 
     Raises
     ------
@@ -728,7 +728,7 @@ def _finish(img, s, pro, s2a, extra, counters, fallback, denoise, t_start, quant
     rays = counters["rays"]
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
     if quantities is not None:
-        metadata["quantities"] = list(quantities)
+        metadata["quantities"] = ",".join(quantities)
     if denoise:
         metadata["denoise"] = True
     if s.ground is not None:

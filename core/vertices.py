@@ -303,6 +303,7 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
 
     rays, trace_s, trace_cpu, counters, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store,
                                                                        progress, cancel, on_rays)
+    memory = counters.get("worker_memory", [])
     if len(quantities) == 1:
         counters = {base: dict(rays=rays, trace_seconds=trace_s, trace_cpu_seconds=trace_cpu)}
     unit = root.unit
@@ -314,10 +315,11 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
             metadata.pop(key, None)
         metadata["sample_points"] = m
         if maps:
-            metadata["quantities"] = list(quantities)
+            metadata["quantities"] = ",".join(quantities)
         if ls.ground is not None:
             metadata["ground_height"] = pro.ground_height(ls)[0]
-        report = {"corners": len(corners), "sample_points": m, "degenerate_corners": root.flat}
+        report = {"corners": len(corners), "sample_points": m, "degenerate_corners": root.flat,
+                  "worker_memory": memory}
         if fallback is not None:
             report.setdefault("warnings", []).append(
                 f"baked on {ls.threads} threads of this process, not in worker processes: {fallback}")
@@ -404,5 +406,5 @@ class VertexBake:
         return out
 
 
-__all__ = ["VertexBakeResult", "bake_vertex_ao", "bake_vertex_maps", "VertexBake", "all_corners", "vertex_means", "sample_points", "NUDGE",
-           "Neighbours", "unit_pairs"]
+__all__ = ["VertexBakeResult", "bake_vertex_ao", "bake_vertex_maps", "VertexBake", "all_corners", "vertex_means",
+           "sample_points", "NUDGE", "Neighbours", "unit_pairs"]

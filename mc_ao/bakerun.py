@@ -71,8 +71,51 @@ class BakeRun:
             # Always last, whatever happened above: the main thread waits for it.
             self.messages.put(("end",))
 
+    def _needs(self, job):
+        """The core quantities ``job`` needs: its own, then each other one an output reads."""
+        own = getattr(job, "quantity", "ao")
+        return [own] + [q for q in self.quantities if q not in (None, own)]
+
+    def _group(self, i):
+        """The jobs from ``i`` on that are other quantities of job ``i``'s object, with every quantity
+        they need, when that is more than one (they are then baked together, core.bake_maps: one set-up,
+        each quantity its own rays); else None."""
+        job = self.jobs[i]
+        if not hasattr(job, "run_maps"):
+            return None
+        members = [i]
+        for j in range(i + 1, len(self.jobs)):
+            other = self.jobs[j]
+            if not (hasattr(other, "quantity") and job.shares_bake_with(other)):
+                break
+            members.append(j)
+        quantities = list(dict.fromkeys(q for j in members for q in self._needs(self.jobs[j])))
+        return (members, quantities) if len(quantities) > 1 else None
+
+    def _run_group(self, i, group, put, on_tile, ahead):
+        """Bake the quantities of ``group`` (from :meth:`_group`) in one core bake through job ``i``;
+        job ``i``'s results, the others' kept in ``ahead`` for their turn."""
+        members, quantities = group
+        own = self.jobs[i].quantity
+
+        def progress(fraction):
+            put(("progress", i, fraction))
+
+        def tile(quantity, rows, cols, block):
+            if quantity == own:
+                on_tile(rows, cols, block)
+
+        baked = self.jobs[i].run_maps(self.settings, self.threads, quantities, progress=progress, cancel=self.cancel,
+                                      on_tile=tile if self.live else None)
+        for j in members:
+            mine = self.jobs[j].quantity
+            ahead[j] = {q: baked[q] for q in self._needs(self.jobs[j]) if q in self.quantities}
+            ahead[j][None] = baked[mine]
+        return ahead.pop(i)
+
     def _work_jobs(self):
         put = self.messages.put
+        ahead = {}  # job index -> its results, baked with an earlier job of the same object
         for i, job in enumerate(self.jobs):
             if self.cancel.is_set():
                 put(("cancelled", i))
@@ -86,6 +129,15 @@ class BakeRun:
             try:
                 own = getattr(job, "quantity", "ao")
                 runs = [q for q in self.quantities if q != own]
+                if i in ahead:  # baked with an earlier job of the same object (below)
+                    results = ahead.pop(i)
+                    put(("progress", i, 1.0))
+                    runs = []
+                else:
+                    group = self._group(i)
+                    if group is not None:
+                        results = self._run_group(i, group, put, on_tile, ahead)
+                        runs = []
                 for k, quantity in enumerate(runs):
                     def progress(fraction, i=i, k=k, n=len(runs)):
                         put(("progress", i, (k + fraction) / n))

@@ -104,8 +104,9 @@ class Job:
         comes without bent normals (the core makes them with the job's own bake)."""
         kw = settings.bake_kwargs(threads)
         quantity = quantity or self.quantity
-        if quantity != "ao":
+        if quantity != "ao":  # the ground and back faces are the AO's (core refuses them for thickness)
             kw.pop("ground", None)
+            kw.pop("ignore_backfaces", None)
             kw["quantity"] = quantity
         if quantity != self.quantity:
             kw.pop("bent_normals", None)
@@ -154,6 +155,51 @@ class Job:
             on_tile=on_tile,
             **extra,
         )
+
+
+    def shares_bake_with(self, other):
+        """Whether ``other`` bakes the same object from the same geometry (another quantity of it): the
+        two can be baked together (:meth:`run_maps`)."""
+        return (other.object_name == self.object_name and other.target is self.target
+                and len(other.highpoly) == len(self.highpoly)
+                and all(a is b for a, b in zip(other.highpoly, self.highpoly)) and other.cage is self.cage
+                and other.extrusion == self.extrusion and other.max_ray_distance == self.max_ray_distance)
+
+    def run_maps(self, settings, threads=None, quantities=("ao", "thickness"), progress=None, cancel=None,
+                 on_tile=None):
+        """Several core quantities of this object from one bake (core.bake_maps, bake_udim_maps or
+        bake_vertex_maps: one set-up, each quantity its own rays): {quantity: result}, each bit for bit
+        what :meth:`run` returns for it from this job (its occluders for the AO, none for a thickness
+        map; the ground, back faces and bent normals for the AO only, the bent normals only where the
+        AO is the job's own quantity). ``on_tile(quantity, rows, cols, block)``. Needs no bpy."""
+        core = corelink.load()
+
+        def mesh(arrays, uvs=True):
+            return core.Mesh(positions=arrays.positions, triangles=arrays.triangles,
+                             uvs=arrays.uvs if uvs else None, normals=arrays.normals, name=arrays.name)
+
+        kw = self.bake_kwargs(settings, threads, "ao")
+        kw.pop("quantity", None)
+        if "ao" not in quantities:
+            kw.pop("ground", None)
+            kw.pop("ignore_backfaces", None)
+        occluders = [mesh(o) for o in self.occluders_for("ao")] if "ao" in quantities else []
+        if settings.vertex_colors:
+            for key in ("resolution", "margin", "bent_normals"):
+                kw.pop(key, None)
+            return core.bake_vertex_maps(mesh(self.target, uvs=False), occluders, corners=self.target.extra["corners"],
+                                         quantities=tuple(quantities), progress=progress, cancel=cancel, **kw)
+        if kw.get("bent_normals"):
+            kw["bent_space"] = (self.target.extra or {}).get("bent_space")
+        if self.highpoly and not (settings.use_udim or settings.bent_normals):  # as run() passes it
+            extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
+            kw.update(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
+                      max_ray_distance=self.max_ray_distance, cage=None if self.cage is None else mesh(self.cage))
+        if settings.use_udim:
+            return core.bake_udim_maps(mesh(self.target), occluders, quantities=tuple(quantities), progress=progress,
+                                       cancel=cancel, **kw)
+        return core.bake_maps(mesh(self.target), occluders, quantities=tuple(quantities), progress=progress,
+                              cancel=cancel, on_tile=on_tile, **kw)
 
 
 # core's BakeResult.report keys that point at a problem in the input, and the sentence that says
@@ -437,20 +483,18 @@ def channel_problem(settings, images=None):
             corelink.load("imageio").check_channel(settings.into, settings.channel, settings.size)
         except corelink.load().SettingsError as exc:
             return str(exc)
-        return _CHANNEL_WRITER_MISSING.format(channel=settings.channel, into=settings.into)
+        return None
     channels = image_channels(image)
     # An image of 3 channels has no alpha; one of 1 or 2 (grey, grey and alpha) no separate green or blue.
     has = {4: "RGBA", 3: "RGB", 2: "RA", 1: "R"}.get(channels, "")
     if settings.channel not in has:
         return (f"image {settings.into!r} has no {settings.channel} channel (it has {channels}: "
                 f"{', '.join(has) or 'none'}); choose one of them")
-    # The writer that puts one channel into an existing image is not part of this version: refuse
-    # rather than bake into the object's own image instead.
-    return _CHANNEL_WRITER_MISSING.format(channel=settings.channel, into=settings.into)
-
-
-_CHANNEL_WRITER_MISSING = ("Channel {channel} into {into!r}: writing the AO into one channel of an existing image "
-                           "is not available in this version; set Channel to Own Image")
+    w, h = settings.size
+    if tuple(image.size) != (w, h) and all(image.size):
+        return (f"image {settings.into!r} is {image.size[0]}x{image.size[1]}, not the bake's {w}x{h}: bake at its "
+                f"size to write into its {settings.channel} channel")
+    return None  # mc_ao.outputs.channel writes it
 
 
 def image_channels(image):

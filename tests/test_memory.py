@@ -206,6 +206,12 @@ def test_the_report_says_what_each_process_held(workers):
             assert e["pid"] != os.getpid() and 0 < e["start"] <= e["peak"] and e["start"] < e["ready"]
 
 
+def test_a_vertex_bake_reports_its_processes_memory_too():
+    P, F, UV, N = wavy(8)
+    r = bake_vertex_ao(Mesh(P, F, normals=N, name="wavy"), [lid()], samples=8, workers=2)
+    assert [e["process"] for e in r.report["worker_memory"]] == ["parent", "worker 0", "worker 1"]
+
+
 def test_auto_starts_no_more_workers_than_the_memory_holds():
     T = 2_000_000
     one = cost.process_bytes(T)

@@ -375,6 +375,8 @@ def assert_agrees(mc, cyc):
     se = np.sqrt(np.sum(2 * (mc * (1 - mc)) / SPP)) / d.size
     assert abs(d.mean()) < 4 * se + 2e-3, (d.mean(), se)
     noise = np.mean(np.sqrt(2 * mc * (1 - mc) / SPP)) * math.sqrt(2 / math.pi)
+    print(f"against Cycles: mean difference {d.mean():.5f} (standard error {se:.5f}), mean absolute difference "
+          f"{np.abs(d).mean():.5f} (noise {noise:.5f})")
     assert np.abs(d).mean() < 1.3 * noise + 0.005, (np.abs(d).mean(), noise)
 
 
@@ -468,13 +470,13 @@ def test_a_channel_is_checked_against_the_image_before_any_work(bpy, scene, capf
     assert result is None and "image 'orm.png' has no A channel (it has 3: R, G, B)" in error, error
     s.channel = "R"
     result, error, _ = run(bpy, capfd)
-    # the image has a red channel; writing into it is refused, rather than baking somewhere else
-    assert result is None and "writing the AO into one channel of an existing image is not available" in error
+    # the image has a red channel, but not the bake's size: refused, rather than baking somewhere else
+    assert result is None and "image 'orm.png' is 8x8, not the bake's 24x24" in error, error
     assert "Floor_AO" not in bpy.data.images
     # a file: core.imageio's check names it and the channels it has
     settings = BakeSettings(channel="A", into=str(rgb), resolution=8)
     assert "orm.png" in baking.channel_problem(settings, {}) and "A" in baking.channel_problem(settings, {})
-    assert "not available" in baking.channel_problem(dataclasses.replace(settings, channel="G"), {})
+    assert baking.channel_problem(dataclasses.replace(settings, channel="G"), {}) is None  # it has G, 8 x 8
     s.into = None
     result, error, _ = run(bpy, capfd)
     assert result is None and "into" in error.lower(), error
@@ -621,3 +623,22 @@ def test_a_skipped_object_that_occludes_only_itself_is_not_said_to_occlude(bpy, 
     result, error, reports = run(bpy, capfd)
     assert result == {"FINISHED"}
     assert ("Warning", "A: skipped, it has no UV map (unwrap it first: Edit Mode, U)") in reports, reports
+
+
+def test_both_quantities_keep_an_error_map_each(bpy, scene, capfd, tmp_path):
+    s = scene.mc_ao
+    s.max_distance, s.processes, s.error_map = 1.0, 1, True
+    s.quantity = {"AO", "THICKNESS"}
+    s.save_to_file, s.output_dir, s.file_format = True, str(tmp_path), "OPEN_EXR"
+    box = add_cube(bpy, "Slab", size=1.0)
+    select_only(bpy, box)
+    result, error, reports = run(bpy, capfd)
+    assert (result, error) == ({"FINISHED"}, None), reports
+    for name in ("Slab_AO", "Slab_AO_stderr", "Slab_Thickness", "Slab_Thickness_stderr"):
+        assert name in bpy.data.images, name
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Slab_AO.exr", "Slab_AO_stderr.exr", "Slab_Thickness.exr",
+                                                          "Slab_Thickness_stderr.exr"]
+    from core import imageio
+
+    assert imageio.read_image(str(tmp_path / "Slab_Thickness.exr"))[1]["map"] == "thickness"
+    assert "map" not in imageio.read_image(str(tmp_path / "Slab_AO.exr"))[1]
