@@ -406,5 +406,5 @@ class VertexBake:
         return out
 
 
-__all__ = ["VertexBakeResult", "bake_vertex_ao", "bake_vertex_maps", "VertexBake", "all_corners", "vertex_means", "sample_points", "NUDGE",
-           "Neighbours", "unit_pairs"]
+__all__ = ["VertexBakeResult", "bake_vertex_ao", "bake_vertex_maps", "VertexBake", "all_corners", "vertex_means",
+           "sample_points", "NUDGE", "Neighbours", "unit_pairs"]

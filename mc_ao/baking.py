@@ -483,20 +483,18 @@ def channel_problem(settings, images=None):
             corelink.load("imageio").check_channel(settings.into, settings.channel, settings.size)
         except corelink.load().SettingsError as exc:
             return str(exc)
-        return _CHANNEL_WRITER_MISSING.format(channel=settings.channel, into=settings.into)
+        return None
     channels = image_channels(image)
     # An image of 3 channels has no alpha; one of 1 or 2 (grey, grey and alpha) no separate green or blue.
     has = {4: "RGBA", 3: "RGB", 2: "RA", 1: "R"}.get(channels, "")
     if settings.channel not in has:
         return (f"image {settings.into!r} has no {settings.channel} channel (it has {channels}: "
                 f"{', '.join(has) or 'none'}); choose one of them")
-    # The writer that puts one channel into an existing image is not part of this version: refuse
-    # rather than bake into the object's own image instead.
-    return _CHANNEL_WRITER_MISSING.format(channel=settings.channel, into=settings.into)
-
-
-_CHANNEL_WRITER_MISSING = ("Channel {channel} into {into!r}: writing the AO into one channel of an existing image "
-                           "is not available in this version; set Channel to Own Image")
+    w, h = settings.size
+    if tuple(image.size) != (w, h) and all(image.size):
+        return (f"image {settings.into!r} is {image.size[0]}x{image.size[1]}, not the bake's {w}x{h}: bake at its "
+                f"size to write into its {settings.channel} channel")
+    return None  # mc_ao.outputs.channel writes it
 
 
 def image_channels(image):

@@ -48,7 +48,7 @@ SETTINGS = BakeSettings(resolution=8, samples=4, margin=1, threads=1, processes=
 
 def test_every_kind_is_registered_and_has_a_file_of_its_own():
     names = [k.name for k in outputs.KINDS]
-    assert names == ["image", "error_map", "bent_normals", "color_attribute"]
+    assert names == ["image", "error_map", "bent_normals", "channel", "color_attribute"]
     for kind in outputs.KINDS:
         assert issubclass(kind, base.OutputKind)
         assert (PACKAGE / f"{kind.__module__.rpartition('.')[2]}.py").is_file()

@@ -5,6 +5,7 @@
 | ``image`` | image.py | the AO in the object's image (plain or UDIM tiles) and its files |
 | ``error_map`` | error_map.py | the standard error in "<image>_stderr" and ``<stem>_stderr.exr`` |
 | ``bent_normals`` | bent_normals.py | the bent normals in "<object>_BentNormal" and its files |
+| ``channel`` | channel.py | the map in one channel of an existing image (Channel, Into) and a copy of its file |
 | ``color_attribute`` | color_attribute.py | the AO in a colour attribute and a PLY file |
 
 ``maps.py`` is what every image kind shares (a kind of map chooses its plane of the core's result,
@@ -17,12 +18,13 @@ summary lines come). No bpy at import. Nothing here imports mc_ao.service, cli o
 
 from .base import FileWrite, OutputKind, SaveError, save_files  # noqa: F401
 from .bent_normals import BentNormalsOutput
+from .channel import ChannelOutput
 from .color_attribute import ColorAttributeOutput
 from .error_map import ErrorMapOutput
 from .image import ImageOutput
 
 #: Every kind of output, in the order their files are planned and written.
-KINDS = (ImageOutput, ErrorMapOutput, BentNormalsOutput, ColorAttributeOutput)
+KINDS = (ImageOutput, ErrorMapOutput, BentNormalsOutput, ChannelOutput, ColorAttributeOutput)
 
 
 def kinds_for(settings):

@@ -470,13 +470,13 @@ def test_a_channel_is_checked_against_the_image_before_any_work(bpy, scene, capf
     assert result is None and "image 'orm.png' has no A channel (it has 3: R, G, B)" in error, error
     s.channel = "R"
     result, error, _ = run(bpy, capfd)
-    # the image has a red channel; writing into it is refused, rather than baking somewhere else
-    assert result is None and "writing the AO into one channel of an existing image is not available" in error
+    # the image has a red channel, but not the bake's size: refused, rather than baking somewhere else
+    assert result is None and "image 'orm.png' is 8x8, not the bake's 24x24" in error, error
     assert "Floor_AO" not in bpy.data.images
     # a file: core.imageio's check names it and the channels it has
     settings = BakeSettings(channel="A", into=str(rgb), resolution=8)
     assert "orm.png" in baking.channel_problem(settings, {}) and "A" in baking.channel_problem(settings, {})
-    assert "not available" in baking.channel_problem(dataclasses.replace(settings, channel="G"), {})
+    assert baking.channel_problem(dataclasses.replace(settings, channel="G"), {}) is None  # it has G, 8 x 8
     s.into = None
     result, error, _ = run(bpy, capfd)
     assert result is None and "into" in error.lower(), error
