@@ -334,6 +334,9 @@ def _setup(job, cancel, progress):
                    bent_normals=job["bent_normals"])
     bake = texel_bake(pro, s, job.get("quantities", [s.quantity]), job["bent_normals"],
                       guide=job.get("guide", False))
+    # The UVs served the UV triangles the bake now holds; a worker bakes tiles from those alone and
+    # lets the UVs go (48 bytes a triangle; the parent keeps them for the images and the denoiser).
+    pro.target.uvs = None
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)
     return bake, shared, s.threads

@@ -1,11 +1,12 @@
 """The Bake AO operator: modal with a worker thread from the UI, synchronous from scripts and -b.
 
-One bake is a list of jobs (one per selected mesh) run one after another by core.bake_ao on a worker
-thread. The thread never touches bpy: it only puts messages (progress, finished tiles, results,
-errors) on a queue. A BakeSession is the main-thread side: it plans the bake, drains the queue,
-applies the messages to Blender's images and ends the bake. The operator drives it from
-window-manager timer events when modal (Esc cancels) or in a blocking loop when not; the tests
-drive it with the same events, since a modal operator cannot run without a window.
+The bake itself is mc_ao.service's, as for the script: a plan (one job per selected mesh and
+quantity, its outputs and files checked before any work), a run on a worker thread that never
+touches bpy and puts messages on a queue, and each finished object through its outputs (images,
+files written all or none, colour attribute). A BakeSession is what only the UI adds: the selection,
+the live image while a job bakes, the progress, Esc and undo, the reports. The operator drives it
+from window-manager timer events when modal (Esc cancels) or in a blocking loop when not; the
+tests drive it with the same events, since a modal operator cannot run without a window.
 
 What goes wrong, and what the user gets (a report naming the object, images kept as they were):
 
@@ -14,7 +15,8 @@ What goes wrong, and what the user gets (a report naming the object, images kept
 - an existing image of another size: resized to the bake's size (reported); put back as it was
   when its bake does not finish
 - an output folder that cannot be written: refused before baking, nothing changes; a file that
-  fails to write later: the image in Blender keeps the bake, the file on disk is left as it was
+  fails to write later: the image in Blender keeps the bake, and none of that object's files is
+  written (each file on disk is left as it was); the report names the file that failed
 - Esc, Undo during a bake, or a failure in the core: unfinished images are put back as they were,
   finished ones are kept; a failed object does not stop the others
 
@@ -33,7 +35,6 @@ import traceback
 import bpy
 
 from . import bakerun, baking, corelink, filecheck, filewriter, images, schema, selected_to_active, service
-from .bakerun import BakeRun  # noqa: F401 - tests start a worker through it
 from .extract import ExtractError
 from .outputs.store import Store
 from .properties import resolve_threads
