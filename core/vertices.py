@@ -385,17 +385,17 @@ class VertexBake:
         """Block ``key``'s points and where each pools its variance (the same for every quantity)."""
         ids = self.blocks[key]
         near = None if self.pairs is None else _block_neighbours(self.pairs, int(ids[0]), int(ids[-1]) + 1)
-        return ids, near
+        return ids, near, {}
 
     def tile(self, key, directions=True, layout=None):
         """Bake block ``key`` of the sample points: a :class:`core.bake.TileOut` whose ``texels`` are
         the points' numbers (bent normals are world directions already); ``layout``: the block's
         :meth:`layout`, taken already for another quantity."""
-        ids, near = self.layout(key) if layout is None else layout
+        ids, near, memo = self.layout(key) if layout is None else layout
         contact = np.zeros(len(ids), bool)
         if self.tracer.touches:
             contact = self.tracer.contact(self.p[ids], self.gn[ids])
-        est, sums = self.baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None)
+        est, sums = self.baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None, memo=memo)
         out = TileOut(key, ids, np.clip(est.mean, 0.0, 1.0).astype(np.float32),
                       self.errors.stderr(est, near, None).astype(np.float32), est.n.astype(np.int32),
                       np.zeros(len(ids), bool))
