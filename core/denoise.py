@@ -665,19 +665,21 @@ def _halo_pairs(guide, mask, r, F):
     order within one): (receiver flat index, source flat index, squared distance, cosine, Chebyshev
     length of the offset)."""
     h, w = guide.height, guide.width
-    isl = np.where(mask, guide.island, -1).reshape(-1)
     keep = mask.reshape(-1)[guide.halo_source]
     ty, tx = guide.halo_row[keep], guide.halo_col[keep]
     hisl, hsrc = guide.halo_island[keep], guide.halo_source[keep]
+    # The islands padded by 2 r (-1 beyond the image): halo texels lie up to r beyond it, their
+    # receivers up to r further, and every lookup stays inside without a bounds test.
+    p = 2 * r
+    wp = w + 2 * p
+    isl = np.pad(np.where(mask, guide.island, -1).astype(np.int32), p, constant_values=-1).reshape(-1)
+    at = (ty + p) * wp + (tx + p)
     recs, srcs, lens = [], [], []
     for dy, dx in _offsets(r):
-        ry, rx = ty - dy, tx - dx
-        ok = (ry >= 0) & (ry < h) & (rx >= 0) & (rx < w)
-        rec = np.where(ok, ry * w + rx, 0)
-        ok &= isl[rec] == hisl
-        recs.append(rec[ok])
+        ok = np.flatnonzero(isl[at - (dy * wp + dx)] == hisl)
+        recs.append((ty[ok] - dy) * w + (tx[ok] - dx))
         srcs.append(hsrc[ok])
-        lens.append(np.full(int(ok.sum()), max(abs(dy), abs(dx)), np.int8))
+        lens.append(np.full(len(ok), max(abs(dy), abs(dx)), np.int8))
     rec, src, cheb = np.concatenate(recs), np.concatenate(srcs), np.concatenate(lens)
     order = np.argsort(rec, kind="stable")
     rec, src, cheb = rec[order], src[order], cheb[order]

@@ -171,19 +171,97 @@ def compare(res, samples, ref_samples, seed=1, threads=2, cache=None, picture_pa
             "guide_cpu": tg.cpu, "denoise_cpu": td.cpu, "bake_cpu": tb.cpu, "oidn": version, "rows": rows}
 
 
-def cost(res, threads=2):
-    """CPU seconds of the denoiser (guide + filter) against a 64-sample bake of the same map."""
-    target, occ, dist = load_scene()
-    with Clock() as tb:
-        raw = bake_ao(target, occ, resolution=res, samples=64, max_distance=dist, seed=3, threads=threads)
-    with Clock() as tg:
-        guide = D.surface_guide(target, res)
-    with Clock() as td:
-        D.denoise(raw.ao, raw.stderr, raw.mask, guide)
+#: What one cost measurement runs, in a process of its own whose ``core`` is the tree measured (this
+#: one, or an earlier commit's, unpacked): a 64-sample bake, the same bake with denoise=True, and the
+#: guide and the filter on their own (surface_guide from the mesh, then denoise of the plain bake).
+#: Prints one JSON line of CPU seconds (process time: every thread, steadier than wall time on a
+#: shared machine).
+_COST_RUN = r"""
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+import numpy as np
+from core import Mesh, bake_ao
+from core import denoise as D
+z = np.load(sys.argv[2])
+target = Mesh(z["P"], z["F"], z["UV"], z["N"], name="Suzanne")
+occ = [Mesh(z[f"O{i}P"], z[f"O{i}F"], name=f"occluder{i}") for i in range(int(z["occluders"]))]
+res, threads, dist = int(sys.argv[3]), int(sys.argv[4]), float(z["distance"])
+out = {}
+def clock(name, f):
+    c, w = time.process_time(), time.perf_counter()
+    r = f()
+    out[name + "_cpu"], out[name + "_wall"] = time.process_time() - c, time.perf_counter() - w
+    return r
+bake = lambda dn: bake_ao(target, occ, resolution=res, samples=64, max_distance=dist, seed=3, threads=threads,
+                          denoise=dn)
+raw = clock("bake64", lambda: bake(False))
+clock("bake64_denoise", lambda: bake(True))
+guide = clock("guide", lambda: D.surface_guide(target, res))
+clock("filter", lambda: D.denoise(raw.ao, raw.stderr, raw.mask, guide, threads=threads))
+print(json.dumps(out))
+"""
+
+
+def _tree(commit, into):
+    """``core`` of ``commit`` unpacked into the folder ``into`` (git archive); returns the folder."""
+    import io
+    import subprocess
+    import tarfile
+
+    data = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "core"], check=True,
+                          capture_output=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(data)) as t:
+        t.extractall(into)
+    return into
+
+
+def cost(res, threads=2, against=None, repeats=1):
+    """CPU seconds of the denoiser against a 64-sample bake of the same map, on the same cores: the
+    bake with denoise=True less the plain bake (what denoising adds to a bake), and the guide and
+    filter alone. With ``against`` (a commit), that commit's core is measured in the same run, the
+    two alternating ``repeats`` times; the least of the repeats counts (the others measure the
+    machine's other work), every repeat kept."""
+    import subprocess
+    import tempfile
+
+    trees = [("this tree", str(ROOT))]
+    tmp = None
+    if against:
+        tmp = tempfile.TemporaryDirectory()
+        trees.insert(0, (against, _tree(against, tmp.name)))
+    runs = {name: [] for name, _ in trees}
+    try:
+        for _ in range(repeats):
+            for name, root in trees:
+                p = subprocess.run([sys.executable, "-c", _COST_RUN, root, str(SCENE), str(res), str(threads)],
+                                   check=True, capture_output=True, text=True)
+                runs[name].append(json.loads(p.stdout.strip().splitlines()[-1]))
+                print(f"  cost {res}^2, {name}: {runs[name][-1]}", flush=True)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
     mt = res * res / 1e6
-    return {"resolution": res, "bake64_cpu": tb.cpu, "bake64_wall": tb.wall, "guide_cpu": tg.cpu,
-            "denoise_cpu": td.cpu, "denoise_wall": td.wall, "ratio_cpu": (tg.cpu + td.cpu) / tb.cpu,
-            "cpu_per_megatexel": (tg.cpu + td.cpu) / mt}
+    out = {"resolution": res, "threads": threads, "samples": 64, "repeats": repeats, "versions": {}}
+    for name, rs in runs.items():
+        best = {k: min(r[k] for r in rs) for k in rs[0]}
+        added = best["bake64_denoise_cpu"] - best["bake64_cpu"]
+        out["versions"][name] = dict(
+            best, runs=rs, added_cpu=added, ratio_cpu=added / best["bake64_cpu"],
+            ratio_parts_cpu=(best["guide_cpu"] + best["filter_cpu"]) / best["bake64_cpu"],
+            cpu_per_megatexel=added / mt, filter_cpu_per_megatexel=best["filter_cpu"] / mt)
+    return out
+
+
+def cost_table(c):
+    lines = [f"Cost at {c['resolution']}^2 (Suzanne, {c['threads']} threads, 64 samples; CPU s, least of "
+             f"{c['repeats']} runs):", "",
+             "| core | 64-sample bake | with denoise=True | added | added / bake | guide alone | filter alone | "
+             "added per megatexel |", "|---|---|---|---|---|---|---|---|"]
+    for name, v in c["versions"].items():
+        lines.append(f"| {name} | {v['bake64_cpu']:.1f} | {v['bake64_denoise_cpu']:.1f} | {v['added_cpu']:.1f} | "
+                     f"{100 * v['ratio_cpu']:.0f}% | {v['guide_cpu']:.1f} | {v['filter_cpu']:.1f} | "
+                     f"{v['cpu_per_megatexel']:.2f} |")
+    return "\n".join(lines)
 
 
 def equal_error(res, ref_samples, seed=1, threads=2, cache=None, raw_samples=(32, 64, 128, 256),
@@ -253,6 +331,8 @@ def main(argv=None):
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--reference-samples", type=int, default=1024)
     ap.add_argument("--cost-resolution", type=int, default=0, help="also measure the cost at this size (0: skip)")
+    ap.add_argument("--cost-against", default=None, help="a commit whose core's cost is measured in the same run")
+    ap.add_argument("--cost-repeats", type=int, default=1)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--reference-cache", type=Path, default=None, help="folder to keep the reference bake in")
@@ -261,15 +341,15 @@ def main(argv=None):
     ap.add_argument("--picture", type=Path, default=None,
                     help="PNG: raw, mc_ao denoised, OIDN RTLightmap, reference; |error| x 5 below")
     a = ap.parse_args(argv)
-    out = {"compare": compare(a.resolution, a.samples, a.reference_samples, threads=a.threads,
-                              cache=a.reference_cache, picture_path=a.picture)}
-    print(table(out["compare"]))
+    out = {}
+    if a.resolution:
+        out["compare"] = compare(a.resolution, a.samples, a.reference_samples, threads=a.threads,
+                                 cache=a.reference_cache, picture_path=a.picture)
+        print(table(out["compare"]))
     if a.cost_resolution:
-        c = cost(a.cost_resolution, threads=a.threads)
+        c = cost(a.cost_resolution, threads=a.threads, against=a.cost_against, repeats=a.cost_repeats)
         out["cost"] = c
-        print(f"\nCost at {c['resolution']}^2: guide {c['guide_cpu']:.2f} + filter {c['denoise_cpu']:.2f} CPU s "
-              f"= {100 * c['ratio_cpu']:.0f}% of a 64-sample bake ({c['bake64_cpu']:.2f} CPU s); "
-              f"{c['cpu_per_megatexel']:.2f} CPU s per megatexel.")
+        print("\n" + cost_table(c))
     if a.equal_error:
         e = equal_error(a.resolution, a.reference_samples, threads=a.threads, cache=a.reference_cache)
         out["equal_error"] = e
