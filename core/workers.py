@@ -328,7 +328,8 @@ def _setup(job, cancel, progress):
         shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
         bake.trace_setup(shared, cancel)
         return bake, shared, s.threads
-    pro = Prologue(_mesh(job["target"]), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=True,
+    # Popped: the job holds nothing of the target past its use (its UVs go once the bake has its UV triangles).
+    pro = Prologue(_mesh(job.pop("target")), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=True,
                    highpoly=None if job["highpoly"] is None else [_mesh(m) for m in job["highpoly"]],
                    extrusion=job["extrusion"], max_ray_distance=job["max_ray_distance"], cage=_mesh(job["cage"]),
                    bent_normals=job["bent_normals"])
