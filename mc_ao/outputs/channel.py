@@ -92,15 +92,20 @@ class ChannelOutput(OutputKind):
 
     # -- 1. before any work ----------------------------------------------------------------------
 
+    def udim_problem(self):
+        if self.settings.use_udim:
+            return (f"Channel {self.settings.channel} into {self.settings.into!r} takes a plain image, not UDIM "
+                    "tiles; turn UDIM off or set Channel to Own Image")
+        return None
+
     def check(self, job):
         from .. import images
 
         if not self.mine(job):
             return
         self._one_object(job)
-        if self.settings.use_udim:
-            raise images.ImageError(f"Channel {self.settings.channel} into {self.settings.into!r} takes a plain "
-                                    "image, not UDIM tiles; turn UDIM off or set Channel to Own Image")
+        if self.udim_problem():
+            raise images.ImageError(self.udim_problem())
         image = self.blender_image()
         if image is not None:
             reason = images.unusable_reason(image)
@@ -132,6 +137,8 @@ class ChannelOutput(OutputKind):
             self._one_object(job)
         except ValueError as exc:
             problems.append(str(exc))
+        if self.udim_problem():
+            problems.append(self.udim_problem())
         source = self.source_file()
         for path in self.planned(job, files):
             if source and os.path.normcase(os.path.abspath(path)) == os.path.normcase(os.path.abspath(source)):
