@@ -36,7 +36,8 @@ import time
 from .errors import FileWriteError
 
 
-__all__ = ["write_text", "PendingFile", "TEMP_PREFIX", "write_file", "io_error", "fsync_dir", "remove_stale"]
+__all__ = ["write_text", "PendingFile", "TEMP_PREFIX", "write_file", "io_error", "fsync_dir", "remove_stale",
+           "commit_together"]
 
 #: Every temporary (and backup) file a writer here makes starts with this.
 TEMP_PREFIX = ".mc_ao-"
@@ -366,6 +367,70 @@ class PendingFile:
             os.replace(self.temp, self.target)
         else:
             os.unlink(self.temp)
+
+
+def commit_together(pendings, error=FileWriteError):
+    """Commit finished :class:`PendingFile` s all together or not at all.
+
+    Each target that exists is first hard-linked to a backup beside it; then the temporary files
+    are renamed over their targets one after another. When a rename fails, the targets already
+    replaced get their old files back (or are removed, where there was none), every temporary file
+    is removed, and ``error`` is raised naming the target that failed. Where the filesystem has no
+    hard links the old file cannot be kept aside: nothing is committed and ``error`` says so. A
+    KeyboardInterrupt during the renames is handled like a failure (everything put back) and then
+    re-raised.
+    """
+    pendings = list(pendings)
+    backups = []
+    try:
+        for p in pendings:
+            backups.append(_backup_of(p.target))
+    except OSError as exc:
+        for p in pendings:
+            p.discard()
+        for b in backups:
+            if b:
+                remove_quietly(b)
+        raise io_error(error, f"cannot keep the old file {os.fspath(p.target)!r} aside while the new ones "
+                              f"are moved in ({exc.strerror or exc}); nothing was replaced", exc.errno) from exc
+    done = 0
+    try:
+        for p in pendings:
+            p.commit()
+            done += 1
+    except BaseException:
+        for p in pendings[done:]:
+            p.discard()
+        for p, b in zip(pendings[:done], backups[:done]):
+            try:
+                if b is None:
+                    os.unlink(p.target)
+                else:
+                    os.replace(b, p.target)
+            except OSError:
+                pass
+        for b in backups[done:]:
+            if b:
+                remove_quietly(b)
+        raise
+    for b in backups:
+        if b:
+            remove_quietly(b)
+
+
+def _backup_of(target):
+    """Hard-link an existing ``target`` to a hidden name beside it; None when there is no target."""
+    target = pathlib.Path(target)
+    if not os.path.lexists(target):
+        return None
+    for _ in range(100):
+        candidate = target.parent / short_name("bak", target.suffix)
+        try:
+            os.link(target, candidate)
+        except FileExistsError:
+            continue
+        return candidate
+    raise OSError(_errno.EEXIST, "no free backup file name")
 
 
 def write_file(target, write, verify=None, overwrite=True, error=FileWriteError, ext=None):

@@ -224,6 +224,12 @@ class Prologue:
         return (self.target.triangle_count + sum(o.triangle_count for o in self.occluders)
                 + (self.s2a.triangle_count if self.s2a else 0))
 
+    @property
+    def triangle_counts(self):
+        """(target, occluders, high-poly meshes and cage) triangles: :mod:`core.cost` prices them apart."""
+        return (self.target.triangle_count, sum(o.triangle_count for o in self.occluders),
+                self.s2a.triangle_count if self.s2a else 0)
+
     def check_memory(self, s):
         """Refuse a texel bake that would not fit in the memory available (BakeMemoryError)."""
         tri_total = self.triangle_count
@@ -552,9 +558,9 @@ def bake_maps(target, occluders=(), resolution=(1024, 1024), samples=256, *, qua
     Returns
     -------
     {quantity: BakeResult}, in the order of ``quantities``: each bit for bit the :func:`bake_ao` of
-    that quantity with the same settings; ``metadata['quantities']`` lists the quantities baked
-    together, ``seconds`` is the whole bake's wall time, ``rays`` and the Embree seconds the quantity's
-    own.
+    that quantity with the same settings; ``metadata['quantities']`` names the quantities baked
+    together (comma-separated, 'ao,thickness': image files keep it), ``seconds`` is the whole
+    bake's wall time, ``rays`` and the Embree seconds the quantity's own.
 
     Raises
     ------
@@ -644,7 +650,7 @@ def _bake_images(target, occluders, resolution, samples, quantities, *, maps=Fal
                    max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
     s2a = pro.s2a
     w, h = s.width, s.height
-    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
+    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_counts)
     if not _workers.in_process(processes) and tile_size is None:
         # Tiles for every thread of every worker, two each at least (they are dealt as workers free up).
         total = _workers.worker_count(processes) * per_worker
@@ -722,7 +728,7 @@ def _finish(img, s, pro, s2a, extra, counters, fallback, denoise, t_start, quant
     rays = counters["rays"]
     metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
     if quantities is not None:
-        metadata["quantities"] = list(quantities)
+        metadata["quantities"] = ",".join(quantities)
     if denoise:
         metadata["denoise"] = True
     if s.ground is not None:

@@ -13,8 +13,10 @@ dense geometry): an estimate to show before a bake, not a promise. Adaptive samp
 most.
 
 The memory: the result's planes and the margin's work per image texel, each process's copy of the
-scene per triangle, a process's fixed share (an interpreter with numpy, embreex and the sample pool),
-and the chunks of rays in flight per thread (the model the bench's peak memory rows check).
+scene per triangle (a target's, an occluder's and a high-poly mesh's triangles cost differently), what
+the parent keeps per triangle while worker processes bake, a process's fixed share (an interpreter
+with numpy, embreex and the sample pool), and the chunks of rays in flight per thread (the model the
+bench's peak memory rows check; the per-triangle figures are bench.sections.memory's).
 """
 
 from dataclasses import dataclass
@@ -25,10 +27,18 @@ import numpy as np
 NS_PER_RAY, NS_PER_TEXEL, NS_PER_TRIANGLE, FIXED_SECONDS = 168.0, 520.0, 3570.0, 0.075
 #: Wall time over CPU time on n cores, the bench's 2-thread bakes: 0.52-0.67 of the CPU time.
 PARALLEL_EFFICIENCY = 0.9
-#: Bytes: per image texel (ao, stderr, samples, mask planes, the margin's work), per triangle held by
-#: a process (its meshes, surface table, UV triangles and Embree scene: 770-830 measured per worker on
-#: a 524k-triangle grid), a process's own, and per ray of a chunk in flight.
-BYTES_PER_TEXEL, BYTES_PER_TRIANGLE, BYTES_PER_PROCESS, BYTES_PER_CHUNK_RAY = 26, 850, 150 << 20, 200
+#: Bytes: per image texel (ao, stderr, samples, mask planes, the margin's work), a process's own, and
+#: per ray of a chunk in flight.
+BYTES_PER_TEXEL, BYTES_PER_PROCESS, BYTES_PER_CHUNK_RAY = 26, 150 << 20, 200
+#: Bytes per triangle of a process that bakes tiles, at its peak beyond its idle size
+#: (bench.sections.memory, 2M-triangle grids on 2 workers, bench/results/memory.txt): a target's
+#: (its UV triangles, surface table, Embree scene, the positions and triangles it was sent: 415
+#: measured), an occluder's (two Embree scenes, occlusion and contact: 412) and a high-poly mesh's
+#: (one robust scene that matches and occludes: 193; 161 at 10M triangles), with some headroom.
+BYTES_PER_TRIANGLE, BYTES_PER_OCCLUDER_TRIANGLE, BYTES_PER_HIGHPOLY_TRIANGLE = 480, 450, 220
+#: Bytes per triangle the parent adds while worker processes bake (its UV triangles and tiles of the
+#: target: 112 measured; 30 for an occluder or a high-poly mesh), beyond the caller's own arrays.
+BYTES_PER_PARENT_TRIANGLE, BYTES_PER_PARENT_OTHER_TRIANGLE = 140, 40
 
 
 @dataclass(frozen=True)
@@ -48,17 +58,35 @@ class Cost:
         return f"{t} and {m}" if s < 1 else f"about {t} and {m}"
 
 
-def estimate(covered_texels, samples, triangles, image_texels=None, threads=1, processes=1, chunk_rays=1 << 16):
+def process_bytes(triangles, occluder_triangles=0, highpoly_triangles=0):
+    """Peak bytes of one process that bakes tiles of a target of ``triangles`` with these occluder
+    and high-poly triangles (its interpreter included)."""
+    return int(BYTES_PER_PROCESS + BYTES_PER_TRIANGLE * int(triangles)
+               + BYTES_PER_OCCLUDER_TRIANGLE * int(occluder_triangles)
+               + BYTES_PER_HIGHPOLY_TRIANGLE * int(highpoly_triangles))
+
+
+def parent_bytes(triangles, other_triangles=0):
+    """Bytes the parent adds while worker processes bake (beyond the caller's arrays)."""
+    return int(BYTES_PER_PARENT_TRIANGLE * int(triangles) + BYTES_PER_PARENT_OTHER_TRIANGLE * int(other_triangles))
+
+
+def estimate(covered_texels, samples, triangles, image_texels=None, threads=1, processes=1, chunk_rays=1 << 16,
+             occluder_triangles=0, highpoly_triangles=0):
     """The :class:`Cost` of a bake of ``covered_texels`` at ``samples`` each, holding ``triangles``
-    (every mesh: target, occluders, high-poly), on ``processes`` x ``threads`` (``image_texels``: the
-    whole image, for the memory; the covered ones when not given)."""
+    (the target's; occluders' and high-poly meshes' given apart, or counted in ``triangles``, which
+    costs their time the same and overstates their memory), on ``processes`` x ``threads``
+    (``image_texels``: the whole image, for the memory; the covered ones when not given)."""
     covered_texels, triangles = int(covered_texels), int(triangles)
+    other = int(occluder_triangles) + int(highpoly_triangles)
     rays = covered_texels * int(samples)
-    cpu = (NS_PER_RAY * rays + NS_PER_TEXEL * covered_texels + NS_PER_TRIANGLE * triangles) * 1e-9 + FIXED_SECONDS
+    cpu = (NS_PER_RAY * rays + NS_PER_TEXEL * covered_texels + NS_PER_TRIANGLE * (triangles + other)) * 1e-9 \
+        + FIXED_SECONDS
     cores = max(1, int(threads) * int(processes))
     seconds = cpu / cores / (PARALLEL_EFFICIENCY if cores > 1 else 1.0)
     image = covered_texels if image_texels is None else int(image_texels)
-    memory = (BYTES_PER_TEXEL * image + int(processes) * (BYTES_PER_TRIANGLE * triangles + BYTES_PER_PROCESS)
+    memory = (BYTES_PER_TEXEL * image + int(processes) * process_bytes(triangles, occluder_triangles, highpoly_triangles)
+              + (parent_bytes(triangles, other) if int(processes) > 1 else 0)
               + cores * min(int(chunk_rays), rays) * BYTES_PER_CHUNK_RAY)
     return Cost(float(seconds), int(memory))
 
@@ -82,8 +110,9 @@ def estimate_bake(target, occluders=(), resolution=(1024, 1024), samples=256, th
     uv = np.asarray(target.uvs, np.float64) * [w, h] if target.uvs is not None else np.zeros((0, 3, 2))
     border = 0.5 * np.linalg.norm(np.roll(uv, -1, axis=1) - uv, axis=2).sum()
     covered = min(w * h, covered + border)
-    triangles = target.triangle_count + sum(m.triangle_count for m in list(occluders) + list(highpoly))
-    return estimate(covered, samples, triangles, image_texels=w * h, threads=threads, processes=processes)
+    return estimate(covered, samples, target.triangle_count, image_texels=w * h, threads=threads, processes=processes,
+                    occluder_triangles=sum(m.triangle_count for m in occluders),
+                    highpoly_triangles=sum(m.triangle_count for m in highpoly))
 
 
-__all__ = ["Cost", "estimate", "estimate_bake", "covered_fraction"]
+__all__ = ["Cost", "estimate", "estimate_bake", "covered_fraction", "process_bytes", "parent_bytes"]

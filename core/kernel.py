@@ -102,7 +102,7 @@ def triangle_matrices(table, tris, offset, curved_all=False, inward=False):
     # Column by column (numpy is slow over an inner axis of 2 or 3, and over a (T, 1) factor
     # broadcast to 3 columns), with the same operations as the (T, 3) forms: the same bits.
     # The ray offset: from the largest |coordinate| on the triangle (at a corner: |.|_inf is convex).
-    c = np.abs(take(table.corners, tris)).reshape(n, 9)
+    c = np.abs(table.corners_of(tris)).reshape(n, 9)
     cmax = c[:, 0].copy()
     for j in range(1, 9):
         np.maximum(cmax, c[:, j], out=cmax)

@@ -31,6 +31,7 @@ memory of any bake to a tile's worth of fragments. Everything a texel gets depen
 texel and the triangles that overlap it, never on the tiling.
 """
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,18 +52,71 @@ ON_EDGE = 1e-9
 TOUCH = 1e-9
 
 
-@dataclass
-class UVTriangles:
-    """Per-triangle data of the target in texel space, shared by every tile."""
+#: Triangles prepared at a time (:func:`prepare`): the temporaries stay a slice's, whatever the mesh.
+SLICE = 1 << 18
 
-    xy: np.ndarray         # (T, 3, 2) corners in texel coordinates, counter-clockwise
-    corners: np.ndarray    # (T, 3, 2) corners in texel coordinates, in the mesh's order
-    valid: np.ndarray      # (T,) bool: positive UV area and area in space (others are skipped)
-    degenerate: int        # number of triangles with zero UV area (skipped)
-    degenerate_space: int  # number of triangles with UV area but zero area in space (skipped)
-    outside: int           # number of valid triangles with some UV outside [0, 1]
-    edges: np.ndarray = None  # (T, 3, 3) edge k (corner k -> k + 1 of xy) as (a, b, c): a x + b y + c
-    #                           is the signed distance in texels from its line, positive inside
+
+class UVTriangles:
+    """Per-triangle data of the target in texel space, shared by every tile.
+
+    corners : (T, 3, 2) corners in texel coordinates, in the mesh's order; valid : (T,) bool, positive
+    UV area and area in space (others are skipped); cw : (T,) bool, corners clockwise in texel space;
+    degenerate : number of triangles with zero UV area (skipped); degenerate_space : number of
+    triangles with UV area but zero area in space (skipped); outside : number of valid triangles
+    with some UV outside [0, 1].
+
+    The counter-clockwise corners and the edge functions are computed for the triangles a tile asks
+    for (:meth:`xy_of`, :meth:`edges_of`: 120 bytes a triangle not held), or for all of them when
+    :attr:`xy` or :attr:`edges` is asked for (then kept); the same bits either way.
+    """
+
+    def __init__(self, corners, valid, cw, degenerate, degenerate_space, outside):
+        self.corners, self.valid, self.cw = corners, valid, cw
+        self.degenerate, self.degenerate_space, self.outside = degenerate, degenerate_space, outside
+
+    def xy_of(self, tri):
+        """(n, 3, 2) corners of triangles ``tri`` (indices), counter-clockwise: every edge function is
+        positive inside."""
+        if "xy" in self.__dict__:
+            return self.xy[tri]
+        xy = np.take(self.corners, tri, axis=0)
+        cw = self.cw[tri]
+        if cw.any():
+            xy[cw, 1], xy[cw, 2] = xy[cw, 2], xy[cw, 1]
+        return xy
+
+    def edges_of(self, tri, xy=None):
+        """(n, 3, 3) edge functions of triangles ``tri``: edge k (corner k -> k + 1 of :meth:`xy_of`) as
+        (a, b, c), a x + b y + c the signed distance in texels from its line, positive inside
+        (``xy``: their :meth:`xy_of`, when already at hand)."""
+        if "edges" in self.__dict__:
+            return self.edges[tri]
+        xy = self.xy_of(tri) if xy is None else xy
+        ea, eb, ec = _edges(xy)
+        norm = np.hypot(ea, eb)
+        norm[~(norm > 0)] = 1.0
+        norm[~self.valid[tri]] = 1.0
+        edges = np.empty(ea.shape + (3,))
+        ef, nf = edges.reshape(-1, 3), norm.reshape(-1)
+        for j, e in enumerate((ea, eb, ec)):
+            np.divide(e.reshape(-1), nf, out=ef[:, j])
+        return edges
+
+    @functools.cached_property
+    def xy(self):
+        """(T, 3, 2) :meth:`xy_of` every triangle (kept once asked for)."""
+        out = np.empty(self.corners.shape)
+        for lo in range(0, len(out), SLICE):
+            out[lo:lo + SLICE] = self.xy_of(np.arange(lo, min(lo + SLICE, len(out))))
+        return out
+
+    @functools.cached_property
+    def edges(self):
+        """(T, 3, 3) :meth:`edges_of` every triangle (kept once asked for)."""
+        out = np.empty(self.corners.shape[:2] + (3,))
+        for lo in range(0, len(out), SLICE):
+            out[lo:lo + SLICE] = self.edges_of(np.arange(lo, min(lo + SLICE, len(out))))
+        return out
 
 
 def prepare(mesh, width, height):
@@ -70,44 +124,42 @@ def prepare(mesh, width, height):
 
     The surface each texel point lies on (position and normal as affine maps of texel space) is
     :class:`core.surface.SurfaceTable`'s business. Arrays of a few values per triangle are worked
-    column by column (see :func:`core.mesh.face_geometry`), with the same operations and bits.
+    column by column (see :func:`core.mesh.face_geometry`), with the same operations and bits, and
+    :data:`SLICE` triangles at a time (the same bits: every operation is per triangle).
     """
     uv = mesh.uvs
     T = len(uv)
     xy = np.empty((T, 3, 2))
-    xf, uf = xy.reshape(-1, 2), uv.reshape(-1, 2)
-    np.multiply(uf[:, 0], np.float64(width), out=xf[:, 0])
-    np.multiply(uf[:, 1], np.float64(height), out=xf[:, 1])
-    e1x, e1y = xy[:, 1, 0] - xy[:, 0, 0], xy[:, 1, 1] - xy[:, 0, 1]
-    e2x, e2y = xy[:, 2, 0] - xy[:, 0, 0], xy[:, 2, 1] - xy[:, 0, 1]
-    det = e1x * e2y - e1y * e2x  # twice the signed UV area, in texels
-    scale = np.maximum(np.maximum(np.abs(e1x), np.abs(e1y)), np.maximum(np.abs(e2x), np.abs(e2y)))
-    valid = np.abs(det) > 1e-12 * np.maximum(scale * scale, 1e-300)
-    valid &= np.abs(det) > 0
-    # A triangle with no area in space has no surface (and no normal) to bake.
-    flat = ~(mesh.areas > 0)
-    degenerate_space = int((valid & flat).sum())
-    valid &= ~flat
-    # Counter-clockwise corners make every edge function positive inside.
-    cw = det < 0
-    xy_ccw = xy.copy()
-    xy_ccw[cw, 1], xy_ccw[cw, 2] = xy[cw, 2], xy[cw, 1]
-    ea, eb, ec = _edges(xy_ccw)
-    norm = np.hypot(ea, eb)
-    norm[~(norm > 0)] = 1.0
-    norm[~valid] = 1.0
-    edges = np.empty(ea.shape + (3,))
-    ef, nf = edges.reshape(-1, 3), norm.reshape(-1)
-    for j, e in enumerate((ea, eb, ec)):
-        np.divide(e.reshape(-1), nf, out=ef[:, j])
-    out_uv = (uv < 0) | (uv > 1)
-    of = out_uv.reshape(T, 6)
-    any_out = of[:, 0] | of[:, 1]
-    for j in range(2, 6):
-        any_out |= of[:, j]
-    outside = int((valid & any_out).sum())
-    return UVTriangles(xy_ccw, xy, valid, degenerate=int((~valid).sum()) - degenerate_space,
-                       degenerate_space=degenerate_space, outside=outside, edges=edges)
+    valid = np.empty(T, bool)
+    cw = np.empty(T, bool)
+    flat_valid = outside = 0
+    for lo in range(0, T, SLICE):
+        hi = min(lo + SLICE, T)
+        part = xy[lo:hi]
+        xf, uf = part.reshape(-1, 2), uv[lo:hi].reshape(-1, 2)
+        np.multiply(uf[:, 0], np.float64(width), out=xf[:, 0])
+        np.multiply(uf[:, 1], np.float64(height), out=xf[:, 1])
+        e1x, e1y = part[:, 1, 0] - part[:, 0, 0], part[:, 1, 1] - part[:, 0, 1]
+        e2x, e2y = part[:, 2, 0] - part[:, 0, 0], part[:, 2, 1] - part[:, 0, 1]
+        det = e1x * e2y - e1y * e2x  # twice the signed UV area, in texels
+        scale = np.maximum(np.maximum(np.abs(e1x), np.abs(e1y)), np.maximum(np.abs(e2x), np.abs(e2y)))
+        v = valid[lo:hi]
+        np.greater(np.abs(det), 1e-12 * np.maximum(scale * scale, 1e-300), out=v)
+        v &= np.abs(det) > 0
+        # A triangle with no area in space has no surface (and no normal) to bake.
+        flat = ~(mesh.face_geometry_of(np.arange(lo, hi))[0] > 0)
+        flat_valid += int((v & flat).sum())
+        v &= ~flat
+        # Counter-clockwise corners make every edge function positive inside (UVTriangles.xy_of).
+        np.less(det, 0, out=cw[lo:hi])
+        out_uv = (uv[lo:hi] < 0) | (uv[lo:hi] > 1)
+        of = out_uv.reshape(hi - lo, 6)
+        any_out = of[:, 0] | of[:, 1]
+        for j in range(2, 6):
+            any_out |= of[:, j]
+        outside += int((v & any_out).sum())
+    return UVTriangles(xy, valid, cw, degenerate=int((~valid).sum()) - flat_valid, degenerate_space=flat_valid,
+                       outside=outside)
 
 
 def _corner_bounds(xy):
@@ -123,42 +175,54 @@ def _corner_bounds(xy):
 
 def uv_centres(tris):
     """(2, n): the texel-space centres (x row, y row) of the valid triangles of ``tris``."""
-    xy = np.take(tris.xy, np.flatnonzero(tris.valid), axis=0)
-    return np.stack([(xy[:, 0, k] + xy[:, 1, k] + xy[:, 2, k]) / 3.0 for k in range(2)])
+    idx = np.flatnonzero(tris.valid)
+    out = np.empty((2, len(idx)))
+    for lo in range(0, len(idx), SLICE):
+        xy = tris.xy_of(idx[lo:lo + SLICE])
+        for k in range(2):
+            out[k, lo:lo + SLICE] = (xy[:, 0, k] + xy[:, 1, k] + xy[:, 2, k]) / 3.0
+    return out
 
 
 def bin_triangles(tris, width, height, tile):
     """Triangle indices per tile: a dict (tile_row, tile_col) -> int64 array (ascending), for tiles
-    touched; ``tile`` the side of square tiles or (columns, rows)."""
+    touched; ``tile`` the side of square tiles or (columns, rows). Binned :data:`SLICE` triangles
+    at a time (the temporaries stay a slice's), each tile's parts joined in order."""
     tile = np.broadcast_to(np.asarray(tile, dtype=np.int64), (2,))
-    idx = np.flatnonzero(tris.valid)
-    lo, hi = _corner_bounds(np.take(tris.xy, idx, axis=0))
-    lo = np.maximum(np.floor(lo).astype(np.int64), 0)
-    hi = np.ceil(hi).astype(np.int64) - 1  # last texel the bbox reaches
-    # Column by column (numpy is slow over an inner axis of 2).
-    np.minimum(hi[:, 0], width - 1, out=hi[:, 0])
-    np.minimum(hi[:, 1], height - 1, out=hi[:, 1])
-    ok = np.flatnonzero((hi[:, 0] >= lo[:, 0]) & (hi[:, 1] >= lo[:, 1]))
-    idx, lo, hi = idx[ok], lo[ok], hi[ok]
-    lx, ly = lo[:, 0] // tile[0], lo[:, 1] // tile[1]  # (x, y) tile coordinates
-    nx = hi[:, 0] // tile[0] - lx + 1
-    ny = hi[:, 1] // tile[1] - ly + 1
-    count = nx * ny
-    rep = np.repeat(np.arange(len(idx)), count)
-    k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
-    nr = nx[rep]
-    tx = lx[rep] + k % nr
-    ty = ly[rep] + k // nr
+    valid = np.flatnonzero(tris.valid)
     tiles_x = -(-width // int(tile[0]))
-    key = ty * tiles_x + tx
-    order = np.argsort(key, kind="stable")
-    key, tri = key[order], idx[rep[order]]
-    bounds = np.flatnonzero(np.diff(key)) + 1
-    out = {}
-    for part_key, part in zip(np.split(key, bounds), np.split(tri, bounds)):
-        if part_key.size:
-            out[(int(part_key[0] // tiles_x), int(part_key[0] % tiles_x))] = part
-    return out
+    parts = {}
+    for s0 in range(0, len(valid), SLICE):
+        idx = valid[s0:s0 + SLICE]
+        # The corners in the mesh's order: the same bounds as counter-clockwise (min and max are exact).
+        lo, hi = _corner_bounds(np.take(tris.corners, idx, axis=0))
+        lo = np.maximum(np.floor(lo).astype(np.int64), 0)
+        hi = np.ceil(hi).astype(np.int64) - 1  # last texel the bbox reaches
+        # Column by column (numpy is slow over an inner axis of 2).
+        np.minimum(hi[:, 0], width - 1, out=hi[:, 0])
+        np.minimum(hi[:, 1], height - 1, out=hi[:, 1])
+        ok = np.flatnonzero((hi[:, 0] >= lo[:, 0]) & (hi[:, 1] >= lo[:, 1]))
+        idx, lo, hi = idx[ok], lo[ok], hi[ok]
+        lx, ly = lo[:, 0] // tile[0], lo[:, 1] // tile[1]  # (x, y) tile coordinates
+        nx = hi[:, 0] // tile[0] - lx + 1
+        ny = hi[:, 1] // tile[1] - ly + 1
+        count = nx * ny
+        rep = np.repeat(np.arange(len(idx)), count)
+        k = np.arange(rep.size) - np.repeat(np.cumsum(count) - count, count)
+        nr = nx[rep]
+        tx = lx[rep] + k % nr
+        ty = ly[rep] + k // nr
+        key = ty * tiles_x + tx
+        order = np.argsort(key, kind="stable")
+        key, tri = key[order], idx[rep[order]]
+        bounds = np.flatnonzero(np.diff(key)) + 1
+        for part_key, part in zip(np.split(key, bounds), np.split(tri, bounds)):
+            if part_key.size:
+                parts.setdefault((int(part_key[0] // tiles_x), int(part_key[0] % tiles_x)), []).append(part)
+    # Each tile's triangles ascending: its parts come slice by slice, each ascending.
+    return {key: p[0] if len(p) == 1 else np.concatenate(p) for key, p in sorted(parts.items(),
+                                                                               key=lambda item: item[0][0] * tiles_x
+                                                                               + item[0][1])}
 
 
 def _clip(X, Y, count, a, b, c):
@@ -429,8 +493,8 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
     compare located texels against).
     """
     tri_ids = np.asarray(tri_ids, dtype=np.int64)
-    xy = tris.xy[tri_ids]
-    E = tris.edges[tri_ids]
+    xy = tris.xy_of(tri_ids)
+    E = tris.edges_of(tri_ids, xy)
     tw, th = x1 - x0, y1 - y0
     spans = _Spans(xy)
     own, r, ov_lo, ov_hi, f_lo, f_hi = _scan(spans, x0, y0, x1, y1)

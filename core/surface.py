@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import corner_positions
+from .mesh import SLICE, corner_positions
 from .patterns import hash_uniform
 
 SQUARE, TRIANGLE, LOCATED = 0, 1, 2
@@ -44,12 +44,12 @@ NEVER = np.float32(3e38)
 _TAG_ALLOCATE = 21
 
 
-def _smooth(mesh):
-    """Per triangle, whether its corner normals differ from each other or from its face normal."""
-    if not mesh.has_corner_normals:
-        return np.zeros(len(mesh.triangles), bool)
-    N, FN = mesh.normals, mesh.face_normals
+def _smooth(mesh, N, FN):
+    """Per triangle, whether its corner normals ``N`` (n, 3, 3) differ from each other or from its
+    face normal ``FN`` (n, 3)."""
     out = np.zeros(len(N), bool)
+    if not mesh.has_corner_normals:
+        return out
     for c in range(3):
         out |= N[:, 1, c] != N[:, 0, c]
         out |= N[:, 2, c] != N[:, 0, c]
@@ -73,29 +73,61 @@ class SurfaceTable:
     Nx: np.ndarray
     Ny: np.ndarray
     FN: np.ndarray
-    corners: np.ndarray = None  # (T, 3, 3) the corners' positions
+    corners: np.ndarray = None  # (T, 3, 3) the corners' positions, or None: from positions and triangles
     smooth: np.ndarray = None   # (T,) bool: the shading normal is not the face normal everywhere
     corners_xy: np.ndarray = None  # (T, 3, 2) the corners in texel space
+    positions: np.ndarray = None   # the mesh's (V, 3) positions and (T, 3) triangles, where ``corners``
+    triangles: np.ndarray = None   # is None (72 bytes a triangle not held)
+
+    def corners_of(self, tri):
+        """(n, 3, 3) corner positions of triangles ``tri``."""
+        if self.corners is not None:
+            return np.take(self.corners, tri, axis=0, mode="clip")
+        return corner_positions(self.positions, np.take(self.triangles, tri, axis=0, mode="clip"))
 
     @classmethod
     def build(cls, mesh, uvtris):
+        """The table of ``mesh`` over its UV triangles ``uvtris`` (:func:`core.raster.prepare`), built
+        :data:`SLICE` triangles at a time: the temporaries (the corner normals, the barycentric
+        gradients) stay a slice's whatever the mesh, and the values are the same bits as in one go."""
+        xy = uvtris.corners
+        T = len(xy)
+        FN = mesh.face_normals
+        maps = {name: (np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 3))) for name in ("P", "N")}
+        if not mesh.has_corner_normals:
+            # Flat: the corner normals are the face normal, N0 is FN itself (its bits, not a copy).
+            maps["N"] = (None,) + maps["N"][1:]
+        smooth = np.empty(T, bool)
+        for lo in range(0, T, SLICE):
+            hi = min(lo + SLICE, T)
+            tri = np.arange(lo, hi)
+            N = mesh.corner_normals(tri)
+            smooth[lo:hi] = _smooth(mesh, N, FN[lo:hi])
+            cls._slice(xy[lo:hi], uvtris.valid[lo:hi], corner_positions(mesh.positions, mesh.triangles[lo:hi]), N,
+                       maps, lo, hi)
+        # origin: the first corners, a view of the corners the UV triangles keep (not a copy).
+        return cls(origin=xy[:, 0], P0=maps["P"][0], corners_xy=xy, Px=maps["P"][1], Py=maps["P"][2],
+                   N0=FN if maps["N"][0] is None else maps["N"][0], Nx=maps["N"][1], Ny=maps["N"][2], FN=FN,
+                   smooth=smooth,
+                   positions=mesh.positions, triangles=mesh.triangles)
+
+    @staticmethod
+    def _slice(xy, valid, P, N, maps, lo, hi):
         # Column by column (see core.mesh.face_geometry: numpy is slow over an inner axis of 2 or 3);
         # the same operations as the (T, 2) and (T, 3) forms, so the same bits.
-        xy = uvtris.corners
         x0, y0 = xy[:, 0, 0], xy[:, 0, 1]
         e1x, e1y = xy[:, 1, 0] - x0, xy[:, 1, 1] - y0
         e2x, e2y = xy[:, 2, 0] - x0, xy[:, 2, 1] - y0
         det = e1x * e2y - e1y * e2x
-        safe = np.where(uvtris.valid, det, 1.0)
+        safe = np.where(valid, det, 1.0)
         # Barycentric weights b1, b2 of corners 1, 2 as linear functions of (x - x0, y - y0).
         d1x, d1y = e2y / safe, -e2x / safe   # d b1 / d(x, y)
         d2x, d2y = -e1y / safe, e1x / safe   # d b2 / d(x, y)
-        P = corner_positions(mesh.positions, mesh.triangles)
-        N = mesh.normals
-        T = len(xy)
-        maps = {}
         for name, V in (("P", P), ("N", N)):
-            vx, vy = np.empty((T, 3)), np.empty((T, 3))
+            v0_out, vx_out, vy_out = maps[name]
+            vx, vy = vx_out[lo:hi], vy_out[lo:hi]
+            if v0_out is not None:
+                v0_out[lo:hi] = V[:, 0]
             for c in range(3):
                 v0 = V[:, 0, c]
                 dv1, dv2 = V[:, 1, c] - v0, V[:, 2, c] - v0
@@ -103,10 +135,6 @@ class SurfaceTable:
                 vx[:, c] += d2x * dv2
                 np.multiply(d1y, dv1, out=vy[:, c])
                 vy[:, c] += d2y * dv2
-            maps[name] = vx, vy
-        return cls(origin=xy[:, 0].copy(), P0=P[:, 0].copy(), corners_xy=xy, Px=maps["P"][0], Py=maps["P"][1],
-                   N0=N[:, 0].copy(), Nx=maps["N"][0], Ny=maps["N"][1],
-                   FN=mesh.face_normals, corners=P, smooth=_smooth(mesh))
 
     def position(self, tri, x, y):
         return self._affine(tri, x, y, self.P0, self.Px, self.Py)
@@ -362,7 +390,7 @@ def contact_texels(frag, table, width, tracer, samples):
     tris = np.flatnonzero(seen)
     # Only triangles whose bounding box, grown by twice the largest offset, meets an occluder's can
     # touch one: the probes go to their texels alone.
-    corners3 = table.corners[tris]
+    corners3 = table.corners_of(tris)
     grow = 2.0 * tracer.offset(np.abs(corners3).max(axis=(1, 2)))[:, None]
     near = np.zeros(len(table.P0), bool)
     near[tris] = tracer.near_occluders(corners3.min(axis=1) - grow, corners3.max(axis=1) + grow)

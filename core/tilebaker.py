@@ -130,43 +130,50 @@ class TileBaker:
         self.seeds = allocation_seeds(settings)
 
     def layout(self, key, tri_ids):
-        """(fragments, sample units or None) of the tile ``key``'s texels: what the tile's texels are,
-        whatever is traced from them. Bakes of several quantities over one layout (:func:`core.bake_maps`)
-        take it once for all of them; nothing here depends on the tracer."""
+        """(fragments, sample units or None, memo) of the tile ``key``'s texels: what the tile's texels
+        are, whatever is traced from them. Bakes of several quantities over one layout
+        (:func:`core.bake_maps`) take it once for all of them; nothing here depends on the tracer. The
+        memo (a dict) keeps what :meth:`trace` computes from the layout alone (the texels' keys, the
+        first round's allocation of samples to units) for the next quantity."""
         s = self.s
         frag = rasterize_tile(self.uvtris, tri_ids, s.width, s.height, *s.tile_bounds(key), locate=self.start.locate)
-        return frag, (build_units(frag, self.table, s.width) if len(frag.texels) else None)
+        return frag, (build_units(frag, self.table, s.width) if len(frag.texels) else None), {}
 
     def bake(self, key, tri_ids, layout=None):
         """(fragments, estimates, direction sums or None) of the tile ``key``'s texels; ``layout``:
         the tile's :meth:`layout`, when it was taken already."""
         s = self.s
-        frag, units = self.layout(key, tri_ids) if layout is None else layout
+        frag, units, memo = self.layout(key, tri_ids) if layout is None else layout
         if len(frag.texels) == 0:
             return frag, self.start.estimates(0, s.replicates), None
         contact = self.start.contact(frag, s.width, s.samples)
         est, sums = self.trace(units, frag.texels, contact, frag.texels % s.width, frag.texels // s.width,
-                               tris=tri_ids)
+                               tris=tri_ids, memo=memo)
         return frag, est, sums
 
-    def trace(self, units, texel_ids, contact, x, y, tris=None):
+    def trace(self, units, texel_ids, contact, x, y, tris=None, memo=None):
         """Trace the plan's rounds, in every replicate, for sample units ``units`` of the texels
         ``texel_ids`` (global ids: they key the texels' random choices); ``contact`` per texel, probe
         its samples for contact; ``x``, ``y`` where the error model pools each texel's variance
         (:func:`core.estimators.window_sums`); ``tris`` the units' triangles, ascending (a superset is
         fine; None: found from the units). Texels need not be texels: mesh vertices are units of
-        their own (:mod:`core.vertices`). Returns (TexelEstimates, direction sums (n, 3) over all
-        replicates, or None)."""
+        their own (:mod:`core.vertices`). ``memo``: None, or a dict shared by the quantities of one
+        layout (:meth:`layout`). Returns (TexelEstimates, direction sums (n, 3) over all replicates,
+        or None)."""
         s, shared, start = self.s, self.shared, self.start
         n_tex = len(texel_ids)
         est = start.estimates(n_tex, s.replicates)
         sums = np.zeros((n_tex, 3)) if self.bent else None
         if n_tex == 0:
             return est, sums
-        keys = [self.pattern.keys(texel_ids, r) for r in range(s.replicates)]
-        # Every replicate's keys in one tile: a round's pieces of all replicates go through the
-        # kernel together (each call costs about half a millisecond before its first ray).
-        tile = TileContext(self.table, units, TileContext.stacked_keys(keys), texel_ids, contact, self.tracer.offset,
+        memo = {} if memo is None else memo
+        stacked = memo.get("keys")
+        if stacked is None:  # the texels' keys depend on the pattern and the texels alone
+            # Every replicate's keys in one tile: a round's pieces of all replicates go through the
+            # kernel together (each call costs about half a millisecond before its first ray).
+            stacked = memo["keys"] = TileContext.stacked_keys([self.pattern.keys(texel_ids, r)
+                                                               for r in range(s.replicates)])
+        tile = TileContext(self.table, units, stacked, texel_ids, contact, self.tracer.offset,
                            located_curved=getattr(start, "located_curved", False), tris=tris,
                            inward=s.quantity == "thickness")
         if y is not None:  # the texels' windows, set up once for every round's pooling
@@ -180,20 +187,32 @@ class TileBaker:
                 texels = texels[keep]
                 if not len(texels):
                     continue
-            done += self._trace(tile, units, est, sums, list(self.plan.shares(first, count, texels)))
+            done += self._trace(tile, units, est, sums, list(self.plan.shares(first, count, texels)), memo)
         # Credit the work the adaptive stop (and points that found nothing) saved, so progress reaches 1.
         shared.advance(n_tex * s.samples - done)
         return est, sums
 
-    def _trace(self, tile, units, est, sums, shares):
+    def _trace(self, tile, units, est, sums, shares, memo):
         """Trace one round: ``shares`` the (replicate, texels, start, count) of each replicate (in
         samples; a stage with ``per_point`` > 1 allocates whole points). Returns the work done."""
         s, shared, start = self.s, self.shared, self.start
         if not shares:
             return 0
         g = start.per_point
-        parts = [allocate(units, texels, first // g, count // g, self.seeds[r], tile.texel_ids)
-                 for r, texels, first, count in shares]
+
+        def allocated(r, texels, first, count):
+            # A round of every texel from one count to another (a fixed-count bake's only one) is
+            # allocated alike for every quantity of the layout: kept in the memo.
+            whole = np.ndim(first) == 0 and np.ndim(count) == 0 and len(texels) == tile.texels
+            key = ("allocate", r, int(first) // g, int(count) // g) if whole else None
+            if key in memo:
+                return memo[key]
+            out = allocate(units, texels, first // g, count // g, self.seeds[r], tile.texel_ids)
+            if key is not None:
+                memo[key] = out
+            return out
+
+        parts = [allocated(r, texels, first, count) for r, texels, first, count in shares]
         unit, first, size = (np.concatenate([p[i] for p in parts]) for i in range(3))
         rep = np.repeat(np.array([r for r, *_ in shares], np.int64), [len(p[0]) for p in parts])
         # Equal pieces go through the kernel together, squares before triangles, located texels

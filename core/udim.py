@@ -313,5 +313,5 @@ def _assemble(target, resolution, results, todo, coverage, denoise, margin):
                       raw_stderr=stack("raw_stderr") if parts[0].raw_stderr is not None else None)
 
 
-__all__ = ["bake_udim", "bake_udim_maps", "covered_tiles", "UdimResult", "TileCoverage", "tile_origin", "tile_of", "tile_seed",
-           "check_tiles", "shifted", "FIRST_TILE", "LAST_TILE"]
+__all__ = ["bake_udim", "bake_udim_maps", "covered_tiles", "UdimResult", "TileCoverage", "tile_origin", "tile_of",
+           "tile_seed", "check_tiles", "shifted", "FIRST_TILE", "LAST_TILE"]

@@ -279,7 +279,7 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
     lanes = bake.lanes if len(quantities) > 1 else {base: bake}
     root = lanes[base]
     pro.check_cancel()
-    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_count)
+    processes, per_worker = _workers.processes_of(workers, threads, s, pro.triangle_counts)
     m = len(root.p)
     values = {q: dict(ao=np.zeros(m, np.float32), se=np.zeros(m, np.float32), count=np.zeros(m, np.int32),
                       bent=np.zeros((m, 3), np.float32) if b.bent_normals else None) for q, b in lanes.items()}
@@ -303,6 +303,7 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
 
     rays, trace_s, trace_cpu, counters, fallback = _workers.bake_tiles(bake, keys, processes, per_worker, job, store,
                                                                        progress, cancel, on_rays)
+    memory = counters.get("worker_memory", [])
     if len(quantities) == 1:
         counters = {base: dict(rays=rays, trace_seconds=trace_s, trace_cpu_seconds=trace_cpu)}
     unit = root.unit
@@ -314,10 +315,11 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
             metadata.pop(key, None)
         metadata["sample_points"] = m
         if maps:
-            metadata["quantities"] = list(quantities)
+            metadata["quantities"] = ",".join(quantities)
         if ls.ground is not None:
             metadata["ground_height"] = pro.ground_height(ls)[0]
-        report = {"corners": len(corners), "sample_points": m, "degenerate_corners": root.flat}
+        report = {"corners": len(corners), "sample_points": m, "degenerate_corners": root.flat,
+                  "worker_memory": memory}
         if fallback is not None:
             report.setdefault("warnings", []).append(
                 f"baked on {ls.threads} threads of this process, not in worker processes: {fallback}")
@@ -383,17 +385,17 @@ class VertexBake:
         """Block ``key``'s points and where each pools its variance (the same for every quantity)."""
         ids = self.blocks[key]
         near = None if self.pairs is None else _block_neighbours(self.pairs, int(ids[0]), int(ids[-1]) + 1)
-        return ids, near
+        return ids, near, {}
 
     def tile(self, key, directions=True, layout=None):
         """Bake block ``key`` of the sample points: a :class:`core.bake.TileOut` whose ``texels`` are
         the points' numbers (bent normals are world directions already); ``layout``: the block's
         :meth:`layout`, taken already for another quantity."""
-        ids, near = self.layout(key) if layout is None else layout
+        ids, near, memo = self.layout(key) if layout is None else layout
         contact = np.zeros(len(ids), bool)
         if self.tracer.touches:
             contact = self.tracer.contact(self.p[ids], self.gn[ids])
-        est, sums = self.baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None)
+        est, sums = self.baker.trace(point_units(ids, np.arange(len(ids))), ids, contact, near, None, memo=memo)
         out = TileOut(key, ids, np.clip(est.mean, 0.0, 1.0).astype(np.float32),
                       self.errors.stderr(est, near, None).astype(np.float32), est.n.astype(np.int32),
                       np.zeros(len(ids), bool))
@@ -404,5 +406,5 @@ class VertexBake:
         return out
 
 
-__all__ = ["VertexBakeResult", "bake_vertex_ao", "bake_vertex_maps", "VertexBake", "all_corners", "vertex_means", "sample_points", "NUDGE",
-           "Neighbours", "unit_pairs"]
+__all__ = ["VertexBakeResult", "bake_vertex_ao", "bake_vertex_maps", "VertexBake", "all_corners", "vertex_means",
+           "sample_points", "NUDGE", "Neighbours", "unit_pairs"]

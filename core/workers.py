@@ -328,12 +328,16 @@ def _setup(job, cancel, progress):
         shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
         bake.trace_setup(shared, cancel)
         return bake, shared, s.threads
-    pro = Prologue(_mesh(job["target"]), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=True,
+    # Popped: the job holds nothing of the target past its use (its UVs go once the bake has its UV triangles).
+    pro = Prologue(_mesh(job.pop("target")), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=True,
                    highpoly=None if job["highpoly"] is None else [_mesh(m) for m in job["highpoly"]],
                    extrusion=job["extrusion"], max_ray_distance=job["max_ray_distance"], cage=_mesh(job["cage"]),
                    bent_normals=job["bent_normals"])
     bake = texel_bake(pro, s, job.get("quantities", [s.quantity]), job["bent_normals"],
                       guide=job.get("guide", False))
+    # The UVs served the UV triangles the bake now holds; a worker bakes tiles from those alone and
+    # lets the UVs go (48 bytes a triangle; the parent keeps them for the images and the denoiser).
+    pro.target.uvs = None
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)
     return bake, shared, s.threads
@@ -685,14 +689,19 @@ def memory_limit():
 
 
 def auto_workers(triangles, cores=None, memory=None):
-    """(workers, threads each) for a bake of ``triangles`` (every mesh it holds): one worker a core,
-    fewer with more threads each where memory holds fewer copies of the scene (threads share one)."""
+    """(workers, threads each) for a bake of ``triangles``: a count (every mesh, costed as the
+    target's) or (target, occluder, high-poly) triangles. One worker a core, fewer with more threads
+    each where memory holds fewer copies of the scene (threads share one): the workers and what the
+    parent adds while they bake within 80% of ``memory`` (None: :func:`memory_limit`, the machine's
+    available memory or what its container's cgroup has left, whichever is less)."""
     cores = cpu_count() if cores is None else cores
     memory = memory_limit() if memory is None else memory
-    # A worker's memory: what core.cost estimates for a process holding the scene (measured 770-830
-    # bytes a triangle per worker with its Embree scene, beside its interpreter and sample pool).
-    per_worker = _cost.BYTES_PER_PROCESS + triangles * _cost.BYTES_PER_TRIANGLE
-    workers = cores if memory is None else max(1, min(cores, int(memory * 0.8 // per_worker)))
+    target, occluders, highpoly = (int(triangles), 0, 0) if np.ndim(triangles) == 0 else map(int, triangles)
+    # core.cost's measured figures: each worker's peak (its tables and Embree scenes, its interpreter
+    # and sample pool), and the parent's share while they bake.
+    per_worker = _cost.process_bytes(target, occluders, highpoly)
+    parent = _cost.parent_bytes(target, occluders + highpoly)
+    workers = cores if memory is None else max(1, min(cores, int((memory * 0.8 - parent) // per_worker)))
     return workers, max(1, cores // workers)
 
 

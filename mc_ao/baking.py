@@ -49,8 +49,10 @@ def skip_note(obj, occluders, needs_uvs=True):
     ``occluders`` is the Occluders setting: a skipped object with a surface still occludes the others
     unless each object is baked alone.
     """
+    from .occluders import occlude_others
+
     note = f"{obj.name}: skipped, it {skip_reason(obj, needs_uvs)}"
-    if obj.type in GEOMETRY_TYPES and occluders != "SELF":
+    if obj.type in GEOMETRY_TYPES and occluders != "SELF" and occlude_others(obj):
         note += "; it still occludes the baked objects"
     return note
 
@@ -95,21 +97,39 @@ class Job:
     # job for each, each with its own image.
     quantity: str = "ao"
 
-    def quantity_kwargs(self):
-        """core.bake_ao's quantity for this job: nothing for AO (a plain bake passes what it did before)."""
-        return {} if self.quantity == "ao" else {"quantity": self.quantity}
+    def bake_kwargs(self, settings, threads=None, quantity=None):
+        """core.bake_ao's keyword arguments for this job: the settings' (BakeSettings.bake_kwargs), and
+        for a thickness map its quantity, without the ground (only the object itself occludes it).
+        ``quantity``: another quantity than the job's own (an output that needs a second one), which
+        comes without bent normals (the core makes them with the job's own bake)."""
+        kw = settings.bake_kwargs(threads)
+        quantity = quantity or self.quantity
+        if quantity != "ao":  # the ground and back faces are the AO's (core refuses them for thickness)
+            kw.pop("ground", None)
+            kw.pop("ignore_backfaces", None)
+            kw["quantity"] = quantity
+        if quantity != self.quantity:
+            kw.pop("bent_normals", None)
+        return kw
+
+    def occluders_for(self, quantity=None):
+        """The occluders of its bake of ``quantity`` (its own by default): none for a thickness map."""
+        return self.occluders if (quantity or self.quantity) == "ao" else []
 
     @property
     def selected_to_active(self):
         return bool(self.highpoly)
 
-    def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None):
+    def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None, quantity=None):
         """core.bake_ao of this job; returns its result. Needs no bpy (safe in a worker thread).
 
+        ``quantity``: bake this core quantity (core.bake_ao's ``quantity``, e.g. "thickness") instead
+        of the job's own (an output that needs a second quantity; see bake_kwargs()).
         Raises core.McAoError subclasses (core.BakeCancelled when ``cancel`` fires).
         """
         if settings.vertex_colors or settings.use_udim or settings.bent_normals:
-            return _run_other(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile)
+            return _run_other(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile,
+                              quantity=quantity)
         core = corelink.load()
 
         def mesh(arrays):
@@ -128,14 +148,58 @@ class Job:
                          cage=None if self.cage is None else mesh(self.cage))
         return core.bake_ao(
             mesh(self.target),
-            occluders=[mesh(o) for o in self.occluders],
-            **settings.bake_kwargs(threads),
+            occluders=[mesh(o) for o in self.occluders_for(quantity)],
+            **self.bake_kwargs(settings, threads, quantity),
             progress=progress,
             cancel=cancel,
             on_tile=on_tile,
             **extra,
-            **self.quantity_kwargs(),
         )
+
+
+    def shares_bake_with(self, other):
+        """Whether ``other`` bakes the same object from the same geometry (another quantity of it): the
+        two can be baked together (:meth:`run_maps`)."""
+        return (other.object_name == self.object_name and other.target is self.target
+                and len(other.highpoly) == len(self.highpoly)
+                and all(a is b for a, b in zip(other.highpoly, self.highpoly)) and other.cage is self.cage
+                and other.extrusion == self.extrusion and other.max_ray_distance == self.max_ray_distance)
+
+    def run_maps(self, settings, threads=None, quantities=("ao", "thickness"), progress=None, cancel=None,
+                 on_tile=None):
+        """Several core quantities of this object from one bake (core.bake_maps, bake_udim_maps or
+        bake_vertex_maps: one set-up, each quantity its own rays): {quantity: result}, each bit for bit
+        what :meth:`run` returns for it from this job (its occluders for the AO, none for a thickness
+        map; the ground, back faces and bent normals for the AO only, the bent normals only where the
+        AO is the job's own quantity). ``on_tile(quantity, rows, cols, block)``. Needs no bpy."""
+        core = corelink.load()
+
+        def mesh(arrays, uvs=True):
+            return core.Mesh(positions=arrays.positions, triangles=arrays.triangles,
+                             uvs=arrays.uvs if uvs else None, normals=arrays.normals, name=arrays.name)
+
+        kw = self.bake_kwargs(settings, threads, "ao")
+        kw.pop("quantity", None)
+        if "ao" not in quantities:
+            kw.pop("ground", None)
+            kw.pop("ignore_backfaces", None)
+        occluders = [mesh(o) for o in self.occluders_for("ao")] if "ao" in quantities else []
+        if settings.vertex_colors:
+            for key in ("resolution", "margin", "bent_normals"):
+                kw.pop(key, None)
+            return core.bake_vertex_maps(mesh(self.target, uvs=False), occluders, corners=self.target.extra["corners"],
+                                         quantities=tuple(quantities), progress=progress, cancel=cancel, **kw)
+        if kw.get("bent_normals"):
+            kw["bent_space"] = (self.target.extra or {}).get("bent_space")
+        if self.highpoly and not (settings.use_udim or settings.bent_normals):  # as run() passes it
+            extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
+            kw.update(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
+                      max_ray_distance=self.max_ray_distance, cage=None if self.cage is None else mesh(self.cage))
+        if settings.use_udim:
+            return core.bake_udim_maps(mesh(self.target), occluders, quantities=tuple(quantities), progress=progress,
+                                       cancel=cancel, **kw)
+        return core.bake_maps(mesh(self.target), occluders, quantities=tuple(quantities), progress=progress,
+                              cancel=cancel, on_tile=on_tile, **kw)
 
 
 # core's BakeResult.report keys that point at a problem in the input, and the sentence that says
@@ -173,7 +237,7 @@ _TARGET_NOTES = {
 }
 
 
-def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None):
+def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None, quantity=None):
     """The core's bake of ``job`` for a colour-attribute, UDIM or bent-normal bake (Job.run's)."""
     core = corelink.load()
 
@@ -181,14 +245,14 @@ def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None)
         return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
                          normals=arrays.normals, name=arrays.name)
 
-    kw = dict(settings.bake_kwargs(threads), **job.quantity_kwargs())
-    occluders = [mesh(o) for o in job.occluders]
+    kw = job.bake_kwargs(settings, threads, quantity)
+    occluders = [mesh(o) for o in job.occluders_for(quantity)]
     if settings.vertex_colors:
         for key in ("resolution", "margin", "bent_normals"):
             kw.pop(key, None)
         return core.bake_vertex_ao(mesh(job.target, uvs=False), occluders, corners=job.target.extra["corners"],
                                    progress=progress, cancel=cancel, **kw)
-    if settings.bent_normals:
+    if kw.get("bent_normals"):
         kw["bent_space"] = (job.target.extra or {}).get("bent_space")
     if settings.use_udim:
         return core.bake_udim(mesh(job.target), occluders, progress=progress, cancel=cancel, **kw)
@@ -386,9 +450,9 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
         if target is None:
             raise ExtractError(f"{obj.name} has no faces to bake")
         occluders = [arrays for key, arrays in pool if key != obj.name]
-        for quantity in settings.quantities:
+        for quantity in settings.quantities:  # a thickness map: the object alone occludes it
             jobs.append(Job(obj.name, settings.quantity_image_name_for(obj.name, quantity, max_bytes), target,
-                            occluders, quantity=quantity))
+                            occluders if quantity == "ao" else [], quantity=quantity))
     if jobs:
         jobs[0].notes.extend(notes)
     check_plan(jobs, settings, {obj.name: obj for obj in targets})
@@ -410,17 +474,37 @@ def channel_problem(settings, images=None):
         images = bpy.data.images
     image = images.get(settings.into)
     if image is None:
-        return f"Into: there is no image named {settings.into!r} to write the AO into"
-    channels = image.channels
+        import os
+
+        if os.path.splitext(settings.into)[1].lower() not in (".png", ".exr", ".tif", ".tiff"):
+            return f"Into: there is no image named {settings.into!r} to write the AO into"
+        # a file (the script's --into PATH): core.imageio checks it, naming it and what it has
+        try:
+            corelink.load("imageio").check_channel(settings.into, settings.channel, settings.size)
+        except corelink.load().SettingsError as exc:
+            return str(exc)
+        return None
+    channels = image_channels(image)
     # An image of 3 channels has no alpha; one of 1 or 2 (grey, grey and alpha) no separate green or blue.
     has = {4: "RGBA", 3: "RGB", 2: "RA", 1: "R"}.get(channels, "")
     if settings.channel not in has:
         return (f"image {settings.into!r} has no {settings.channel} channel (it has {channels}: "
                 f"{', '.join(has) or 'none'}); choose one of them")
-    # The writer that puts one channel into an existing image is not part of this version: refuse
-    # rather than bake into the object's own image instead.
-    return (f"Channel {settings.channel} into {settings.into!r}: writing the AO into one channel of an existing "
-            "image is not available in this version; set Channel to Own Image")
+    w, h = settings.size
+    if tuple(image.size) != (w, h) and all(image.size):
+        return (f"image {settings.into!r} is {image.size[0]}x{image.size[1]}, not the bake's {w}x{h}: bake at its "
+                f"size to write into its {settings.channel} channel")
+    return None  # mc_ao.outputs.channel writes it
+
+
+def image_channels(image):
+    """How many channels ``image`` holds (its file's or its buffer's): Blender's Image.channels says 4
+    for every loaded image, its depth (bits per pixel) tells: 8 bits a channel, 32 in a float image."""
+    depth = getattr(image, "depth", 0)
+    per = 32 if getattr(image, "is_float", False) else 8
+    if depth and depth % per == 0 and 1 <= depth // per <= 4:
+        return depth // per
+    return image.channels
 
 
 def check_channel(settings, images=None):

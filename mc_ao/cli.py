@@ -719,35 +719,30 @@ def run(argv, in_blender, summary):
     if not filewriter.oiio_available():
         print("bake_ao: no OpenImageIO in this Python; writing files with Blender's image writer", file=sys.stderr)
 
-    from . import outputs
+    from . import service
 
     check_save(args, bpy.data.filepath)
     try:
         if settings.use_selected_to_active:
-            plan = plan_selected_to_active(bpy, args, settings)
+            jobs = plan_selected_to_active(bpy, args, settings)
         else:
             objects = pick_objects(bpy, args.objects, baking, needs_uvs=baking.needs_uvs(settings))
-            plan = baking.plan(
+            jobs = baking.plan(
                 bpy.context.evaluated_depsgraph_get(), objects, settings,
                 selected=objects, view_layer=bpy.context.view_layer,
             )
         formats = [(FORMATS[f], BITS[args.bits] if args.bits else None) for f in args.format]
-        files = outputs.plan_files(settings, str(args.output), plan, formats, stderr=args.stderr)
+        plan = service.plan(settings, jobs, str(args.output), formats)
     except (ExtractError, core.McAoError) as exc:
         raise UsageError(str(exc)) from None
-    summary.outputs = [(f, "one of this run's files") for f in planned_paths(files)]
+    summary.outputs = [(f, "one of this run's files") for f in plan.paths()]
     if getattr(args, "save", None) is not None:
         summary.outputs.append((args.save, "the --save file"))
     check_paths(args, summary)  # again, now that the run's own files are known
     summary.settings = record = filewriter.settings_record(settings)
     if args.match_suffix:  # the summary's record only: file metadata holds plain values
         summary.settings = dict(record, match_suffix=list(args.match_suffix))
-    return bake(plan, files, settings, args, summary)
-
-
-def planned_paths(files):
-    """Every path of a run's planned files (``{image name: [OutputFile]}``): images, standard errors, PLY."""
-    return [os.fspath(p) for entry in files.values() for f in entry for p in (f.path, f.stderr_path) if p]
+    return bake(plan, args, summary)
 
 
 def s2a_record(job, result=None):
@@ -763,94 +758,89 @@ def s2a_record(job, result=None):
 
 
 class ScriptRun:
-    """The script's handler of a bake's messages (mc_ao.bakerun.dispatch): progress on stderr, each finished
-    object's files written (Ctrl-C held off meanwhile), its outcome into the summary and the table."""
+    """The script's side of one bake (mc_ao.service.Bake): progress on stderr, each object's outcome
+    (its files written by the service, Ctrl-C held off meanwhile) into the summary and the table."""
 
-    def __init__(self, plan, files, settings, args, summary, run):
+    def __init__(self, plan, args, summary):
         import bpy
 
-        self.plan, self.files, self.settings, self.args, self.summary, self.run = plan, files, settings, args, summary, run
-        self.blend = bpy.data.filepath
+        from . import service
+        from .outputs.store import Store
+
+        self.plan, self.settings, self.args, self.summary = plan, plan.settings, args, summary
+        store = None
+        if plan.settings.vertex_colors and getattr(args, "save", None) is not None:
+            # --save: the colour attributes go into the .blend file the run saves at its end
+            store = Store(plan.settings, plan.folder, plan.files,
+                          lambda kind, text: print(f"bake_ao: {escape(text)}", file=sys.stderr))
+        self.run = service.Bake(plan, args.threads or None, live=False, store=store,
+                                store_kinds={"color_attribute"}, blend=bpy.data.filepath, hold_interrupts=True,
+                                store_after_save=True)
         self.progress = Progress(enabled=not args.quiet)
-        self.rows, self.failures, self.done = [], 0, set()
+        self.rows, self.failures = [], 0
 
     def begin(self, i):
-        if i < len(self.plan):
-            name = escape(self.plan[i].object_name)
-            print(f"bake_ao: [{i + 1}/{len(self.plan)}] baking {name}", flush=True)
-            self.progress.begin(f"[{i + 1}/{len(self.plan)}] {name}")
+        jobs = self.plan.jobs
+        if i < len(jobs):
+            name = escape(jobs[i].object_name)
+            print(f"bake_ao: [{i + 1}/{len(jobs)}] baking {name}", flush=True)
+            self.progress.begin(f"[{i + 1}/{len(jobs)}] {name}")
 
     def on_progress(self, i, fraction):
         self.progress.update(fraction)
 
-    def on_done(self, i, result):
-        from . import baking, filewriter, interrupts, outputs
+    def on_outcome(self, outcome):
+        from . import baking
 
-        job, settings = self.plan[i], self.settings
-        with interrupts.held_off():  # a Ctrl-C now: this object's files all written, then the cancel
-            self.progress.end()
-            metadata = filewriter.file_metadata(settings, job, self.blend)
-            # every kind: the image and its standard error, UDIM tiles, bent normals, PLY
-            written, errors = outputs.write_files(job, result, self.files, metadata, settings)
-            if settings.vertex_colors and getattr(self.args, "save", None) is not None and not errors:
-                errors = attribute_errors(job, result, settings)
-            for note in baking.input_notes(result):
-                print(f"bake_ao: {escape(job.object_name)}: warning: {escape(note)}", file=sys.stderr)
-            if job.selected_to_active:
-                print(f"bake_ao: {escape(job.object_name)}: from {', '.join(escape(h.name) for h in job.highpoly)}"
-                      f"{baking.miss_summary(result)}", file=sys.stderr)
-            per_texel, rate = baking.throughput(result)
-            if errors:
-                self._failed(i, [exc for _, exc in errors], result.seconds, written, result.rays, per_texel,
-                             result=result)
-            else:
-                self.done.add(i)
-                self.summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, written,
-                                 **s2a_record(job, result))
-                self.rows.append((escape(job.object_name), size_text(result, settings), f"{result.seconds:.2f}",
-                                  f"{per_texel:.0f}", f"{rate:.2f}", escape(", ".join(written))))
-        self.begin(i + 1)
-
-    def on_failed(self, i, error):
-        self._failed(i, [error])
-        self.begin(i + 1)
-
-    def on_crashed(self, i, exc, trace):
-        print(trace, file=sys.stderr, end="")
-        self._failed(i, [f"bake failed ({type(exc).__name__}: {exc}); the traceback is above"])
-        self.begin(i + 1)
-
-    def _failed(self, i, errors, seconds=None, files=(), rays=0, per_texel=0.0, result=None):
         self.progress.end()
-        self.failures += 1
-        self.done.add(i)
-        for error in errors:
-            print(f"bake_ao: {escape(self.plan[i].object_name)}: {escape(error)}", file=sys.stderr)
-        if seconds is None:
-            seconds = time.monotonic() - self.run.started.get(i, time.monotonic())
-        self.summary.add(self.plan[i].object_name, "failed", seconds, rays, per_texel, files,
-                         "; ".join(map(str, errors)), **s2a_record(self.plan[i], result))
+        job, settings = outcome.job, self.settings
+        name = escape(job.object_name)
+        if outcome.trace:
+            print(outcome.trace, file=sys.stderr, end="")
+        result = outcome.result
+        for note in outcome.notes:
+            print(f"bake_ao: {name}: warning: {escape(note)}", file=sys.stderr)
+        if result is not None and job.selected_to_active:
+            print(f"bake_ao: {name}: from {', '.join(escape(h.name) for h in job.highpoly)}"
+                  f"{baking.miss_summary(result)}", file=sys.stderr)
+        if not outcome.baked or outcome.file_error:
+            error = outcome.error if not outcome.baked else (
+                f"none of its files was written (any file already there is unchanged): {outcome.file_error}")
+            if outcome.trace:
+                error += "; the traceback is above"
+            print(f"bake_ao: {name}: {escape(error)}", file=sys.stderr)
+            self.failures += 1
+            if result is None:
+                seconds = time.monotonic() - self.run.started.get(outcome.index, time.monotonic())
+                self.summary.add(job.object_name, "failed", seconds, error=error, **s2a_record(job))
+            else:
+                per_texel, _ = baking.throughput(result)
+                self.summary.add(job.object_name, "failed", result.seconds, result.rays, per_texel, outcome.files,
+                                 error, **s2a_record(job, result))
+        else:
+            per_texel, rate = baking.throughput(result)
+            self.summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, outcome.files,
+                             **s2a_record(job, result))
+            self.rows.append((name, size_text(result, settings), f"{result.seconds:.2f}",
+                              f"{per_texel:.0f}", f"{rate:.2f}", escape(", ".join(outcome.files))))
+        self.begin(outcome.index + 1)
 
 
-def bake(plan, files, settings, args, summary):
-    """Bake the jobs on a worker thread, write each finished one's files here; the exit status."""
-    from . import bakerun
-
-    run = bakerun.BakeRun(plan, settings, args.threads or None, live=False)
-    handler = ScriptRun(plan, files, settings, args, summary, run)
-    progress, done = handler.progress, handler.done
+def bake(plan, args, summary):
+    """Bake the plan's jobs on a worker thread, each finished one's files written here; the exit status."""
+    handler = ScriptRun(plan, args, summary)
+    run, settings = handler.run, plan.settings
     handler.begin(0)
     run.start()
     try:
-        while not bakerun.dispatch(run.next_message(), handler):
+        while not run.handle(run.next_message(), handler):
             pass
     except BaseException as exc:
         run.stop()  # a "cancelled" message comes only from here: the cancel is this Ctrl-C's
-        progress.end()
+        handler.progress.end()
         why = "cancelled (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else "the run stopped"
-        for i, job in enumerate(plan):
-            if i not in done:
-                summary.add(job.object_name, "failed", error=f"not baked: {why}")
+        for outcome in run.cancel_rest():
+            summary.add(outcome.object_name, "failed", error=f"not baked: {why}")
         raise
     run.stop()
     rows, failures = handler.rows, handler.failures
@@ -871,9 +861,9 @@ def bake(plan, files, settings, args, summary):
         widths = [max(len(r[i]) for r in rows + [header]) for i in range(len(header))]
         for row in [header] + rows:
             print("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
-    print(f"bake_ao: baked {len(rows)} of {len(plan)} objects" + (f", {failures} failed" if failures else ""))
+    print(f"bake_ao: baked {len(rows)} of {len(plan.jobs)} objects" + (f", {failures} failed" if failures else ""))
     if failures and summary.error is None:
-        summary.error = f"{failures} of {len(plan)} objects failed"
+        summary.error = f"{failures} of {len(plan.jobs)} objects failed"
     return 1 if failures else 0
 
 
@@ -885,20 +875,3 @@ def size_text(result, settings):
     if settings.use_udim:
         return f"{w}x{h} x{len(result.tiles)} tiles"
     return f"{w}x{h}"
-
-
-def attribute_errors(job, result, settings):
-    """Store a finished colour-attribute bake in its object's mesh (for --save); [] or [(what, error)]."""
-    import bpy
-
-    from . import vertex_colors
-    from .extract import ExtractError
-
-    obj = bpy.data.objects.get(job.object_name)
-    try:
-        if obj is None:
-            raise ExtractError("the object is gone")
-        vertex_colors.write_attribute(obj, settings, result, job.target.extra)
-    except (ExtractError, RuntimeError) as exc:
-        return [(job.object_name, exc)]
-    return []

@@ -6,11 +6,12 @@ batch: needs no bpy to import.
   :func:`core.filenames.unique_file_stems` (one safe, distinct stem per image, also where names
   differ only in case) and :func:`core.filenames.path_inside` (the final path lies in the output
   folder). Nothing else turns a name into a path.
-- :func:`write_outputs`: one writer for all. OpenImageIO through core.imageio where its Python
+- :func:`writer_name`: the one image writer: OpenImageIO through core.imageio where its Python
   module exists (Blender's official builds), else Blender's own image writer (Debian's Blender has
   no OpenImageIO module). Both write a temporary file, check it and only then replace the target
-  (:mod:`core.atomicfile`); the only folder ever created is the chosen output folder itself; a file
-  of another kind at a path is never replaced (:func:`kind_problem`).
+  (:mod:`core.atomicfile`); an object's files are written together, all or none
+  (mc_ao.outputs.save_files); the only folder ever created is the chosen output folder itself
+  (:func:`make_output_folder`); a file of another kind at a path is never replaced (:func:`kind_problem`).
 - :func:`settings_record` and :func:`file_metadata`: the bake's settings as written into every
   file's metadata (and into the script's ``--summary-json``).
 """
@@ -157,7 +158,7 @@ def oiio_available():
 
 
 def writer_name():
-    """The writer write_outputs() uses here: "OpenImageIO" or "Blender"."""
+    """The image writer used here: "OpenImageIO" or "Blender"."""
     return "OpenImageIO" if oiio_available() else "Blender"
 
 
@@ -172,51 +173,6 @@ def make_output_folder(folder):
         raise core.ImageWriteError(f"could not create the output folder {folder!r}: {exc.strerror or exc}") from exc
 
 
-def write_outputs(result, files, metadata=None):
-    """Write a bake result to each of ``files`` (OutputFile); return ``(written, failures)``.
-
-    ``written`` lists the paths written, ``failures`` ``(path, exception)`` for each file that was
-    not (core.McAoError subclasses such as core.ImageWriteError naming the file, or OSError): a
-    file that fails does not stop the others. Every file is complete and checked before it
-    replaces anything, and a failed one leaves the file at its path as it was (see the module
-    docstring).
-    """
-    written, failures = [], []
-    if not files:
-        return written, failures
-    core = corelink.load()
-    try:
-        make_output_folder(os.path.dirname(files[0].path))
-    except OSError as exc:
-        return written, [(f.path, exc) for f in files]
-    if oiio_available():
-        imageio = corelink.load("imageio")
-
-        def write(f):
-            imageio.write_ao(f.path, result, bits=f.bits, stderr_path=f.stderr_path, metadata=metadata)
-            return [f.path, f.stderr_path] if f.stderr_path else [f.path]
-    else:
-        from . import images  # Blender's writer: needs bpy, only here
-
-        def write(f):
-            images.save_pixels_with_blender(images.rgba(result.ao), f.path, f.file_format, f.bits)
-            if not f.stderr_path:
-                return [f.path]
-            images.save_pixels_with_blender(images.rgba(result.stderr), f.stderr_path, "OPEN_EXR", "float")
-            return [f.path, f.stderr_path]
-
-    for f in files:
-        problem = kind_problem(f.path, f.stderr_path)
-        if problem is not None:
-            failures.append((f.path, corelink.load("errors").FileWriteError(problem)))
-            continue
-        try:
-            written.extend(write(f))
-        except (core.McAoError, OSError, RuntimeError) as exc:
-            failures.append((f.path, exc))
-    return written, failures
-
-
 def kind_problem(*paths):
     """The first of ``paths`` (None ones skipped) that holds a file of another kind than a bake writes
     there, as a message; None when every one may be written (mc_ao.filecheck.replace_problem)."""
@@ -227,9 +183,3 @@ def kind_problem(*paths):
         if problem:
             return problem
     return None
-
-
-def planned_kind_problems(files):
-    """Every planned file (``{image name: [OutputFile]}``) that would replace a file of another kind:
-    checked before baking, so that the bake is not spent on files that cannot be written."""
-    return [p for entry in files.values() for f in entry for p in [kind_problem(f.path, f.stderr_path)] if p]

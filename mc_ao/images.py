@@ -257,7 +257,7 @@ def use_file(image, path, relative):
 def save_pixels_with_blender(pixels, path, file_format, bits):
     """Write (H, W, 4) pixels to ``path`` in ``file_format`` (PNG, OPEN_EXR, TIFF) with Blender's writer.
 
-    Used where this Python has no OpenImageIO module (mc_ao.filewriter.write_outputs chooses). ``bits``
+    Used where this Python has no OpenImageIO module (mc_ao.outputs.maps chooses). ``bits``
     8 writes an 8-bit file; any other value a float image, which Blender writes as a 16-bit PNG or
     TIFF, or a float EXR (Image.save() writes float EXR also for "half": checked with bpy 5.0.1).
     RGBA, no metadata.

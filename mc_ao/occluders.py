@@ -38,8 +38,12 @@ def occlude_others(obj):
     props = getattr(obj, "mc_ao", None)
     if props is not None and hasattr(props, "occlude_others"):
         return bool(props.occlude_others)
+    # Blender 5.0 keeps the values of registered properties apart from an object's custom
+    # properties (bl_system_properties_get); earlier versions keep them among them.
+    system = getattr(obj, "bl_system_properties_get", None)
+    stored = system() if system is not None else obj
     try:
-        group = obj.get("mc_ao")
+        group = stored.get("mc_ao") if stored is not None else None
     except (TypeError, AttributeError):
         group = None
     if group is not None and hasattr(group, "get"):
@@ -243,8 +247,8 @@ def pool(depsgraph, settings, *, selected=(), view_layer=None, notes=None):
     view_layer = view_layer or depsgraph.view_layer
     chooser = Chooser(depsgraph.scene, settings.occluder_collections, settings.exclude_collections)
     notes = [] if notes is None else notes
-    if settings.only_local or settings.occluders == "SELF":
-        return []
+    if settings.only_local or settings.occluders == "SELF" or "ao" not in settings.quantities:
+        return []  # (a thickness map: only the object itself occludes it)
     if settings.occluders == "SELECTED":
         return list(_selected_geometry(depsgraph, selected, chooser))
     return list(_rendered_geometry(depsgraph, view_layer, chooser, notes))

@@ -1,11 +1,12 @@
 """The Bake AO operator: modal with a worker thread from the UI, synchronous from scripts and -b.
 
-One bake is a list of jobs (one per selected mesh) run one after another by core.bake_ao on a worker
-thread. The thread never touches bpy: it only puts messages (progress, finished tiles, results,
-errors) on a queue. A BakeSession is the main-thread side: it plans the bake, drains the queue,
-applies the messages to Blender's images and ends the bake. The operator drives it from
-window-manager timer events when modal (Esc cancels) or in a blocking loop when not; the tests
-drive it with the same events, since a modal operator cannot run without a window.
+The bake itself is mc_ao.service's, as for the script: a plan (one job per selected mesh and
+quantity, its outputs and files checked before any work), a run on a worker thread that never
+touches bpy and puts messages on a queue, and each finished object through its outputs (images,
+files written all or none, colour attribute). A BakeSession is what only the UI adds: the selection,
+the live image while a job bakes, the progress, Esc and undo, the reports. The operator drives it
+from window-manager timer events when modal (Esc cancels) or in a blocking loop when not; the
+tests drive it with the same events, since a modal operator cannot run without a window.
 
 What goes wrong, and what the user gets (a report naming the object, images kept as they were):
 
@@ -14,7 +15,8 @@ What goes wrong, and what the user gets (a report naming the object, images kept
 - an existing image of another size: resized to the bake's size (reported); put back as it was
   when its bake does not finish
 - an output folder that cannot be written: refused before baking, nothing changes; a file that
-  fails to write later: the image in Blender keeps the bake, the file on disk is left as it was
+  fails to write later: the image in Blender keeps the bake, and none of that object's files is
+  written (each file on disk is left as it was); the report names the file that failed
 - Esc, Undo during a bake, or a failure in the core: unfinished images are put back as they were,
   finished ones are kept; a failed object does not stop the others
 
@@ -25,19 +27,16 @@ changed. The report of each object ends with its summary (size, time, samples, r
 warnings, since the status bar shows only the last report.
 """
 
-import os
 import queue
 import sys
-import threading
 import time
 import traceback
 
 import bpy
-import numpy as np
 
-from . import bakerun, baking, corelink, filecheck, filewriter, images, outputs, schema, selected_to_active
+from . import bakerun, baking, corelink, filecheck, filewriter, images, schema, selected_to_active, service
 from .extract import ExtractError
-from .bakerun import BakeRun
+from .outputs.store import Store
 from .properties import resolve_threads
 from .settings import BakeSettings
 from .terminal import escape
@@ -161,18 +160,6 @@ HANDLERS = {
 }
 
 
-def summary(job, result):
-    """One line per baked object: size, time, samples per texel, ray throughput (and for Selected to
-    Active, the high-poly objects and how many sample points missed them)."""
-    h, w = result.ao.shape
-    per_texel, rate = baking.throughput(result)
-    sources = f" from {', '.join(h.name for h in job.highpoly)}" if getattr(job, "highpoly", None) else ""
-    return (
-        f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r} in {result.seconds:.2f} s, "
-        f"{per_texel:.0f} samples per texel, {rate:.2f} M rays/s{baking.miss_summary(result)}"
-    )
-
-
 def total_summary(results):
     """One line for a bake of several objects: their number, time, samples per texel, ray throughput."""
     seconds = sum(r.seconds for r in results)
@@ -195,17 +182,15 @@ def with_warnings(text, warnings, errors=0):
     return f"{text}; {' and '.join(counts)} before this, in the Info editor"
 
 
-
-
 class BakeSession:
-    """The main-thread side of one bake: plan it, start the worker, apply its messages, end it.
+    """The operator's side of one bake (mc_ao.service): plan it, run it, show it, report it, end it.
 
     ``report(type, message)`` is the operator's ``self.report`` (or anything that takes the same).
-    Images are prepared when a job first writes into them (created, or their pixel buffer resized
-    when they exist with another size), with an images.Snapshot taken then; every image whose job
-    did not finish is put back from its snapshot at the end, so a cancelled or failed bake leaves no
-    partial image. A finished job's image gets its settings, pixels, fake user and packing (or its
-    saved file) at once, in _finish_job.
+    The service's Bake finishes each object (its images, files, colour attribute); this session
+    adds what only the UI has: the live image while the bake runs, the progress, Esc and undo, and
+    the reports. Images are prepared when a job first writes into them, with a snapshot
+    (mc_ao.outputs.store.Store); every image whose job did not finish is put back at the end, so a
+    cancelled or failed bake leaves no partial image.
     """
 
     def __init__(self, report):
@@ -235,8 +220,8 @@ class BakeSession:
         if missing is not None:
             self.report({"ERROR"}, f"Cannot bake: {missing}")
             return False
-        self.settings = BakeSettings.from_properties(context.scene.mc_ao)
-        problems = schema.problems(self.settings)
+        self.settings = settings = BakeSettings.from_properties(context.scene.mc_ao)
+        problems = schema.problems(settings)
         if problems:
             # The properties' own limits keep most values in range; what gets past them (a script
             # setting a value, a limit of the core's) is refused here, before anything is baked.
@@ -246,13 +231,11 @@ class BakeSession:
             ) + "; nothing was baked")
             return False
         selected = list(context.selected_objects)
-        to_active = self.settings.use_selected_to_active
-        needs_uvs = baking.needs_uvs(self.settings)
-        if to_active:
+        needs_uvs = baking.needs_uvs(settings)
+        if settings.use_selected_to_active:
             # Selected to Active: the active object from the other selected ones (their cage aside).
-            active, cage = context.active_object, selected_to_active.cage_of(self.settings)
-            reason = (selected_to_active.unsupported(self.settings)
-                      or selected_to_active.why_not(selected, active, cage))
+            active, cage = context.active_object, selected_to_active.cage_of(settings)
+            reason = selected_to_active.unsupported(settings) or selected_to_active.why_not(selected, active, cage)
             objects = [] if reason else [active]
             skipped = [obj for obj in selected if obj is not active and obj is not cage
                        and obj not in selected_to_active.high_objects(selected, active, cage)]
@@ -266,24 +249,15 @@ class BakeSession:
             self.report({"ERROR"}, reason)
             return False
         try:
-            self.output_dir = _output_dir(self.settings) if self.settings.save_to_file else None
-            if to_active:
-                planned = [selected_to_active.plan(context.evaluated_depsgraph_get(), objects[0], selected,
-                                                   self.settings, view_layer=context.view_layer)]
+            folder = _output_dir(settings) if settings.save_to_file else None
+            depsgraph = context.evaluated_depsgraph_get()
+            if settings.use_selected_to_active:
+                jobs = [selected_to_active.plan(depsgraph, objects[0], selected, settings,
+                                                view_layer=context.view_layer)]
             else:
-                planned = baking.plan(
-                    context.evaluated_depsgraph_get(), objects, self.settings,
-                    selected=selected, view_layer=context.view_layer,
-                )
-            for job in planned:
-                try:
-                    outputs.check_images(job, self.settings)
-                except images.ImageError as exc:
-                    raise images.ImageError(f"{job.object_name}: {exc}") from None
-            if self.output_dir is not None:  # the files' paths, checked before anything is baked
-                outputs.plan_files(self.settings, self.output_dir, planned,
-                                   [(self.settings.file_format, self.settings.file_bits)],
-                                   stderr=self.settings.error_map)
+                jobs = baking.plan(depsgraph, objects, settings, selected=selected, view_layer=context.view_layer)
+            plan = service.plan(settings, jobs, folder, [(settings.file_format, settings.file_bits)],
+                                check_blender=True)
         except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
             self.report({"ERROR"}, str(exc))
             return False
@@ -291,72 +265,56 @@ class BakeSession:
         self.unsummarised = 0  # warnings since the last summary line, counted in the next one
         self.unsummarised_errors = 0  # errors (a file not saved) since the last summary line
         for obj in skipped:
-            self._warn(baking.skip_note(obj, self.settings.occluders, needs_uvs))
-        for job in planned:
+            self._warn(baking.skip_note(obj, settings.occluders, needs_uvs))
+        for job in jobs:
             for note in job.notes:
                 self._warn(f"{job.object_name}: {note}")
-        w, h = self.settings.size
-        # UDIM tiles and colour attributes are written when their object's bake finishes.
-        self.live = live and w * h <= LIVE_MAX_TEXELS and not outputs.custom(self.settings)
+        w, h = settings.size
+        # UDIM tiles and colour attributes are stored when their object's bake finishes.
+        self.live = live and w * h <= LIVE_MAX_TEXELS and not (settings.vertex_colors or settings.use_udim)
         self.errors = 0  # objects whose bake failed
-        self.file_errors = 0  # files not saved (their objects are baked)
+        self.file_errors = 0  # objects baked whose files were not saved
         self.finished = []
         self.results = []  # of the finished jobs, for the summary of a bake of several objects
-        self.snapshots = {}  # job index -> images.Snapshot of its image before the bake touched it
         self.buffers = {}  # job index -> live pixel buffer (H, W, channels)
         self.pending = set()  # jobs whose live buffer has tiles not yet in the image
         self.last_flush = 0.0
         self.fraction = 0.0
-        self.run = BakeRun(planned, self.settings, resolve_threads(context, self.settings), self.live)
+        self.store = Store(settings, folder, plan.files, lambda kind, text: self.report({kind}, text))
+        self.run = service.Bake(plan, resolve_threads(context, settings), self.live, store=self.store,
+                                blend=bpy.data.filepath)
         self.run.start()
         _SESSIONS.add(self)
         context.window_manager.progress_begin(0.0, 1.0)
         return True
 
-    # -- the images ----------------------------------------------------------------------------
-
-    def _image(self, i):
-        """The image of job i, ready for the bake's pixels; prepared (and snapshot) on first use.
-
-        Looked up by name every time and never kept: an undo frees and re-reads image datablocks,
-        and a kept reference would then point at freed memory.
-        """
-        job = self.run.jobs[i]
-        w, h = self.settings.size
-        image = bpy.data.images.get(job.image_name)
-        if i not in self.snapshots:
-            image, snapshot = images.prepare_image(job.image_name, w, h, self.settings.float_buffer)
-            self.snapshots[i] = snapshot
-            if not snapshot.created and all(snapshot.size) and snapshot.size != (w, h):
-                self.report(
-                    {"INFO"},
-                    f"{job.object_name}: image {job.image_name!r} was {snapshot.size[0]}x{snapshot.size[1]}, "
-                    f"resized to {w}x{h}",
-                )
-        elif image is None or tuple(image.size) != (w, h):
-            image, _ = images.prepare_image(job.image_name, w, h, self.settings.float_buffer)
-        return image
+    # -- the live image ------------------------------------------------------------------------
 
     def _buffer(self, i):
         """The live pixel buffer of job i (None when its image cannot take the bake)."""
         if i not in self.buffers:
+            w, h = self.settings.size
+            self.store.current, self.store.object_name = i, self.run.jobs[i].object_name
             try:
-                self.buffers[i] = images.pixels_of(self._image(i))
+                self.buffers[i] = images.pixels_of(
+                    self.store.image(self.run.jobs[i].image_name, w, h, self.settings.float_buffer, i=i))
             except images.ImageError:
                 self.buffers[i] = None  # reported when the job is done
         return self.buffers[i]
 
-    def _restore_unfinished(self):
-        """Put back the images of jobs that did not finish: no partial image is left behind.
-
-        After an undo, an image the bake created is already gone (the undo went back to before
-        the bake), and a datablock of that name, if any, is the undo's: only reused images are put
-        back then (the undo kept their datablock, which the bake had not changed, with the bake's
-        partial pixel buffer).
-        """
-        for i, snapshot in self.snapshots.items():
-            if i not in self.finished and not (self.interrupted and snapshot.created):
-                snapshot.restore()
+    def _flush_live(self, context):
+        now = time.monotonic()
+        if not self.pending or now - self.last_flush < LIVE_UPDATE_INTERVAL:
+            return
+        w, h = self.settings.size
+        for i in self.pending:
+            image = self.store.image(self.run.jobs[i].image_name, w, h, self.settings.float_buffer, i=i)
+            buffer = self.buffers.get(i)
+            if buffer is not None and tuple(image.size) == (buffer.shape[1], buffer.shape[0]):
+                images.set_pixels(image, buffer)
+        self.pending.clear()
+        self.last_flush = now
+        _redraw(context)
 
     def interrupt(self):
         """Stop the worker now, write nothing more; finish() follows (after the undo that called this)."""
@@ -364,12 +322,12 @@ class BakeSession:
             self.run.stop()
             self.interrupted = True
 
-    # -- the worker's messages -----------------------------------------------------------------
+    # -- the service's messages ------------------------------------------------------------------
 
     def _handle(self, context, message):
-        """Apply one worker message (mc_ao.bakerun.dispatch to the on_* methods); True at the end of the run."""
+        """Apply one worker message (mc_ao.service.Bake.handle); True at the end of the run."""
         self._context = context
-        return bakerun.dispatch(message, self)
+        return self.run.handle(message, self)
 
     def on_progress(self, i, fraction):
         self.fraction = (i + fraction) / len(self.run.jobs)
@@ -381,27 +339,30 @@ class BakeSession:
             buffer[rows, cols] = images.rgba(block, buffer.shape[2])
             self.pending.add(i)
 
-    def on_done(self, i, result):
-        self._finish_job(self._context, i, result)
-
-    def on_failed(self, i, exc):
-        self._failed(i)
-        self.report({"ERROR"}, f"{self.run.jobs[i].object_name}: {exc}")
-
-    def on_crashed(self, i, exc, trace):
-        self._failed(i)
-        print(f"mc_ao: the bake of {self.run.jobs[i].object_name} failed:\n{trace}", file=sys.stderr)
-        self.report(
-            {"ERROR"},
-            f"{self.run.jobs[i].object_name}: bake failed ({type(exc).__name__}: {exc}); see the console",
-        )
-
-    def _failed(self, i):
-        self.errors += 1
-        self.pending.discard(i)
-        self.buffers.pop(i, None)
-        if i in self.snapshots:
-            self.snapshots[i].restore()
+    def on_outcome(self, outcome):
+        """One object ended: report its errors, its files, its warnings, then its summary."""
+        self.pending.discard(outcome.index)
+        self.buffers.pop(outcome.index, None)
+        name = outcome.object_name
+        if not outcome.baked:
+            self.errors += 1
+            if outcome.trace:
+                print(f"mc_ao: the bake of {name} failed:\n{outcome.trace}", file=sys.stderr)
+            self.report({"ERROR"}, f"{name}: {outcome.error}" + ("; see the console" if outcome.trace else ""))
+            return
+        self.finished.append(outcome.index)
+        self.results.append(outcome.result)
+        if outcome.file_error:
+            self.file_errors += 1
+            self.unsummarised_errors += 1
+            self.report({"ERROR"}, service.file_error_message(outcome))
+        elif outcome.files:
+            self.report({"INFO"}, f"{name}: saved {', '.join(outcome.files)} ({filewriter.writer_name()})")
+        _redraw(self._context)
+        for note in outcome.notes:
+            self._warn(f"{name}: {note}")
+        if outcome.summary:
+            self._summarise(outcome.summary)
 
     def _warn(self, message):
         self.warnings += 1
@@ -413,120 +374,6 @@ class BakeSession:
         warnings, errors = self.unsummarised, self.unsummarised_errors
         self.unsummarised = self.unsummarised_errors = 0
         self.report({"WARNING"} if warnings or errors else {"INFO"}, with_warnings(text, warnings, errors))
-
-    def _finish_job(self, context, i, result):
-        """A job's result into its image for good, its file saved; its warnings, then its summary."""
-        if outputs.custom(self.settings):  # colour attributes, UDIM tiles
-            outputs.finish_job(self, context, i, result)
-            _redraw(context)
-            return
-        job = self.run.jobs[i]
-        self.pending.discard(i)
-        self.buffers.pop(i, None)
-        try:
-            self._image(i)  # prepared and snapshot, where no live tile came first
-            images.finish_image(job.image_name, result.ao, self.settings.float_buffer)
-        except images.ImageError as exc:
-            self._failed(i)
-            self.report({"ERROR"}, f"{job.object_name}: {exc}")
-            return
-        self.finished.append(i)
-        self.results.append(result)
-        if not outputs.finish_bent(self, i, result):  # "<object>_BentNormal" beside the AO
-            self.unsummarised_errors += 1
-        saved = {}
-        if self.output_dir is not None:
-            saved = self._save(job, result)
-            if not saved:  # reported as an error; counted in the summary, which comes after it
-                self.unsummarised_errors += 1
-            outputs.save_bent(self, job, result, saved.get("ao"))
-        self._keep(job, job.image_name, result.ao, saved.get("ao"))
-        if self.settings.error_map:
-            self._error_map(job, result, saved.get("stderr"))
-        _redraw(context)
-        for note in baking.input_notes(result):
-            self._warn(f"{job.object_name}: {note}")
-        self._summarise(summary(job, result))
-
-    def _keep(self, job, image_name, values, saved, float_buffer=None):
-        """Make a finished image survive save, reopen and undo: its saved file, else packed pixels.
-
-        ``values`` are the image's (H, W) values; ``saved`` is the path of the file the bake was just
-        saved to, or None.
-        """
-        float_buffer = self.settings.float_buffer if float_buffer is None else float_buffer
-        if saved is not None and self.settings.link_to_file:
-            try:
-                relative = self.settings.output_dir.startswith("//")
-                images.use_file(bpy.data.images[image_name], saved, relative=relative)
-                return
-            except (images.ImageError, RuntimeError) as exc:
-                self._warn(f"{job.object_name}: {exc}; its pixels are packed into the .blend file instead")
-        try:
-            if saved is not None and self.settings.link_to_file:  # the pixels, after use_file failed
-                images.finish_image(image_name, values, float_buffer)
-            images.pack(bpy.data.images[image_name])
-        except images.ImageError as exc:
-            self._warn(
-                f"{job.object_name}: {exc}; save the image (Image > Save As) before closing the .blend file"
-            )
-
-    def _error_map(self, job, result, saved):
-        """The finished job's standard error into its own float image "<image>_stderr", kept like the AO."""
-        name = outputs.stderr_name(job, self.settings)
-        h, w = result.stderr.shape
-        try:
-            images.prepare_image(name, w, h, float_buffer=True)
-            images.finish_image(name, result.stderr, True)
-        except images.ImageError as exc:
-            self._warn(f"{job.object_name}: the error map was not kept: {exc}")
-            return
-        self._keep(job, name, result.stderr, saved, float_buffer=True)
-
-    def _save(self, job, result):
-        """Write the finished job's file into the output folder; report where, or why not."""
-        metadata = filewriter.file_metadata(self.settings, job, bpy.data.filepath)
-        try:
-            files = self._output_files()[job.image_name]
-            written, failures = filewriter.write_outputs(result, files, metadata)
-        except corelink.load().McAoError as exc:  # a path that would leave the output folder
-            written, failures = [], [(self.output_dir, exc)]
-        for path, exc in failures:
-            self.file_errors += 1
-            why = str(exc) if path in str(exc) else f"{path}: {exc}"
-            self.report(
-                {"ERROR"},
-                f"{job.object_name}: the bake is in image {job.image_name!r}, but its file was not saved "
-                f"(any file already there is unchanged): {why}",
-            )
-        if written:
-            self.report({"INFO"}, f"{job.object_name}: saved {', '.join(written)} ({filewriter.writer_name()})")
-        if failures or not written:
-            return {}
-        f = files[0]
-        return {"ao": f.path, "stderr": f.stderr_path} if f.stderr_path else {"ao": f.path}
-
-    def _output_files(self):
-        """image name -> its OutputFile list, over all of this bake's jobs (distinct, safe names)."""
-        if getattr(self, "_files", None) is None:
-            self._files = outputs.output_files(  # the AO images' files, and the bent-normal images'
-                self.settings, self.output_dir, self.run.jobs,
-                [(self.settings.file_format, self.settings.file_bits)], stderr=self.settings.error_map,
-            )
-        return self._files
-
-    def _flush_live(self, context):
-        now = time.monotonic()
-        if not self.pending or now - self.last_flush < LIVE_UPDATE_INTERVAL:
-            return
-        for i in self.pending:
-            image = self._image(i)
-            buffer = self.buffers.get(i)
-            if buffer is not None and tuple(image.size) == (buffer.shape[1], buffer.shape[0]):
-                images.set_pixels(image, buffer)
-        self.pending.clear()
-        self.last_flush = now
-        _redraw(context)
 
     def _next_message(self):
         # A timeout, so that Ctrl-C (KeyboardInterrupt) gets through while nothing arrives.
@@ -595,7 +442,9 @@ class BakeSession:
             return self.ended
         self.run.stop()
         _SESSIONS.discard(self)
-        self._restore_unfinished()
+        # After an undo, an image the bake created is already gone (the undo went back to before
+        # it) and a datablock of that name is the undo's: only reused images are put back then.
+        self.store.restore_all(created=not self.interrupted)
         self.buffers.clear()
         self.pending.clear()
         try:
@@ -608,7 +457,12 @@ class BakeSession:
         total = len(self.run.jobs)
         if cancelled:
             kept = f"kept the finished bakes of {', '.join(done)}; the other images" if done else "the images"
-            self.report({"WARNING"}, f"AO bake cancelled{' ' + why if why else ''}; {kept} are as they were")
+            files = ""
+            if self.run.plan.folder is not None:  # each object's files are written together or not at all
+                saved = [o.object_name for o in self.run.outcomes.values() if o.baked and o.files]
+                files = (f"; every file of {', '.join(saved)} is written, none of the others'" if saved
+                         else "; no file was written")
+            self.report({"WARNING"}, f"AO bake cancelled{' ' + why if why else ''}; {kept} are as they were{files}")
             self.ended = {"CANCELLED"}
         else:
             if self.errors and total > 1:
@@ -624,7 +478,7 @@ class BakeSession:
         # Blender keeps the last registered operators, and with them this session, for its redo
         # and history: keep nothing heavy (the jobs' geometry, the images' old pixels) past the end.
         self.run = None
-        self.snapshots = {}
+        self.store = None
         self.results = []
         set_outcome(self.last_report)
         return self.ended

@@ -293,7 +293,7 @@ def draw_collections(layout, settings, name):
     for i, item in enumerate(items):
         row = col.row(align=True)
         row.prop(item, "collection", text=label if i == 0 else " ")
-        op = row.operator(MC_AO_OT_collection_remove.bl_idname, text="", icon="X")
+        op = row.operator(MC_AO_OT_collection_remove.bl_idname, text="", icon="REMOVE")
         op.setting, op.index = name, i
     row = col.row(align=True)
     row.use_property_split = False
@@ -333,7 +333,6 @@ class VIEW3D_PT_mc_ao_object(_McAoPanel, bpy.types.Panel):
 
     bl_label = "Object"
     bl_parent_id = "VIEW3D_PT_mc_ao"
-    bl_options = {"DEFAULT_CLOSED"}
 
     @classmethod
     def poll(cls, context):
@@ -341,10 +340,10 @@ class VIEW3D_PT_mc_ao_object(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         obj = context.active_object
-        layout = self.split_layout()
         if obj is None or getattr(obj, "mc_ao", None) is None:
             return
-        layout.prop(obj.mc_ao, "occlude_others")
+        # the whole row for the checkbox's name: in a split layout's half it is cut off
+        self.layout.prop(obj.mc_ao, "occlude_others")
 
 
 class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):

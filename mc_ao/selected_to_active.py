@@ -171,7 +171,7 @@ def plan(depsgraph, active, selected, settings, *, view_layer=None, max_bytes=No
                      f"scaled by {scale:.4g} (Cycles scales it per axis); apply the scale (Ctrl A) for the same "
                      "result as Cycles")
     occluders = []
-    if settings.occluders == "VISIBLE":  # Selected: the high-poly objects alone, as Object Alone
+    if settings.occluders == "VISIBLE" and settings.quantities == ("ao",):  # Selected: the high-poly objects alone, as Object Alone
         skip = {active.name, *(o.name for o in highs)} | ({cage.name} if cage is not None else set())
         occluders = [arrays for key, arrays in occluder_sets.pool(depsgraph, settings, view_layer=view_layer,
                                                                  notes=notes)

@@ -165,3 +165,22 @@ def test_a_bad_manifest_value_is_a_manifest_error_naming_the_entry(tmp_path):
     with pytest.raises(ManifestError, match=r"entry 1 \(a.blend\): objects: '-x' starts with '-'"):
         plan(manifest, tmp_path / "out")
 
+
+
+def test_the_batch_takes_the_scripts_parser_from_the_package():
+    """The batch imports mc_ao.cli for the script's options and checks; it loads no script by its path."""
+    import ast
+
+    from pathlib import Path
+
+    from mc_ao import cli as script
+    from mc_ao_batch import manifest
+
+    assert manifest.bake_script_module() is script
+    parser = manifest.bake_parser()
+    assert {a.dest for a in parser._actions} >= {a.dest for a in script.make_parser(with_blend=True)._actions}
+    for path in sorted((Path(__file__).resolve().parents[1] / "mc_ao_batch").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            name = node.attr if isinstance(node, ast.Attribute) else node.id if isinstance(node, ast.Name) else None
+            assert name not in {"spec_from_file_location", "SourceFileLoader", "run_path", "exec_module"}, \
+                f"{path.name} loads a module by its path ({name})"

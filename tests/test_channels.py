@@ -4,6 +4,7 @@ its format, sample types and attributes; a failed write leaves the old file; bad
 name before anything is written; and Blender's in-memory pixels are packed the same way."""
 
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -211,3 +212,43 @@ def test_pack_channel_refuses_what_does_not_fit():
         pack_channel(pixels, 0, np.zeros((H, W + 1)))
     with pytest.raises(ChannelError, match="does not fit"):
         pack_channel(np.zeros((H, W, 4), np.float32), 0, np.zeros((W, H * 2)))
+
+
+# -- the add-on's Channel and Into (mc_ao.outputs.channel), without Blender: Into is a file ------------
+
+def test_the_add_on_writes_the_map_into_a_copy_of_the_into_file(tmp_path):
+    from mc_ao import baking, service
+    from mc_ao.settings import BakeSettings
+    from test_maps import arrays, service_run, unwrapped_box
+
+    source = tmp_path / "orm.tif"
+    before = user_image(source, "uint16", 4)
+    old = source.read_bytes()
+    out = tmp_path / "out"
+    out.mkdir()
+    settings = BakeSettings(resolution=W, height=H, samples=8, margin=1, threads=1, processes=1, channel="G",
+                            into=str(source))
+    assert baking.channel_problem(settings, {}) is None
+    target = arrays(unwrapped_box(), "crate")
+    jobs = [baking.Job("crate", "crate_AO", target, [], quantity="ao")]
+    plan = service.plan(settings, jobs, str(out), [("PNG", 16)])
+    (outcome,) = service_run(plan)
+    assert outcome.status == "ok", outcome.error or outcome.trace
+    assert sorted(p.name for p in out.iterdir()) == ["crate_AO.png", "orm.tif"]
+    assert source.read_bytes() == old  # the Into file is an input: never written
+    after, spec = stored(out / "orm.tif")
+    assert after[:, :, [0, 2, 3]].tobytes() == before[:, :, [0, 2, 3]].tobytes()
+    ao = outcome.results[None].ao
+    assert np.array_equal(after[:, :, 1], np.rint(ao[::-1].astype(np.float64) * 65535).astype(np.uint16))
+    assert spec.get_string_attribute("Artist") == "someone else"
+    # UDIM tiles: refused before any work.
+    from core.errors import FileWriteError
+
+    with pytest.raises(FileWriteError, match="takes a plain image, not UDIM tiles"):
+        service.plan(replace(settings, use_udim=True), jobs, str(out), [("PNG", 16)])
+    # A channel the file does not have, or another size: refused before any work, naming the file.
+    bad = BakeSettings(resolution=W, height=H, channel="A", into=str(tmp_path / "rgb.png"))
+    user_image(tmp_path / "rgb.png", "uint8", 3)
+    assert "rgb.png' has no channel A" in baking.channel_problem(bad, {})
+    assert "is 37 x 23 pixels, not the 24 x 24" in baking.channel_problem(
+        BakeSettings(resolution=24, channel="R", into=str(source)), {})

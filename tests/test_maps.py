@@ -55,7 +55,7 @@ def check_maps(maps, singles, quantities=("ao", "thickness")):
     assert list(maps) == list(quantities)
     for q in quantities:
         same(maps[q], singles[q], q)
-        assert maps[q].metadata["quantities"] == list(quantities)
+        assert maps[q].metadata["quantities"] == ",".join(quantities)
         assert maps[q].metadata["quantity"] == q
         assert "quantities" not in singles[q].metadata
         # The processes' memory (report['worker_memory']) is measured, not computed: the rest is the same.
@@ -218,3 +218,70 @@ def test_bad_quantities_are_refused_by_name(kw, message):
         bake_vertex_maps(target, samples=4, **kw)
     with pytest.raises(SettingsError, match=message):
         bake_udim_maps(target, resolution=16, samples=4, **kw)
+
+
+# -- the add-on's run (mc_ao.bakerun, no Blender): the jobs of one object's quantities in one bake -------
+
+def arrays(mesh, name):
+    from mc_ao.extract import MeshArrays
+
+    return MeshArrays(name, mesh.positions, mesh.triangles.astype(np.int32),
+                      None if mesh.uvs is None else mesh.uvs.astype(np.float32),
+                      None if mesh.normals is None else mesh.normals.astype(np.float32))
+
+
+def service_run(plan):
+    from mc_ao import service
+
+    got = []
+
+    class Handler:
+        def on_outcome(self, outcome):
+            got.append(outcome)
+
+    bake = service.Bake(plan, threads=1)
+    bake.start()
+    try:
+        while not bake.handle(bake.next_message(), Handler()):
+            pass
+    finally:
+        bake.stop()
+    return got
+
+
+@pytest.mark.parametrize("extra", [dict(), dict(ground="AUTO", ignore_backfaces=True), dict(use_udim=True),
+                                   dict(target="VERTEX_COLORS")])
+def test_the_add_on_bakes_an_objects_ao_and_thickness_in_one_bake(monkeypatch, extra):
+    import core
+    from mc_ao import baking, service
+    from mc_ao.settings import BakeSettings
+
+    if extra.get("target"):
+        from core.vertices import all_corners
+
+        target = arrays(unwrapped_box(), "crate")
+        target.extra = {"corners": all_corners(unwrapped_box())}
+    else:
+        target = arrays(unwrapped_box(), "crate")
+    occ = [arrays(o, o.name) for o in occluders()]
+    settings = BakeSettings(resolution=24, samples=8, margin=1, threads=1, processes=1,
+                            quantity=("AO", "THICKNESS"), **extra)
+    jobs = [baking.Job("crate", "crate_AO", target, occ, quantity="ao"),
+            baking.Job("crate", "crate_Thickness", target, [], quantity="thickness")]
+    calls = {"maps": 0, "single": 0}
+    for name, key in (("bake_maps", "maps"), ("bake_udim_maps", "maps"), ("bake_vertex_maps", "maps"),
+                      ("bake_ao", "single"), ("bake_udim", "single"), ("bake_vertex_ao", "single")):
+        real = getattr(core, name)
+
+        def counted(*a, _real=real, _key=key, **k):
+            calls[_key] += 1
+            return _real(*a, **k)
+
+        monkeypatch.setattr(core, name, counted)
+    outcomes = service_run(service.plan(settings, jobs))
+    assert [o.status for o in outcomes] == ["ok", "ok"], [o.error or o.trace for o in outcomes]
+    assert calls == {"maps": 1, "single": 0}
+    monkeypatch.undo()
+    for job, outcome in zip(jobs, outcomes):
+        same(outcome.results[None], job.run(settings, threads=1), job.quantity)
+        assert outcome.results[None].metadata["quantities"] == "ao,thickness"

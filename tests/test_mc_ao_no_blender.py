@@ -158,17 +158,18 @@ def test_image_names_fit_blenders_limit_and_stay_apart(limit):
 
 
 def test_a_file_of_another_kind_is_not_written_over_at_write_time(tmp_path):
-    """Files found only after the bake (UDIM tiles) get the planning's check where they are written."""
-    import types
-
+    """Files found only after the bake (UDIM tiles) get the planning's check where they are written;
+    the object's other files are then not written either (all or none)."""
     pytest.importorskip("OpenImageIO")
-    result = types.SimpleNamespace(ao=np.full((2, 2), 0.5, np.float32), stderr=np.zeros((2, 2), np.float32),
-                                   metadata={})
+    from core.imageio import write_image
+    from mc_ao import outputs
+
+    pixels = np.full((2, 2), 0.5, np.float32)
     blend = tmp_path / "Ground_AO.1001.png"
     blend.write_bytes(b"BLENDER-v402 somebody's scene")
     fine = tmp_path / "Ground_AO.1002.png"
-    files = [filewriter.OutputFile(str(blend), "PNG", 8), filewriter.OutputFile(str(fine), "PNG", 8)]
-    written, failures = filewriter.write_outputs(result, files)
-    assert written == [str(fine)] and [p for p, _ in failures] == [str(blend)]
-    assert "is a .blend file, not a PNG image" in str(failures[0][1])
-    assert blend.read_bytes() == b"BLENDER-v402 somebody's scene"
+    writes = [outputs.FileWrite(str(p), lambda target: write_image(target, pixels, bits=8)) for p in (blend, fine)]
+    with pytest.raises(outputs.SaveError) as info:
+        outputs.save_files(writes)
+    assert info.value.path == str(blend) and "is a .blend file, not a PNG image" in str(info.value)
+    assert blend.read_bytes() == b"BLENDER-v402 somebody's scene" and not fine.exists()

@@ -169,12 +169,12 @@ def test_shutdown_ends_the_pool():
 
 def test_auto_workers_follow_cores_and_memory():
     assert W.auto_workers(10_000, cores=16, memory=64 << 30) == (16, 1)
-    # 10M triangles: each worker holds about 8.6 GB; 16 GB holds one copy, whose threads use every core.
+    # 10M triangles: each worker holds gigabytes; 16 GB holds a few copies, whose threads use every core.
     w, t = W.auto_workers(10_000_000, cores=16, memory=16 << 30)
     from core import cost
 
-    assert w * (cost.BYTES_PER_PROCESS + 10_000_000 * cost.BYTES_PER_TRIANGLE) \
-        <= 0.8 * (16 << 30) and w * t <= 16 and t >= 16 // max(w, 1)
+    assert w * cost.process_bytes(10_000_000) + cost.parent_bytes(10_000_000) \
+        <= 0.8 * (16 << 30) and w * t <= 16 and t >= 16 // max(w, 1) and w < 16
     assert W.auto_workers(10, cores=4, memory=None) == (4, 1)
 
 

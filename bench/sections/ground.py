@@ -75,7 +75,8 @@ def main(argv=None):
               "command": "python -m bench.sections.ground" + (" --quick" if args.quick else "")}
     if not args.no_save:
         RESULTS.mkdir(exist_ok=True)
-        (RESULTS / ("ground-quick.json" if args.quick else "ground.json")).write_text(json.dumps(record, indent=1) + "\n")
+        name = "ground-quick.json" if args.quick else "ground.json"
+        (RESULTS / name).write_text(json.dumps(record, indent=1) + "\n")
     return record
 
 

@@ -21,6 +21,8 @@ Cases (all core.bake_ao, 1 thread per worker):
   onto a 2-triangle plane 0.5 below it (extrusion 1, AO distance 0.5) at 256^2 x 16, on W workers;
   per high-poly triangle: each process's peak beyond its baseline (the parent's: beyond its input
   arrays);
+- ``occluder``: the same grid as an occluder 0.5 above that plane (AO distance 1), the plane's own
+  AO at 256^2 x 16 on W workers: per occluder triangle, as for the high-poly;
 - ``target``: an N-triangle displaced grid's own AO (UVs over [0, 1]^2, AO distance 0.5) at
   1024^2 x 16 on W workers: each worker's peak beyond its baseline and beyond its Embree scene
   (``embree`` case, scaled), per triangle;
@@ -154,6 +156,13 @@ def child(case, triangles, workers, res, spp):
         target = Mesh(lowp, tri, uvs=(lowp[tri][:, :, :2] + 2) / 4, name="low")
         high = Mesh(P, F, name="high")
         kwargs = dict(highpoly=[high], extrusion=1.0, max_distance=0.5)
+    elif case == "occluder":
+        P, F, _ = grid(grid_side(triangles), False)
+        inputs = [P, F]
+        lowp = np.array([[-2, -2, -0.5], [2, -2, -0.5], [2, 2, -0.5], [-2, 2, -0.5]], float)
+        tri = np.array([[0, 1, 2], [0, 2, 3]])
+        target = Mesh(lowp, tri, uvs=(lowp[tri][:, :, :2] + 2) / 4, name="low")
+        kwargs = dict(occluders=[Mesh(P, F, name="occluder")], max_distance=1.0)
     elif case == "target":
         P, F, UV = grid(grid_side(triangles), True)
         inputs = [P, F, UV]
@@ -226,7 +235,7 @@ def figures(rows):
             d["worker_peak_beyond_idle_per_triangle"] = beyond
             if r["case"] == "target" and per_tri_embree:
                 d["worker_peak_beyond_embree_per_triangle"] = [b - per_tri_embree for b in beyond]
-            if r["case"] == "highpoly" and per_tri_embree:
+            if r["case"] in ("highpoly", "occluder") and per_tri_embree:
                 d["embree_per_triangle"] = {"occlusion": per_tri_embree, "matching (robust)": per_tri_match}
             wm = r.get("worker_memory")
             if wm:
@@ -277,13 +286,13 @@ def main(argv=None):
     ap.add_argument("--big", action="store_true", help="also the 10M-triangle high-poly on 2 workers")
     ap.add_argument("--stem", default="memory")
     ap.add_argument("--triangles", type=int, default=2_000_000, help="the high-poly and target cases' size")
-    ap.add_argument("--cases", nargs="*", default=["embree", "highpoly1", "highpoly", "target", "large"])
+    ap.add_argument("--cases", nargs="*", default=["embree", "highpoly1", "highpoly", "occluder", "target", "large"])
     args = ap.parse_args(argv)
     started = time.strftime("%Y-%m-%d %H:%M")
     load_before = load_average()
     T = args.triangles
     plan = {"embree": ("embree", T, 1, 0, 0), "highpoly1": ("highpoly", T, 1, 256, 16),
-            "highpoly": ("highpoly", T, 2, 256, 16), "target": ("target", T, 2, 1024, 16),
+            "highpoly": ("highpoly", T, 2, 256, 16), "occluder": ("occluder", T, 2, 256, 16), "target": ("target", T, 2, 1024, 16),
             "large": ("large", 0, 2, 8192, 4)}
     rows = [run_case(*plan[c]) for c in args.cases]
     if args.big:

@@ -66,6 +66,11 @@ def scene(bpy, addon):
     """A clean scene with small, fast bake settings (24 x 24, 16 samples, margin 2, 2 threads)."""
     from blender_helpers import clean_scene
 
+    if bpy.data.filepath:
+        # An earlier test saved or opened a .blend file: start from an unsaved one, as each test
+        # expects (a relative output folder, for one, needs a saved file). The add-on's classes and
+        # its scene.mc_ao stay registered across the new file.
+        bpy.ops.wm.read_homefile(use_empty=True)
     scene = clean_scene(bpy)
     settings = scene.mc_ao
     settings.resolution = 24

@@ -326,7 +326,7 @@ def test_a_failed_file_write_keeps_the_bake_in_blender_and_the_old_file(bpy, sce
     assert reports[-1][0] == "WARNING" and reports[-1][1].startswith("Ground: 24x24 into 'Ground_AO' in ")
     assert reports[-1][1].endswith("; 1 error before this, in the Info editor")
     assert error == (
-        "Error: Ground: the bake is in image 'Ground_AO', but its file was not saved (any file already "
+        "Error: Ground: the bake is in image 'Ground_AO', but none of its files was written (any file already "
         f"there is unchanged): could not write '{path}': [Errno 28] No space left on device\n"
     )
     assert path.read_bytes() == old_file(path, "the previous bake's file")

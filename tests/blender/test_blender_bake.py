@@ -257,13 +257,13 @@ def test_errors_are_reported_with_the_object_name(bpy, scene, setting, value, me
 
 
 def test_a_cancelled_run_reports_cancelled(bpy, scene):
-    from mc_ao import baking, operators
+    from mc_ao import bakerun, baking, operators
     from mc_ao.settings import BakeSettings
 
     ground = add_plane(bpy, "Ground", size=4)
     settings = BakeSettings(resolution=16, samples=8)
     jobs = baking.plan(bpy.context.evaluated_depsgraph_get(), [ground], settings)
-    run = operators.BakeRun(jobs, settings, threads=1, live=True)
+    run = bakerun.BakeRun(jobs, settings, threads=1, live=True)
     run.cancel.set()
     run.start()
     run.stop()

@@ -71,8 +71,9 @@ def test_the_script_on_a_full_disk_exits_1_and_keeps_every_previous_file(blend, 
     proc = run_script(blend, "--objects", "Ground", "--output", disk, "--format", "png", "exr", "tif",
                       "--stderr", "--summary-json", summary, *NOISY)
     assert proc.returncode == 1, proc.stderr
-    errors = [f"bake_ao: Ground: could not write '{disk / name}': no space left on the device"
-              for name in ("Ground_AO.png", "Ground_AO.exr", "Ground_AO.tif")]
+    # The first file that cannot be written ends the object's save: none of its files is written.
+    errors = ["bake_ao: Ground: none of its files was written (any file already there is unchanged): "
+              f"could not write '{disk / 'Ground_AO.png'}': no space left on the device"]
     assert [line for line in proc.stderr.splitlines() if line.startswith("bake_ao: Ground:")] == errors
     assert "bake_ao: baked 0 of 1 objects, 1 failed" in proc.stdout
     assert "Traceback" not in proc.stderr
@@ -93,11 +94,12 @@ def test_the_script_does_not_replace_a_read_only_file(blend, tmp_path):
     proc = run_script(blend, "--objects", "Ground", "--output", out, "--format", "png", "exr", *NOISY)
     assert proc.returncode == 1
     assert (
-        f"bake_ao: Ground: '{out / 'Ground_AO.png'}' is read-only (its write permission is off): it was left "
+        "bake_ao: Ground: none of its files was written (any file already there is unchanged): "
+        f"'{out / 'Ground_AO.png'}' is read-only (its write permission is off): it was left "
         "as it is; make it writable, or choose another folder or name, to replace it\n"
     ) in proc.stderr
     assert (out / "Ground_AO.png").read_bytes() == old_file("x.png", "keep me")
-    assert listing(out) == ["Ground_AO.exr", "Ground_AO.png"]  # the other format is still written
+    assert listing(out) == ["Ground_AO.png"]  # nor its other format: an object's files are all or none
 
 
 def test_the_script_keeps_permission_bits(blend, tmp_path):
@@ -150,7 +152,7 @@ def test_the_operator_on_a_full_disk_reports_the_error_not_saved(bpy, scene, dis
     fill(disk, 2 * PAGE)
     result, error, out = bake_and_report(bpy, capfd)
     assert error == (
-        "Error: Ground: the bake is in image 'Ground_AO', but its file was not saved (any file already "
+        "Error: Ground: the bake is in image 'Ground_AO', but none of its files was written (any file already "
         f"there is unchanged): could not write '{disk / name}': no space left on the device\n"
     )
     # No line says the file was saved. Blender 4.2's own writer reports its failure too ("Image
@@ -174,7 +176,7 @@ def test_the_operator_does_not_replace_a_read_only_file(bpy, scene, tmp_path, ca
     path.chmod(0o444)
     result, error, _ = bake_and_report(bpy, capfd)
     assert error == (
-        "Error: Ground: the bake is in image 'Ground_AO', but its file was not saved (any file already "
+        "Error: Ground: the bake is in image 'Ground_AO', but none of its files was written (any file already "
         f"there is unchanged): '{path}' is read-only (its write permission is off): it was left as it is; "
         "make it writable, or choose another folder or name, to replace it\n"
     )

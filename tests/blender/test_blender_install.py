@@ -60,7 +60,7 @@ def test_own_zip_writer_matches_blenders_builder(bpy, tmp_path):
         assert sorted(a.namelist()) == sorted(b.namelist())
         assert a.read("blender_manifest.toml") == b.read("blender_manifest.toml")
         names = a.namelist()
-    assert "core/bake.py" in names and "mc_ao/operators.py" in names
+    assert "core/bake.py" in names and "mc_ao/operators.py" in names and "mc_ao/outputs/maps.py" in names
     assert_allow_list(names)
 
 

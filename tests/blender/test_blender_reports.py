@@ -260,28 +260,41 @@ def test_no_setting_label_is_cut_off_at_the_sidebars_default_width(bpy, scene):
     drawn = []
 
     class Recorder:
+        def __init__(self, split=False):
+            object.__setattr__(self, "is_split", split)  # labels left of the fields, a checkbox's name in the right half
+
         def __getattr__(self, name):
             if name == "prop":
-                return lambda data, prop, **kw: drawn.append((data, prop, kw))
+                return lambda data, prop, **kw: drawn.append((data, prop, kw, self.is_split))
             return lambda *a, **k: self
 
         def __setattr__(self, name, value):
             pass
 
     settings = scene.mc_ao
+    from blender_helpers import add_plane, select_only
+
+    select_only(bpy, add_plane(bpy, "Ground"))  # the Object sub-panel draws the active object's settings
     for target in ("IMAGE_TEXTURES", "VERTEX_COLORS"):
         settings.target = target
         for use_cage in (False, True):
             settings.use_cage = use_cage
             for cls in (getattr(panel, n) for n in dir(panel) if n.startswith("VIEW3D_PT_mc_ao")):
-                panel_self = types.SimpleNamespace(layout=Recorder(), split_layout=lambda: Recorder())
+                panel_self = types.SimpleNamespace(layout=Recorder(), split_layout=lambda: Recorder(split=True))
                 cls.draw(panel_self, bpy.context)
     label_room = panel.text_width("Noise Threshold", bpy.context)
     value_room = panel.text_width("Color Attributes", bpy.context)
-    for data, prop, kw in drawn:
+    check_room = panel.text_width("Link Image to File", bpy.context)
+    for data, prop, kw, split in drawn:
         rna = data.bl_rna.properties[prop]
-        if rna.type == "BOOLEAN" or kw.get("text") == "":
-            continue  # a checkbox's label has the whole row
+        if rna.type == "BOOLEAN" and kw.get("text") != "":
+            # a checkbox's name has the whole row, or in a split layout the right half: there the real
+            # Blender 4.3 showed "Link Image to File" whole and cut "Occludes Other Objects" off
+            if split:
+                assert panel.text_width(kw.get("text", rna.name), bpy.context) <= check_room, rna.name
+            continue
+        if kw.get("text") == "":
+            continue
         label = kw.get("text", rna.name)
         assert panel.text_width(label, bpy.context) <= label_room, label
         assert not kw.get("expand"), prop  # a row of buttons cuts every name in it

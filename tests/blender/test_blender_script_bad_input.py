@@ -163,14 +163,14 @@ import os, runpy, signal, sys
 signal.signal(signal.SIGINT, signal.default_int_handler)
 sys.path.insert(0, sys.argv[1])
 import core.imageio as imageio
-real = imageio.write_ao
-def write_ao(*args, **kwargs):
+real = imageio.write_image
+def write_image(*args, **kwargs):
     written = real(*args, **kwargs)
-    if not getattr(write_ao, "sent", False):
-        write_ao.sent = True
+    if not getattr(write_image, "sent", False):
+        write_image.sent = True
         os.kill(os.getpid(), signal.SIGINT)
     return written
-imageio.write_ao = write_ao
+imageio.write_image = write_image
 sys.argv = sys.argv[2:]
 runpy.run_path(sys.argv[0], run_name="__main__")
 """

@@ -39,7 +39,7 @@ def bumps(bpy, name, location=(0, 0, 0), size=2.2):
 @pytest.fixture(scope="module")
 def blends(bpy, tmp_path_factory):
     """pairs.blend: Chair_low/Chair_high and Table_low/Table_high side by side, Lamp_low alone, a box
-    over the chair, a cage of Chair_low, a Cage4 of another topology (both hidden); Chair_low active,
+    over the chair, a cage of Chair_low, a Cage4 of another topology (both hidden and not rendered); Chair_low active,
     Chair_high selected."""
     folder = tmp_path_factory.mktemp("s2a")
     clean_scene(bpy)
@@ -52,8 +52,9 @@ def blends(bpy, tmp_path_factory):
     add_plane(bpy, "Chair_cage", size=2, location=(0, 0, 0.3))
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=2, y_subdivisions=2, size=2, location=(0, 0, 0.3))
     bpy.context.active_object.name = "Cage4"
-    for name in ("Chair_cage", "Cage4"):  # hidden: visible, they would occlude as any object
+    for name in ("Chair_cage", "Cage4"):  # rendered, they would occlude as any object (as in Cycles' bake)
         bpy.context.view_layer.objects[name].hide_set(True)
+        bpy.context.view_layer.objects[name].hide_render = True
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj.name in ("Chair_low", "Chair_high"))
     bpy.context.view_layer.objects.active = chair

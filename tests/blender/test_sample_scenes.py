@@ -224,4 +224,6 @@ def test_suzanne_islands_do_not_overlap_at_1024(fresh):
     (job,) = baking.plan(depsgraph, [bpy.data.objects["Suzanne"]], settings)
     report = job.run(settings, threads=2).report
     assert report["covered_texels"] > 0.3 * 1024 ** 2
-    assert {key: count for key, count in report.items() if key != "covered_texels" and count} == {}
+    problems = {key: count for key, count in report.items()
+                if key not in ("covered_texels", "worker_memory") and count}
+    assert problems == {}

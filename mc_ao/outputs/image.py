@@ -1,0 +1,29 @@
+"""The AO image: "<object>_AO" (or the Image name setting's), its files, the summary line of its object."""
+
+from .. import baking
+from .maps import MapOutput
+
+
+class ImageOutput(MapOutput):
+    """The baked AO (or the bake's quantity) in the object's image, plain or tiled, and its files."""
+
+    name = "image"
+
+    @classmethod
+    def applies(cls, settings):
+        return not settings.vertex_colors
+
+    def summarise(self, job, results):
+        result = results[self.quantity]
+        per, rate = baking.throughput(result)
+        w, h = self.settings.size
+        if self.settings.use_udim:
+            tiles = sorted(result.tiles)
+            listed = ", ".join(map(str, tiles))
+            return (f"{job.object_name}: {len(tiles)} UDIM tile{'s' if len(tiles) != 1 else ''} ({listed}) of {w}x{h} "
+                    f"into {job.image_name!r} in {result.seconds:.2f} s, {per:.0f} samples per texel, "
+                    f"{rate:.2f} M rays/s")
+        h, w = result.ao.shape
+        sources = f" from {', '.join(s.name for s in job.highpoly)}" if getattr(job, "highpoly", None) else ""
+        return (f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r} in {result.seconds:.2f} s, "
+                f"{per:.0f} samples per texel, {rate:.2f} M rays/s{baking.miss_summary(result)}")
