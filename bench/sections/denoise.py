@@ -7,14 +7,19 @@ image, RTLightmap; each on the bake's image with its 16-texel margin) and compar
 reference of its own seed that no filter touched: RMSE over the covered texels, over island-border
 texels (covered texels with an uncovered 8-neighbour), and across UV seams (mean |difference| of the
 texel pairs the guide links, against the reference's own), plus the denoiser's z = error / reported
-error. Times: CPU seconds of this process; the cost check is the denoiser (guide + filter) against a
-64-sample bake at --cost-resolution, on the same cores.
+error. Times: CPU seconds of this process.
 
-Self-contained (core, numpy, pyoidn if installed):
+``--cycles``: the equal-error table against Cycles' AO bake (bpy) on the Suzanne scene, the room and
+dense.blend, in one run (:func:`cycles_equal_error`). ``--cost-resolution N``: what denoise=True adds
+to a 64-sample bake at N^2, and with ``--cost-against COMMIT`` that commit's core in the same run
+(:func:`cost`).
 
     .venv/bin/python -m bench.sections.denoise [--resolution 256] [--samples 16] [--reference-samples 1024]
-                                             [--cost-resolution 1024] [--json out.json] [--reference-cache DIR]
+                                             [--json out.json] [--reference-cache DIR]
                                              [--picture docs/denoise.png] [--equal-error]
+    .venv/bin/python -m bench.sections.denoise --cycles --resolution 512 --reference-samples 2048
+    .venv/bin/python -m bench.sections.denoise --resolution 0 --cost-resolution 4096 --cost-against COMMIT
+                                             --cost-repeats 2
 """
 
 import argparse
