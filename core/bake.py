@@ -718,8 +718,8 @@ def _finish(img, s, pro, s2a, extra, counters, fallback, denoise, t_start, quant
         raw_ao, raw_se = ao.copy(), se.copy()
         if s.margin > 0:
             dilate(raw_ao, mask, s.margin, threads=s.threads, out=raw_ao)
-        ao, se, info = _denoise.denoise(ao, se, mask, _denoise.surface_guide(pro.target, (w, h), texels=guide),
-                                        threads=s.threads)
+        guide = _denoise.surface_guide(pro.target, (w, h), texels=guide, tris=uvtris)
+        ao, se, info = _denoise.denoise(ao, se, mask, guide, threads=s.threads)
     if s.margin > 0:
         dilate(ao, mask, s.margin, threads=s.threads, out=ao)
     if bent is not None:

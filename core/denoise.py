@@ -43,9 +43,10 @@ one canvas at their UDIM places) and AO baked at face corners (:func:`denoise_ve
 points joined by the mesh's edges in place of an image window).
 
 Cost: one pass of the pilot, one of the candidates, one of the bias, each over half of the window's
-image offsets (the weights are symmetric), as numpy operations on bands of rows; no loop over
-texels. Measured (docs/denoise.md): 1.6-2.2 CPU seconds per megatexel with the guide, 30-45% of a
-64-sample bake.
+image offsets (the weights are symmetric), as numpy operations on bands of rows (the columns of
+each band that hold covered texels); no loop over texels. In a bake the guide comes from the bake's
+own tiles (:func:`tile_guide`). Measured (docs/denoise.md): 1.15 CPU seconds per megatexel for the
+filter, 30-38% of a 64-sample bake at 4096^2 with the guide.
 """
 
 import copy
@@ -331,12 +332,15 @@ def _components(n, a, b):
         label = new
 
 
-def _edges(mesh, valid):
+def _weld(mesh):
+    """Per vertex, one index per distinct position (meshes split at UV seams or sharp edges still
+    join there)."""
+    return np.unique(mesh.positions, axis=0, return_inverse=True)[1].reshape(-1)
+
+
+def _edges(mesh, valid, weld):
     """Edges of the valid triangles: (triangle, corner k (edge k -> k + 1), welded vertex pair
-    (lo, hi) and whether the edge runs lo -> hi). Vertices at the same position are welded (meshes
-    split at UV seams or sharp edges still join there)."""
-    _, weld = np.unique(mesh.positions, axis=0, return_inverse=True)
-    weld = weld.reshape(-1)
+    (lo, hi) and whether the edge runs lo -> hi), ``weld`` the vertices' welded indices."""
     tri = np.flatnonzero(valid)
     v = weld[mesh.triangles[tri]]
     t = np.repeat(tri, 3)
@@ -345,31 +349,36 @@ def _edges(mesh, valid):
     return t, k, np.minimum(va, vb), np.maximum(va, vb), va < vb
 
 
-def _islands_and_seams(mesh, valid):
+def _islands_and_seams(mesh, valid, weld):
     """(island of every triangle (T,), -1 for invalid ones; seam pairs (s, 4): triangle A, its edge
     corner, triangle B, its edge corner, for edges shared in 3D by exactly two triangles whose UVs
     differ along them)."""
     T = len(mesh.triangles)
-    t, k, lo, hi, forward = _edges(mesh, valid)
+    t, k, lo, hi, forward = _edges(mesh, valid, weld)
     uv = mesh.uvs
     ua, ub = uv[t, k], uv[t, (k + 1) % 3]
     ulo = np.where(forward[:, None], ua, ub)
     uhi = np.where(forward[:, None], ub, ua)
-    # Group by the 3D edge, then by its UVs.
-    order = np.lexsort((uhi[:, 1], uhi[:, 0], ulo[:, 1], ulo[:, 0], hi, lo))
-    t, k, lo, hi = t[order], k[order], lo[order], hi[order]
-    ulo, uhi = ulo[order], uhi[order]
-    same3d = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1])
+    # Group by the 3D edge (one integer key), then, within the groups of more than two (non-manifold
+    # edges: rare), by the edge's UVs; a group of two needs no order to compare its UVs.
+    key = lo.astype(np.int64) * (int(weld.max()) + 1 if len(weld) else 1) + hi
+    order = np.argsort(key, kind="stable")
+    t, k, key, ulo, uhi = t[order], k[order], key[order], ulo[order], uhi[order]
+    same3d = key[1:] == key[:-1]
+    start = np.ones(len(t), bool)
+    start[1:] = ~same3d
+    gid = np.cumsum(start) - 1
+    size = np.bincount(gid)
+    big = np.flatnonzero(size[gid] > 2)
+    if len(big):
+        perm = big[np.lexsort((uhi[big, 1], uhi[big, 0], ulo[big, 1], ulo[big, 0], key[big]))]
+        t[big], k[big], ulo[big], uhi[big] = t[perm], k[perm], ulo[perm], uhi[perm]
     sameuv = same3d & (ulo[1:] == ulo[:-1]).all(axis=1) & (uhi[1:] == uhi[:-1]).all(axis=1)
     label = _components(T, t[:-1][sameuv], t[1:][sameuv])
     _, island = np.unique(label, return_inverse=True)
     island = island.reshape(-1).astype(np.int32)
     island[~valid] = -1
     # Edges shared in 3D by exactly two triangles with different UVs: seams.
-    start = np.ones(len(t), bool)
-    start[1:] = ~same3d
-    gid = np.cumsum(start) - 1
-    size = np.bincount(gid)
     two = size[gid] == 2
     first = start & two
     i = np.flatnonzero(first)
@@ -380,14 +389,13 @@ def _islands_and_seams(mesh, valid):
     return island, pairs
 
 
-def _seam_maps(xy, mesh, pairs):
+def _seam_maps(xy, mesh, pairs, weld):
     """For every seam pair, both directions (host, other): the similarity of texel space that takes
     the host's chart to the other's across the shared edge, unfolded so that the host's interior
     maps away from the other's. Returns a dict of (n,) arrays: host, other triangles; h0, h1 (n, 2)
     the edge in the host chart; hc (n, 2) the host's third corner; the map z -> o0 + q (z - h0) or,
     where ``mirror`` (the charts have opposite orientations), o0 + q conj(z - h0) (complex numbers).
     Edges shared by more than two triangles are no seams here (non-manifold: no unfolding)."""
-    weld = np.unique(mesh.positions, axis=0, return_inverse=True)[1].reshape(-1)
     tA, kA, tB, kB = pairs.T
     host = np.concatenate([tA, tB])
     hk = np.concatenate([kA, kB])
@@ -419,7 +427,7 @@ def _apply_map(m, idx, px, py):
     return w.real, w.imag
 
 
-def surface_guide(mesh, resolution, radius=RADIUS, texels=None, threads=1):
+def surface_guide(mesh, resolution, radius=RADIUS, texels=None, threads=1, tris=None):
     """Where every texel of a ``resolution`` map of ``mesh``'s UVs lies on the surface, and its
     neighbours across UV seams.
 
@@ -432,6 +440,7 @@ def surface_guide(mesh, resolution, radius=RADIUS, texels=None, threads=1):
         (triangle (H * W,) int32, -1 where not covered; position, normal (H * W, 3) float32), used
         (not copied) instead of finding every texel's triangle again. The same guide, bit for bit.
     threads : tiles rasterised at the same time (the result does not depend on it).
+    tris : the bake's :func:`core.raster.prepare` of ``mesh`` at this resolution, if it has it.
 
     Returns
     -------
@@ -440,11 +449,12 @@ def surface_guide(mesh, resolution, radius=RADIUS, texels=None, threads=1):
     if mesh.uvs is None:
         raise MeshError(f"mesh {mesh.name!r} has no UVs: the denoiser's guide needs the UV map the bake used")
     w, h = _resolution(resolution)
-    tris = prepare(mesh, w, h)
+    tris = prepare(mesh, w, h) if tris is None else tris
     xy = tris.corners
     valid = tris.valid
     ids = np.flatnonzero(valid)
-    island_t, pairs = _islands_and_seams(mesh, valid)
+    weld = _weld(mesh)
+    island_t, pairs = _islands_and_seams(mesh, valid, weld)
     # World length of a texel per triangle: sqrt(area in space / area in texels).
     det = np.abs((xy[:, 1, 0] - xy[:, 0, 0]) * (xy[:, 2, 1] - xy[:, 0, 1])
                  - (xy[:, 1, 1] - xy[:, 0, 1]) * (xy[:, 2, 0] - xy[:, 0, 0]))
@@ -458,7 +468,7 @@ def surface_guide(mesh, resolution, radius=RADIUS, texels=None, threads=1):
     # Per texel from its triangle (-1 reads the appended entry: 0 scale, no island).
     scale = np.append(tscale, np.float32(0))[triangle]
     island = np.append(island_t, np.int32(-1))[triangle]
-    halo, links = _halo(xy, mesh, pairs, island_t, island, w, h, radius)
+    halo, links = _halo(xy, mesh, pairs, island_t, island, w, h, radius, weld)
     return SurfaceGuide(width=w, height=h, covered=covered.reshape(h, w), triangle=triangle.reshape(h, w),
                         position=position.reshape(h, w, 3), normal=normal.reshape(h, w, 3),
                         scale=scale.reshape(h, w), island=island.reshape(h, w),
@@ -499,11 +509,11 @@ def _near_segments(h0, h1, lo, hi, radius):
     return seg[part], col, row[part]
 
 
-def _halo(xy, mesh, pairs, island_t, island, w, h, radius):
+def _halo(xy, mesh, pairs, island_t, island, w, h, radius, weld):
     empty = np.zeros(0, np.int64)
     if len(pairs) == 0:
         return (empty.astype(np.int32), empty, empty, empty), np.zeros((0, 2), np.int64)
-    m = _seam_maps(xy, mesh, pairs)
+    m = _seam_maps(xy, mesh, pairs, weld)
     h0, h1 = m["h0"], m["h1"]
     seg = np.stack([h0, h1, m["hc"]], axis=1)  # enumerate texels near each host edge via its bbox
     # Halo texels may lie beyond the image (an island on its border has neighbours there too).
@@ -665,19 +675,21 @@ def _halo_pairs(guide, mask, r, F):
     order within one): (receiver flat index, source flat index, squared distance, cosine, Chebyshev
     length of the offset)."""
     h, w = guide.height, guide.width
-    isl = np.where(mask, guide.island, -1).reshape(-1)
     keep = mask.reshape(-1)[guide.halo_source]
     ty, tx = guide.halo_row[keep], guide.halo_col[keep]
     hisl, hsrc = guide.halo_island[keep], guide.halo_source[keep]
+    # The islands padded by 2 r (-1 beyond the image): halo texels lie up to r beyond it, their
+    # receivers up to r further, and every lookup stays inside without a bounds test.
+    p = 2 * r
+    wp = w + 2 * p
+    isl = np.pad(np.where(mask, guide.island, -1).astype(np.int32), p, constant_values=-1).reshape(-1)
+    at = (ty + p) * wp + (tx + p)
     recs, srcs, lens = [], [], []
     for dy, dx in _offsets(r):
-        ry, rx = ty - dy, tx - dx
-        ok = (ry >= 0) & (ry < h) & (rx >= 0) & (rx < w)
-        rec = np.where(ok, ry * w + rx, 0)
-        ok &= isl[rec] == hisl
-        recs.append(rec[ok])
+        ok = np.flatnonzero(isl[at - (dy * wp + dx)] == hisl)
+        recs.append((ty[ok] - dy) * w + (tx[ok] - dx))
         srcs.append(hsrc[ok])
-        lens.append(np.full(int(ok.sum()), max(abs(dy), abs(dx)), np.int8))
+        lens.append(np.full(len(ok), max(abs(dy), abs(dx)), np.int8))
     rec, src, cheb = np.concatenate(recs), np.concatenate(srcs), np.concatenate(lens)
     order = np.argsort(rec, kind="stable")
     rec, src, cheb = rec[order], src[order], cheb[order]

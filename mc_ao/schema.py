@@ -229,8 +229,8 @@ SETTINGS = (
             lo=0, hi=MAX_THREADS, zero="from the cores and the memory", ui={"soft_max": 64}),
     Setting("denoise", "bool", False, "Denoise",
             "Filter the baked AO over the surface, across UV seams, each texel weighed by its own error: much "
-            "less noise at few samples (16 denoised samples beat 128 raw ones on the bench), for a third to "
-            "half of a 64-sample bake's time more; the error map then shows the denoised map's error",
+            "less noise at few samples (16 denoised samples beat 128 raw ones on the bench), for about a "
+            "third of a 64-sample bake's time more; the error map then shows the denoised map's error",
             targets=("image", "udim", "vertex")),
     Setting("ignore_backfaces", "bool", False, "Ignore Backfaces", "Rays that hit the back of a face pass through it"),
     Setting("target", "enum", "IMAGE_TEXTURES", "Target", "Where the AO goes", items=(

@@ -236,7 +236,10 @@ class Bake:
 
     def _store_all(self, i, outcome):
         """The kinds that store into Blender, stored; None when one failed (the outcome then says
-        why, and the images of the object are put back)."""
+        why, and the images of the object are put back). Without a Blender store (the service run
+        outside Blender) nothing is stored and bpy is not imported."""
+        if self.store is None:
+            return []
         from . import images
 
         job, settings, stored = outcome.job, self.plan.settings, []

@@ -97,9 +97,9 @@ def test_the_guide_the_bake_builds_from_its_tiles_is_the_one_computed_from_the_m
     seen = []
     compute = D.surface_guide
 
-    def record(m, resolution, radius=D.RADIUS, texels=None, threads=1):
+    def record(m, resolution, radius=D.RADIUS, texels=None, threads=1, tris=None):
         seen.append((m, texels))
-        return compute(m, resolution, radius, texels=texels)
+        return compute(m, resolution, radius, texels=texels, tris=tris)
 
     monkeypatch.setattr(D, "surface_guide", record)
     r = bake_ao(mesh, resolution=res, samples=2, seed=1, threads=2, tile_size=16, denoise=True)

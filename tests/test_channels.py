@@ -4,6 +4,7 @@ its format, sample types and attributes; a failed write leaves the old file; bad
 name before anything is written; and Blender's in-memory pixels are packed the same way."""
 
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -240,6 +241,11 @@ def test_the_add_on_writes_the_map_into_a_copy_of_the_into_file(tmp_path):
     ao = outcome.results[None].ao
     assert np.array_equal(after[:, :, 1], np.rint(ao[::-1].astype(np.float64) * 65535).astype(np.uint16))
     assert spec.get_string_attribute("Artist") == "someone else"
+    # UDIM tiles: refused before any work.
+    from core.errors import FileWriteError
+
+    with pytest.raises(FileWriteError, match="takes a plain image, not UDIM tiles"):
+        service.plan(replace(settings, use_udim=True), jobs, str(out), [("PNG", 16)])
     # A channel the file does not have, or another size: refused before any work, naming the file.
     bad = BakeSettings(resolution=W, height=H, channel="A", into=str(tmp_path / "rgb.png"))
     user_image(tmp_path / "rgb.png", "uint8", 3)

@@ -7,14 +7,19 @@ image, RTLightmap; each on the bake's image with its 16-texel margin) and compar
 reference of its own seed that no filter touched: RMSE over the covered texels, over island-border
 texels (covered texels with an uncovered 8-neighbour), and across UV seams (mean |difference| of the
 texel pairs the guide links, against the reference's own), plus the denoiser's z = error / reported
-error. Times: CPU seconds of this process; the cost check is the denoiser (guide + filter) against a
-64-sample bake at --cost-resolution, on the same cores.
+error. Times: CPU seconds of this process.
 
-Self-contained (core, numpy, pyoidn if installed):
+``--cycles``: the equal-error table against Cycles' AO bake (bpy) on the Suzanne scene, the room and
+dense.blend, in one run (:func:`cycles_equal_error`). ``--cost-resolution N``: what denoise=True adds
+to a 64-sample bake at N^2, and with ``--cost-against COMMIT`` that commit's core in the same run
+(:func:`cost`).
 
     .venv/bin/python -m bench.sections.denoise [--resolution 256] [--samples 16] [--reference-samples 1024]
-                                             [--cost-resolution 1024] [--json out.json] [--reference-cache DIR]
+                                             [--json out.json] [--reference-cache DIR]
                                              [--picture docs/denoise.png] [--equal-error]
+    .venv/bin/python -m bench.sections.denoise --cycles --resolution 512 --reference-samples 2048
+    .venv/bin/python -m bench.sections.denoise --resolution 0 --cost-resolution 4096 --cost-against COMMIT
+                                             --cost-repeats 2
 """
 
 import argparse
@@ -171,19 +176,97 @@ def compare(res, samples, ref_samples, seed=1, threads=2, cache=None, picture_pa
             "guide_cpu": tg.cpu, "denoise_cpu": td.cpu, "bake_cpu": tb.cpu, "oidn": version, "rows": rows}
 
 
-def cost(res, threads=2):
-    """CPU seconds of the denoiser (guide + filter) against a 64-sample bake of the same map."""
-    target, occ, dist = load_scene()
-    with Clock() as tb:
-        raw = bake_ao(target, occ, resolution=res, samples=64, max_distance=dist, seed=3, threads=threads)
-    with Clock() as tg:
-        guide = D.surface_guide(target, res)
-    with Clock() as td:
-        D.denoise(raw.ao, raw.stderr, raw.mask, guide)
+#: What one cost measurement runs, in a process of its own whose ``core`` is the tree measured (this
+#: one, or an earlier commit's, unpacked): a 64-sample bake, the same bake with denoise=True, and the
+#: guide and the filter on their own (surface_guide from the mesh, then denoise of the plain bake).
+#: Prints one JSON line of CPU seconds (process time: every thread, steadier than wall time on a
+#: shared machine).
+_COST_RUN = r"""
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+import numpy as np
+from core import Mesh, bake_ao
+from core import denoise as D
+z = np.load(sys.argv[2])
+target = Mesh(z["P"], z["F"], z["UV"], z["N"], name="Suzanne")
+occ = [Mesh(z[f"O{i}P"], z[f"O{i}F"], name=f"occluder{i}") for i in range(int(z["occluders"]))]
+res, threads, dist = int(sys.argv[3]), int(sys.argv[4]), float(z["distance"])
+out = {}
+def clock(name, f):
+    c, w = time.process_time(), time.perf_counter()
+    r = f()
+    out[name + "_cpu"], out[name + "_wall"] = time.process_time() - c, time.perf_counter() - w
+    return r
+bake = lambda dn: bake_ao(target, occ, resolution=res, samples=64, max_distance=dist, seed=3, threads=threads,
+                          denoise=dn)
+raw = clock("bake64", lambda: bake(False))
+clock("bake64_denoise", lambda: bake(True))
+guide = clock("guide", lambda: D.surface_guide(target, res))
+clock("filter", lambda: D.denoise(raw.ao, raw.stderr, raw.mask, guide, threads=threads))
+print(json.dumps(out))
+"""
+
+
+def _tree(commit, into):
+    """``core`` of ``commit`` unpacked into the folder ``into`` (git archive); returns the folder."""
+    import io
+    import subprocess
+    import tarfile
+
+    data = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "core"], check=True,
+                          capture_output=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(data)) as t:
+        t.extractall(into)
+    return into
+
+
+def cost(res, threads=2, against=None, repeats=1):
+    """CPU seconds of the denoiser against a 64-sample bake of the same map, on the same cores: the
+    bake with denoise=True less the plain bake (what denoising adds to a bake), and the guide and
+    filter alone. With ``against`` (a commit), that commit's core is measured in the same run, the
+    two alternating ``repeats`` times; the least of the repeats counts (the others measure the
+    machine's other work), every repeat kept."""
+    import subprocess
+    import tempfile
+
+    trees = [("this tree", str(ROOT))]
+    tmp = None
+    if against:
+        tmp = tempfile.TemporaryDirectory()
+        trees.insert(0, (against, _tree(against, tmp.name)))
+    runs = {name: [] for name, _ in trees}
+    try:
+        for _ in range(repeats):
+            for name, root in trees:
+                p = subprocess.run([sys.executable, "-c", _COST_RUN, root, str(SCENE), str(res), str(threads)],
+                                   check=True, capture_output=True, text=True)
+                runs[name].append(json.loads(p.stdout.strip().splitlines()[-1]))
+                print(f"  cost {res}^2, {name}: {runs[name][-1]}", flush=True)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
     mt = res * res / 1e6
-    return {"resolution": res, "bake64_cpu": tb.cpu, "bake64_wall": tb.wall, "guide_cpu": tg.cpu,
-            "denoise_cpu": td.cpu, "denoise_wall": td.wall, "ratio_cpu": (tg.cpu + td.cpu) / tb.cpu,
-            "cpu_per_megatexel": (tg.cpu + td.cpu) / mt}
+    out = {"resolution": res, "threads": threads, "samples": 64, "repeats": repeats, "versions": {}}
+    for name, rs in runs.items():
+        best = {k: min(r[k] for r in rs) for k in rs[0]}
+        added = best["bake64_denoise_cpu"] - best["bake64_cpu"]
+        out["versions"][name] = dict(
+            best, runs=rs, added_cpu=added, ratio_cpu=added / best["bake64_cpu"],
+            ratio_parts_cpu=(best["guide_cpu"] + best["filter_cpu"]) / best["bake64_cpu"],
+            cpu_per_megatexel=added / mt, filter_cpu_per_megatexel=best["filter_cpu"] / mt)
+    return out
+
+
+def cost_table(c):
+    lines = [f"Cost at {c['resolution']}^2 (Suzanne, {c['threads']} threads, 64 samples; CPU s, least of "
+             f"{c['repeats']} runs):", "",
+             "| core | 64-sample bake | with denoise=True | added | added / bake | guide alone | filter alone | "
+             "added per megatexel |", "|---|---|---|---|---|---|---|---|"]
+    for name, v in c["versions"].items():
+        lines.append(f"| {name} | {v['bake64_cpu']:.1f} | {v['bake64_denoise_cpu']:.1f} | {v['added_cpu']:.1f} | "
+                     f"{100 * v['ratio_cpu']:.0f}% | {v['guide_cpu']:.1f} | {v['filter_cpu']:.1f} | "
+                     f"{v['cpu_per_megatexel']:.2f} |")
+    return "\n".join(lines)
 
 
 def equal_error(res, ref_samples, seed=1, threads=2, cache=None, raw_samples=(32, 64, 128, 256),
@@ -228,6 +311,167 @@ def equal_error(res, ref_samples, seed=1, threads=2, cache=None, raw_samples=(32
             "ratio": (t_dn / t_raw) if t_raw and t_dn else None}
 
 
+# --- equal error against Cycles, in one run ---------------------------------------------------------
+
+#: The scenes of the equal-error table: (name, how to open it in bpy, target object, AO distance).
+CYCLES_SCENES = ("suzanne", "room", "dense")
+
+
+def _open_scene(bpy, name):
+    """Open ``name`` in bpy: (the target object, its core.Mesh, the occluders' core.Meshes, AO distance).
+    suzanne: the bench's scene (bench.harness.scene); room: sample_scenes/room.blend (walls, distance
+    1); dense: sample_scenes/dense.blend (524k-triangle terrain, distance 1)."""
+    from bench.harness import scene as S
+
+    if name == "suzanne":
+        S.reset_blender(bpy)
+        objs = S.build_scene(bpy)
+        obj, target_name, dist = objs["Suzanne"], "Suzanne", S.DISTANCE
+    else:
+        blend, target_name = {"room": ("room.blend", "Room"), "dense": ("dense.blend", "Terrain")}[name]
+        bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / blend), load_ui=False)
+        dist = 1.0
+        if bpy.context.scene.world is None:
+            bpy.context.scene.world = bpy.data.worlds.new("World")
+        bpy.context.scene.world.light_settings.distance = dist
+        obj = bpy.data.objects[target_name]
+    ta, oa = S.scene_arrays(bpy, target_name)
+    target, occ = S.core_meshes(ta, oa)
+    return obj, target, occ, dist
+
+
+def _series_time(pts, goal, key):
+    """The ``key`` time at which a series [(samples, rmse, {times})] reaches ``goal`` RMSE (log-log
+    interpolation between the counts that bracket it; None if it does not)."""
+    from bench.harness.common import interp_time_at
+
+    return interp_time_at([p[key] for p in pts], [p["rmse"] for p in pts], goal)
+
+
+def cycles_equal_error(res=512, ref_samples=2048, threads=2, cache=None, scenes=CYCLES_SCENES,
+                       cycles_samples=(32, 64, 128, 256), raw_samples=(16, 32, 64, 128, 256),
+                       dn_samples=(8, 16, 32, 64), seed=1, picture_path=None):
+    """Per scene, in one run: Cycles' AO bake at ``cycles_samples``, mc_ao raw and denoised, and Open
+    Image Denoise (RT, RTLightmap) on mc_ao's noisy bakes, each against an mc_ao reference of
+    ``ref_samples`` that no filter touched. The time to reach Cycles 128's RMSE (over interior texels:
+    covered by both bakers with every 8-neighbour too, as bench.sections.equal measures) for each,
+    over Cycles 128's time; CPU seconds of this process (Cycles bakes in it too) and wall seconds.
+    Raw bakes take one replicate (the add-on's bake without an error map, lowest noise); denoised
+    ones two (the filter needs the error). OIDN sees the same noisy bake as the denoiser, dilated 16
+    texels (without a margin it darkens borders); its time is the bake's plus its own."""
+    import bpy
+
+    from bench.comparators import cycles
+    from bench.harness.common import erode
+    from core.margin import dilate
+
+    filters, version = oidn_filters()
+    filters = {k: v for k, v in filters.items() if k in ("OIDN RT", "OIDN RTLightmap")}
+    out = {"resolution": res, "reference_samples": ref_samples, "threads": threads, "oidn": version, "scenes": {}}
+    for name in scenes:
+        obj, target, occ, dist = _open_scene(bpy, name)
+        path = None if cache is None else Path(cache) / f"denoise_cycles_ref_{name}_{res}_{ref_samples}.npz"
+        if path is not None and path.exists():
+            ref = _Ref(np.load(path))
+        else:
+            ref = bake_ao(target, occ, resolution=res, samples=ref_samples, max_distance=dist, seed=10_000 + seed,
+                          threads=threads, margin=0)
+            if path is not None:
+                np.savez(path, ao=ref.ao, stderr=ref.stderr, mask=ref.mask)
+        cycles.bake(bpy, obj, 32, 32, 1, threads)  # warm up (kernels, BVH) outside the measurements
+        cyc = {}
+        for n in cycles_samples:
+            ao, wall = cycles.bake(bpy, obj, res, res, n, threads, seed=11, margin=0, sentinel=-1.0)
+            cyc[n] = (ao, wall, cycles.LAST["cpu"])
+        cmask = cyc[cycles_samples[0]][0] >= 0
+        maps = {}
+        for n in raw_samples:
+            with Clock() as t:
+                r = bake_ao(target, occ, resolution=res, samples=n, max_distance=dist, seed=seed + n, threads=threads,
+                            margin=0, replicates=1)
+            maps[("raw", n)] = (r.ao, t.wall, t.cpu)
+        guide = None
+        for n in dn_samples:
+            with Clock() as t:
+                r = bake_ao(target, occ, resolution=res, samples=n, max_distance=dist, seed=seed + 100 + n,
+                            threads=threads, margin=0, denoise=True)
+            maps[("denoised", n)] = (r.ao, t.wall, t.cpu)
+            # The same noisy bake for OIDN: its time is the bake's without the filter (measured: the
+            # raw bake's share, from the bake with denoise off at this count).
+            with Clock() as tb:
+                bake_ao(target, occ, resolution=res, samples=n, max_distance=dist, seed=seed + 100 + n,
+                        threads=threads, margin=0)
+            padded = r.raw_ao.copy()
+            dilate(padded, r.mask, 16, out=padded)
+            for fname, f in filters.items():
+                with Clock() as tf:
+                    img = f(padded, None)
+                maps[(fname, n)] = (img, tb.wall + tf.wall, tb.cpu + tf.cpu)
+            if n == 16:
+                maps[("raw replicates 2", n)] = (r.raw_ao, tb.wall, tb.cpu)
+        mask = ref.mask & cmask
+        inner = erode(mask)
+        edge = border(ref.mask) & mask
+        if guide is None:
+            guide = D.surface_guide(target, res)
+        a, b = guide.links[:, 0], guide.links[:, 1]
+        keep = mask.reshape(-1)[a] & mask.reshape(-1)[b]
+        a, b = a[keep], b[keep]
+
+        def metrics(img):
+            f = np.asarray(img, np.float64).reshape(-1)
+            e = np.asarray(img, np.float64) - ref.ao
+            return {"rmse": float(np.sqrt(np.mean(e[inner] ** 2))), "rmse_common": float(np.sqrt(np.mean(e[mask] ** 2))),
+                    "border_rmse": float(np.sqrt(np.mean(e[edge] ** 2))),
+                    "seam_mean_abs_diff": float(np.mean(np.abs(f[a] - f[b]))) if len(a) else None}
+
+        rows = []
+        for n, (ao, wall, cpu) in cyc.items():
+            rows.append(dict(metrics(ao), kind="Cycles", samples=n, wall=wall, cpu=cpu))
+        for (kind, n), (ao, wall, cpu) in maps.items():
+            rows.append(dict(metrics(ao), kind=kind, samples=n, wall=wall, cpu=cpu))
+        goal_row = next(x for x in rows if x["kind"] == "Cycles" and x["samples"] == 128)
+        goal = goal_row["rmse"]
+        matched = {}
+        for kind in ["raw", "denoised"] + list(filters):
+            pts = [x for x in rows if x["kind"] == kind]
+            t_cpu, t_wall = _series_time(pts, goal, "cpu"), _series_time(pts, goal, "wall")
+            matched[kind] = {"cpu": t_cpu, "wall": t_wall,
+                             "ratio_cpu": None if t_cpu is None else t_cpu / goal_row["cpu"],
+                             "ratio_wall": None if t_wall is None else t_wall / goal_row["wall"]}
+        r = ref.ao.reshape(-1)
+        out["scenes"][name] = {
+            "triangles": int(target.triangle_count), "distance": dist, "texels_interior": int(inner.sum()),
+            "texels_common": int(mask.sum()), "texels_border": int(edge.sum()), "seam_pairs": int(len(a)),
+            "seam_reference": float(np.mean(np.abs(r[a] - r[b]))) if len(a) else None,
+            "reference_rmse_floor": float(np.sqrt(np.mean(ref.stderr[inner].astype(np.float64) ** 2))),
+            "goal_rmse": goal, "cycles128_cpu": goal_row["cpu"], "cycles128_wall": goal_row["wall"],
+            "rows": rows, "matched": matched}
+        if picture_path is not None and name == "suzanne":
+            pick = [maps[("raw replicates 2", 16)][0], maps[("denoised", 16)][0]]
+            if ("OIDN RTLightmap", 16) in maps:
+                pick.append(maps[("OIDN RTLightmap", 16)][0])
+            picture(picture_path, pick + [ref.ao], ref.ao, ref.mask)
+        print(cycles_table(name, out["scenes"][name]), flush=True)
+    return out
+
+
+def cycles_table(name, c):
+    fmt = lambda v, f="{:.3f}": "-" if v is None else f.format(v)  # noqa: E731
+    lines = [f"\n{name}: {c['texels_interior']} interior texels ({c['texels_border']} border, {c['seam_pairs']} seam "
+             f"pairs, reference seam |diff| {fmt(c['seam_reference'], '{:.4f}')}); reference RMSE floor "
+             f"{c['reference_rmse_floor']:.4f}; Cycles 128: RMSE {c['goal_rmse']:.4f}, {c['cycles128_cpu']:.1f} CPU s",
+             "", "| map | samples | RMSE (interior) | all | border | seams | CPU s | wall s |",
+             "|---|---|---|---|---|---|---|---|"]
+    for x in c["rows"]:
+        lines.append(f"| {x['kind']} | {x['samples']} | {x['rmse']:.4f} | {x['rmse_common']:.4f} | "
+                     f"{x['border_rmse']:.4f} | {fmt(x['seam_mean_abs_diff'], '{:.4f}')} | {x['cpu']:.2f} | "
+                     f"{x['wall']:.2f} |")
+    lines += ["", "Time to Cycles 128's RMSE, over Cycles 128's (CPU, wall): " + "; ".join(
+        f"{k} {fmt(v['ratio_cpu'])}x, {fmt(v['ratio_wall'])}x" for k, v in c["matched"].items())]
+    return "\n".join(lines)
+
+
 def table(c):
     lines = [f"Suzanne scene {c['resolution']}^2, {c['covered']} covered texels ({c['border_texels']} on island "
              f"borders, {c['seam_pairs']} texel pairs across UV seams); reference {c['reference_samples']} samples "
@@ -253,23 +497,28 @@ def main(argv=None):
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--reference-samples", type=int, default=1024)
     ap.add_argument("--cost-resolution", type=int, default=0, help="also measure the cost at this size (0: skip)")
+    ap.add_argument("--cost-against", default=None, help="a commit whose core's cost is measured in the same run")
+    ap.add_argument("--cost-repeats", type=int, default=1)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--reference-cache", type=Path, default=None, help="folder to keep the reference bake in")
     ap.add_argument("--equal-error", action="store_true",
                     help="also: CPU time to reach raw 128's RMSE, raw against denoised")
+    ap.add_argument("--cycles", action="store_true",
+                    help="the equal-error table against Cycles (bpy) on the Suzanne scene, the room and dense.blend")
+    ap.add_argument("--scenes", nargs="+", default=list(CYCLES_SCENES))
     ap.add_argument("--picture", type=Path, default=None,
                     help="PNG: raw, mc_ao denoised, OIDN RTLightmap, reference; |error| x 5 below")
     a = ap.parse_args(argv)
-    out = {"compare": compare(a.resolution, a.samples, a.reference_samples, threads=a.threads,
-                              cache=a.reference_cache, picture_path=a.picture)}
-    print(table(out["compare"]))
+    out = {}
+    if a.resolution and not a.cycles:
+        out["compare"] = compare(a.resolution, a.samples, a.reference_samples, threads=a.threads,
+                                 cache=a.reference_cache, picture_path=a.picture)
+        print(table(out["compare"]))
     if a.cost_resolution:
-        c = cost(a.cost_resolution, threads=a.threads)
+        c = cost(a.cost_resolution, threads=a.threads, against=a.cost_against, repeats=a.cost_repeats)
         out["cost"] = c
-        print(f"\nCost at {c['resolution']}^2: guide {c['guide_cpu']:.2f} + filter {c['denoise_cpu']:.2f} CPU s "
-              f"= {100 * c['ratio_cpu']:.0f}% of a 64-sample bake ({c['bake64_cpu']:.2f} CPU s); "
-              f"{c['cpu_per_megatexel']:.2f} CPU s per megatexel.")
+        print("\n" + cost_table(c))
     if a.equal_error:
         e = equal_error(a.resolution, a.reference_samples, threads=a.threads, cache=a.reference_cache)
         out["equal_error"] = e
@@ -280,6 +529,9 @@ def main(argv=None):
         fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
         print(f"CPU s to reach it: raw {fmt(e['raw_cpu_at_goal'])}, denoised {fmt(e['denoised_cpu_at_goal'])}"
               f" (ratio {fmt(e['ratio'])})")
+    if a.cycles:
+        out["cycles"] = cycles_equal_error(a.resolution or 512, a.reference_samples, threads=a.threads,
+                                           cache=a.reference_cache, scenes=a.scenes, picture_path=a.picture)
     if a.json:
         a.json.write_text(json.dumps(out, indent=1))
     return out

@@ -92,15 +92,22 @@ class ChannelOutput(OutputKind):
 
     # -- 1. before any work ----------------------------------------------------------------------
 
+    def udim_problem(self):
+        if self.settings.use_udim:
+            return (f"Channel {self.settings.channel} into {self.settings.into!r} takes a plain image, not UDIM "
+                    "tiles; turn UDIM off or set Channel to Own Image")
+        return None
+
     def check(self, job):
         from .. import images
 
         if not self.mine(job):
             return
-        self._one_object(job)
-        if self.settings.use_udim:
-            raise images.ImageError(f"Channel {self.settings.channel} into {self.settings.into!r} takes a plain "
-                                    "image, not UDIM tiles; turn UDIM off or set Channel to Own Image")
+        problem = self._one_object(job)
+        if problem:
+            raise images.ImageError(problem)
+        if self.udim_problem():
+            raise images.ImageError(self.udim_problem())
         image = self.blender_image()
         if image is not None:
             reason = images.unusable_reason(image)
@@ -112,14 +119,14 @@ class ChannelOutput(OutputKind):
                                         f"{w}x{h}: bake at its size to write into its {self.settings.channel} channel")
 
     def _one_object(self, job):
-        from .. import images
-
+        """Why ``job`` cannot write into the Into image (another object already does), or None."""
         if job.object_name not in self.objects:
             self.objects.append(job.object_name)
         if len(self.objects) > 1:
-            raise images.ImageError(f"{self.objects[0]} and {self.objects[1]} would both write into channel "
-                                    f"{self.settings.channel} of {self.settings.into!r}, each the whole channel: "
-                                    "bake one object into it at a time")
+            return (f"{self.objects[0]} and {self.objects[1]} would both write into channel "
+                    f"{self.settings.channel} of {self.settings.into!r}, each the whole channel: "
+                    "bake one object into it at a time")
+        return None
 
     def planned(self, job, files):
         return [p for p, _ in self.paths(job, files)]
@@ -128,10 +135,11 @@ class ChannelOutput(OutputKind):
         problems = super().check_files(job, files)
         if not self.mine(job):
             return problems
-        try:
-            self._one_object(job)
-        except ValueError as exc:
-            problems.append(str(exc))
+        problem = self._one_object(job)
+        if problem:
+            problems.append(problem)
+        if self.udim_problem():
+            problems.append(self.udim_problem())
         source = self.source_file()
         for path in self.planned(job, files):
             if source and os.path.normcase(os.path.abspath(path)) == os.path.normcase(os.path.abspath(source)):
