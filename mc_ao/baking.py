@@ -333,26 +333,89 @@ def uv_coverage(obj, uv_map=""):
     return _COVERAGE[key]
 
 
-def bake_cost(settings, targets, depsgraph=None, occluder_triangles=0):
+# The occluders' triangle counts of bake_cost, by what decides them besides Blender's data: the panel
+# asks on every redraw, and counting walks every rendered object and instance (about 5 us each).
+# forget_occluder_counts empties it whenever the data changes (operators.HANDLERS: depsgraph_update_post
+# and load_post).
+_OCCLUDER_COUNTS = {}
+
+
+def forget_occluder_counts():
+    _OCCLUDER_COUNTS.clear()
+
+
+def occluder_counts(depsgraph, settings, selected=(), view_layer=None):
+    """mc_ao.occluders.pool's occluders as ``[(object name or None for an instance, triangles)]``,
+    without reading their geometry; kept until the data changes (forget_occluder_counts)."""
+    from . import occluders as occluder_sets
+
+    view_layer = view_layer or depsgraph.view_layer
+    key = (depsgraph.scene.name_full, view_layer.name, settings.occluders, tuple(settings.occluder_collections),
+           tuple(settings.exclude_collections), settings.only_local, tuple(settings.quantities),
+           tuple(obj.name_full for obj in selected) if settings.occluders == "SELECTED" else ())
+    if key not in _OCCLUDER_COUNTS:
+        counts = occluder_sets.pool(depsgraph, settings, selected=selected, view_layer=view_layer,
+                                    read=occluder_sets.triangle_count)
+        if len(_OCCLUDER_COUNTS) > 64:
+            _OCCLUDER_COUNTS.clear()
+        _OCCLUDER_COUNTS[key] = counts
+    return _OCCLUDER_COUNTS[key]
+
+
+def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None, threads=None, highpoly=(),
+              cage=None):
     """What baking ``targets`` with ``settings`` will cost, before it runs (core.cost): a
-    core.cost.Cost for them all, one after another. Triangles are the evaluated meshes' where a
-    depsgraph is given. The processes each hold the scene; threads and processes as the bake takes
-    them (0: every core)."""
+    core.cost.Cost for them all, one after another.
+
+    core.cost prices a target's triangles, its occluders' and a high-poly's apart; each is counted
+    here as the bake will hold it, from the evaluated meshes (``depsgraph``: the context's by default)
+    without reading their geometry: the occluders :func:`plan` gives each target (mc_ao.occluders:
+    the Occluders choice, Include and Exclude, instances, Only Local, Occludes Other Objects;
+    ``selected`` and ``view_layer`` as :func:`plan` takes them), and for Selected to Active
+    (``highpoly``: the high-poly objects, ``cage``: the cage object or None) the high-poly objects'
+    and the cage's, with the occluders mc_ao.selected_to_active.plan takes. The processes and threads
+    are those the bake takes (core.workers.processes_of; Processes 0 picks them from the cores, the
+    memory and these counts); ``threads``: the bake's (properties.resolve_threads), else the
+    settings' (0: every core).
+    """
+    from types import SimpleNamespace
+
+    from . import occluders as occluder_sets
+
+    if depsgraph is None:
+        import bpy
+
+        depsgraph = bpy.context.evaluated_depsgraph_get()
     cost = corelink.load("cost")
     workers = corelink.load("workers")
     w, h = settings.size
-    cores = settings.threads or workers.cpu_count()
-    processes = settings.processes or cores
+    threads = threads or settings.threads or None
+    # core.workers.processes_of reads the bake's thread count from its settings
+    core_settings = SimpleNamespace(threads=threads or workers.cpu_count())
+    skip, high = set(), 0
+    if highpoly:
+        skip = {obj.name for obj in (*targets, *highpoly, *((cage,) if cage is not None else ()))}
+        pool = (occluder_counts(depsgraph, settings, view_layer=view_layer)
+                if settings.occluders == "VISIBLE" and settings.quantities == ("ao",) else [])
+        high = sum(occluder_sets.triangle_count(obj.evaluated_get(depsgraph)) or 0 for obj in highpoly)
+    else:
+        pool = occluder_counts(depsgraph, settings, selected, view_layer)
     seconds, peak = 0.0, 0
     for obj in targets:
-        mesh = obj.evaluated_get(depsgraph).data if depsgraph is not None else obj.data
+        mesh = obj.evaluated_get(depsgraph).data
         triangles = len(mesh.loops) - 2 * len(mesh.polygons)  # an n-gon is n - 2 triangles
+        occluders = sum(n for key, n in pool if key != obj.name and key not in skip)
+        highpoly_triangles = high + (triangles if cage is not None else 0)  # the cage: the target's topology
         covered = (uv_coverage(obj, settings.uv_map) if not settings.vertex_colors else 1.0) * w * h
         if settings.vertex_colors:
             covered = len(mesh.loops)
-        c = cost.estimate(covered, settings.samples, triangles + occluder_triangles,
+        processes, per_worker = workers.processes_of(
+            "auto" if settings.processes == 0 else settings.processes, threads, core_settings,
+            (triangles, occluders, highpoly_triangles))
+        c = cost.estimate(covered, settings.samples, triangles,
                           image_texels=w * h if not settings.vertex_colors else covered,
-                          threads=1 if processes > 1 else cores, processes=processes)
+                          threads=per_worker, processes=processes, occluder_triangles=occluders,
+                          highpoly_triangles=highpoly_triangles)
         seconds += c.seconds
         peak = max(peak, c.bytes)
     return cost.Cost(seconds, peak)

@@ -26,7 +26,7 @@ refused, naming the object and both collections.
 
 from .extract import GEOMETRY_TYPES, ExtractError, object_arrays
 
-__all__ = ["occlude_others", "rendered_names", "Chooser", "pool"]
+__all__ = ["occlude_others", "rendered_names", "Chooser", "pool", "triangle_count"]
 
 # Collection instances inside collection instances are followed this deep (Blender's own limit is 8).
 MAX_INSTANCE_DEPTH = 8
@@ -156,9 +156,23 @@ def _instancer_counts(obj):
     return not (obj.instance_type in ("VERTS", "FACES") and not obj.show_instancer_for_render)
 
 
-def _collection_instances(instancer, matrix, depsgraph, depth=0):
-    """(MeshArrays) of the objects a collection instance places, at ``matrix`` (the instancer's world
-    matrix), following collection instances inside it."""
+def triangle_count(obj_eval, matrix=None):
+    """How many triangles :func:`object_arrays` reads from an evaluated object, None where it reads
+    none (no faces): a mesh's from its counts of faces and face corners (an n-gon is n - 2 triangles),
+    without reading them; another type's (a curve, a text) through a temporary mesh."""
+    if obj_eval.type == "MESH" and obj_eval.data is not None:
+        mesh = obj_eval.data
+        return len(mesh.loops) - 2 * len(mesh.polygons) if len(mesh.polygons) else None
+    mesh = obj_eval.to_mesh()
+    try:
+        return len(mesh.loops) - 2 * len(mesh.polygons) if mesh is not None and len(mesh.polygons) else None
+    finally:
+        obj_eval.to_mesh_clear()
+
+
+def _collection_instances(instancer, matrix, depsgraph, depth=0, read=object_arrays):
+    """``read(evaluated object, matrix=...)`` (MeshArrays) of the objects a collection instance
+    places, at ``matrix`` (the instancer's world matrix), following collection instances inside it."""
     from mathutils import Matrix
 
     collection = instancer.instance_collection
@@ -170,19 +184,23 @@ def _collection_instances(instancer, matrix, depsgraph, depth=0):
             continue
         m = place @ obj.matrix_world
         if obj.type in GEOMETRY_TYPES:
-            arrays = object_arrays(obj.evaluated_get(depsgraph), matrix=m)
+            arrays = read(obj.evaluated_get(depsgraph), matrix=m)
             if arrays is not None:
                 yield arrays
         if obj.instance_type == "COLLECTION":
-            yield from _collection_instances(obj, m, depsgraph, depth + 1)
+            yield from _collection_instances(obj, m, depsgraph, depth + 1, read)
 
 
-def _rendered_geometry(depsgraph, view_layer, chooser, notes):
-    """(original object name, or None for an instance; MeshArrays) of every rendered, chosen object."""
+def _rendered_geometry(depsgraph, view_layer, chooser, notes, read=object_arrays):
+    """(original object name, or None for an instance; ``read``'s MeshArrays) of every rendered, chosen object."""
     import bpy
 
     rendered = rendered_names(view_layer)
     chosen = {}  # name -> whether it may occlude others, decided once per object
+    # bpy.data.objects.get(name) searches the list: once per object, that is quadratic in the objects
+    objects = {}
+    for obj in bpy.data.objects:
+        objects.setdefault(obj.name, obj)
 
     def decide(obj):
         if obj.name not in chosen:
@@ -190,7 +208,7 @@ def _rendered_geometry(depsgraph, view_layer, chooser, notes):
         return chosen[obj.name]
 
     for name in sorted(rendered):  # every refusal before any geometry is read
-        obj = bpy.data.objects.get(name)
+        obj = objects.get(name)
         if obj is not None:
             decide(obj)
     seen = set()
@@ -205,13 +223,13 @@ def _rendered_geometry(depsgraph, view_layer, chooser, notes):
             continue
         if not decide(owner):
             continue
-        arrays = object_arrays(obj, matrix=inst.matrix_world.copy())
+        arrays = read(obj, matrix=inst.matrix_world.copy())
         if arrays is not None:
             yield (None if inst.is_instance else owner.name), arrays
     # Objects that render but that the viewport does not draw: hidden (evaluated all the same) or
     # disabled in viewports (not evaluated: their data without modifiers).
     for name in sorted(rendered - seen):
-        obj = bpy.data.objects.get(name)
+        obj = objects.get(name)
         if obj is None or not decide(obj):
             continue
         evaluated = obj.evaluated_get(depsgraph)
@@ -219,25 +237,27 @@ def _rendered_geometry(depsgraph, view_layer, chooser, notes):
             if not evaluated.is_evaluated and len(obj.modifiers):
                 notes.append(f"{name} is disabled in viewports: it occludes as its data without its modifiers "
                              "(enable it in viewports for its modifiers)")
-            arrays = object_arrays(evaluated)
+            arrays = read(evaluated)
             if arrays is not None:
                 yield name, arrays
         if obj.instance_type == "COLLECTION":
-            for arrays in _collection_instances(obj, obj.matrix_world, depsgraph):
+            for arrays in _collection_instances(obj, obj.matrix_world, depsgraph, read=read):
                 yield None, arrays
 
 
-def _selected_geometry(depsgraph, objects, chooser):
+def _selected_geometry(depsgraph, objects, chooser, read=object_arrays):
     objects = [obj for obj in objects if obj.type in GEOMETRY_TYPES and occlude_others(obj)]
     objects = [obj for obj in objects if chooser.chosen(obj)]  # every refusal before any geometry is read
     for obj in objects:
-        arrays = object_arrays(obj.evaluated_get(depsgraph))
+        arrays = read(obj.evaluated_get(depsgraph))
         if arrays is not None:
             yield obj.name, arrays
 
 
-def pool(depsgraph, settings, *, selected=(), view_layer=None, notes=None):
-    """Every occluder of a bake: ``[(original object name or None for an instance, MeshArrays)]``.
+def pool(depsgraph, settings, *, selected=(), view_layer=None, notes=None, read=object_arrays):
+    """Every occluder of a bake: ``[(original object name or None for an instance, MeshArrays)]``;
+    with ``read=triangle_count``, the same objects' triangle counts in place of their MeshArrays (what
+    the estimate of a bake counts, without reading any geometry).
 
     A target leaves itself out (its own name); it always occludes itself in the core. Empty for Only
     Local and Object Alone. ``notes`` (a list) receives what the bake should say about the occluders.
@@ -250,5 +270,5 @@ def pool(depsgraph, settings, *, selected=(), view_layer=None, notes=None):
     if settings.only_local or settings.occluders == "SELF" or "ao" not in settings.quantities:
         return []  # (a thickness map: only the object itself occludes it)
     if settings.occluders == "SELECTED":
-        return list(_selected_geometry(depsgraph, selected, chooser))
-    return list(_rendered_geometry(depsgraph, view_layer, chooser, notes))
+        return list(_selected_geometry(depsgraph, selected, chooser, read))
+    return list(_rendered_geometry(depsgraph, view_layer, chooser, notes, read))

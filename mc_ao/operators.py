@@ -126,8 +126,16 @@ def set_outcome(report):
 
 @bpy.app.handlers.persistent
 def forget_outcome(*_args):
-    """load_post handler: another file is open; the last bake's line was about the one before."""
+    """load_post handler: another file is open; the last bake's line and the estimate's counts of
+    occluders were about the one before."""
     set_outcome(None)
+    baking.forget_occluder_counts()
+
+
+@bpy.app.handlers.persistent
+def forget_occluder_counts(*_args):
+    """depsgraph_update_post handler: Blender's data changed; the estimate counts the occluders again."""
+    baking.forget_occluder_counts()
 
 
 @bpy.app.handlers.persistent
@@ -157,6 +165,7 @@ HANDLERS = {
     "undo_post": end_bakes_after_undo,
     "redo_post": end_bakes_after_undo,
     "load_post": forget_outcome,
+    "depsgraph_update_post": forget_occluder_counts,
 }
 
 

@@ -7,6 +7,7 @@ from . import operators
 from . import preview, selected_to_active
 from .operators import OBJECT_OT_mc_ao_bake, is_running
 from .extract import default_uv_map
+from .properties import resolve_threads
 from .settings import BakeSettings
 
 # Selected objects that will not be baked are listed under the button, up to this many lines.
@@ -140,13 +141,16 @@ def draw_targets(layout, context):
         layout.label(text=f"... and {len(skipped) - MAX_SKIPPED_LINES} more skipped", icon="ERROR")
 
 
-def draw_cost(layout, context, settings, targets):
-    """The bake's estimated time and memory (core.cost, calibrated by the bench), and a warning before
-    a bake that will not fit in memory."""
+def draw_cost(layout, context, settings, targets, highpoly=(), cage=None):
+    """The bake's estimated time and memory (core.cost, calibrated by the bench; the occluders and
+    high-poly objects it will use counted apart), and a warning before a bake that will not fit in
+    memory."""
     if not targets:
         return
     try:
-        cost = baking.bake_cost(settings, targets, context.evaluated_depsgraph_get())
+        cost = baking.bake_cost(settings, targets, context.evaluated_depsgraph_get(),
+                                selected=context.selected_objects, view_layer=context.view_layer,
+                                threads=resolve_threads(context, settings), highpoly=highpoly, cage=cage)
         available = baking.corelink.load("workers").memory_limit()
     except Exception:  # the core cannot load (no numpy, no embreex): the bake will say why
         return
@@ -191,9 +195,11 @@ def draw_selected_to_active(layout, context):
     names = ", ".join(o.name for o in highs[:MAX_SKIPPED_LINES])
     if len(highs) > MAX_SKIPPED_LINES:
         names += f" and {len(highs) - MAX_SKIPPED_LINES} more"
-    image_name = BakeSettings.from_properties(settings).image_name_for(active.name, baking.id_name_max_bytes())
+    bake_settings = BakeSettings.from_properties(settings)
+    image_name = bake_settings.image_name_for(active.name, baking.id_name_max_bytes())
     wrapped_label(layout, context, f"From {names} onto {active.name}", icon="MOD_SHRINKWRAP")
     wrapped_label(layout, context, f"Into {image_name}", icon="IMAGE_DATA")
+    draw_cost(layout, context, bake_settings, [active], highpoly=highs, cage=cage)
 
 
 class VIEW3D_PT_mc_ao_selected_to_active(_McAoPanel, bpy.types.Panel):

@@ -228,27 +228,161 @@ def test_the_panel_shows_what_the_bake_will_cost_and_warns_before_it_does_not_fi
     select_only(bpy, ground)
     scene.mc_ao.resolution, scene.mc_ao.samples = 1024, 128
     labels = draw_main_panel(bpy, SIDEBAR)
-    (estimate,) = [text for text, icon in labels if icon == "TIME"]
+    estimate = shown_estimate(bpy)
     assert estimate.startswith("Estimate: about ") and ("MiB" in estimate or "GiB" in estimate)
     cost = baking.bake_cost(BakeSettings.from_properties(scene.mc_ao), [ground])
-    # A 1024^2 plane (all of it covered) at 128 samples: what core.cost says, the panel shows.
+    # A 1024^2 plane (all of it covered) at 128 samples, alone in the scene, on the workers Processes 0
+    # picks for its 2 triangles: what core.cost says, the panel shows.
+    processes, threads = bake_processes(scene, (2, 0, 0))
     assert cost == corelink.load("cost").estimate(1024 * 1024, 128, 2, image_texels=1024 * 1024,
-                                                   threads=1 if cost_processes(scene) > 1 else cost_cores(scene),
-                                                   processes=cost_processes(scene))
+                                                   threads=threads, processes=processes)
+    assert estimate == f"Estimate: {cost.describe()}"
     assert not any(icon == "ERROR" for _, icon in labels)
     monkeypatch.setattr(corelink.load("workers"), "memory_limit", lambda: 1 << 20)  # 1 MiB free
     warned = [text for text, icon in draw_main_panel(bpy, SIDEBAR) if icon == "ERROR"]
     assert warned and warned[0].startswith("This bake needs about")
 
 
-def cost_cores(scene):
+def collection_of(bpy, name, *objects):
+    """A new collection in the scene holding ``objects`` (moved out of their own)."""
+    collection = bpy.data.collections.new(name)
+    bpy.context.scene.collection.children.link(collection)
+    for obj in objects:
+        for c in list(obj.users_collection):
+            c.objects.unlink(obj)
+        collection.objects.link(obj)
+    return collection
+
+
+def grid(bpy, name, cuts, location):
+    """A subdivided plane of 2 (cuts + 1)^2 triangles."""
+    obj = add_plane(bpy, name, size=2, location=location)
+    obj.modifiers.new("Cuts", "SUBSURF").subdivision_type = "SIMPLE"
+    obj.modifiers["Cuts"].levels = obj.modifiers["Cuts"].render_levels = 0
+    bpy.ops.object.select_all(action="DESELECT")
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.subdivide(number_cuts=cuts)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    obj.modifiers.remove(obj.modifiers["Cuts"])
+    return obj
+
+
+def shown_estimate(bpy):
+    """The panel's estimate line, its wrapped lines joined."""
+    labels = draw_main_panel(bpy, SIDEBAR)
+    start = [icon for _, icon in labels].index("TIME")
+    end = next((i for i in range(start + 1, len(labels)) if labels[i][1] != "BLANK1"), len(labels))
+    return " ".join(text for text, _ in labels[start:end])
+
+
+def occluder_triangles(job):
+    return sum(len(arrays.triangles) for arrays in job.occluders)
+
+
+def test_the_estimate_prices_the_occluders_the_bake_will_use_apart(bpy, scene):
+    """The estimate counts the target's triangles and those of the occluders plan() gives it (Include and
+    Exclude, instances, Occludes Other Objects) apart, as core.cost prices them: excluding a heavy
+    occluder collection lowers its memory by core.cost's bytes for those triangles, in each process."""
+    from mc_ao import baking, corelink
+    from mc_ao.settings import BakeSettings
+
+    cost = corelink.load("cost")
+    for collection in list(bpy.data.collections):
+        bpy.data.collections.remove(collection)
+    floor = add_plane(bpy, "Floor", size=4)
+    heavy = grid(bpy, "Heavy", 99, (0, 0, 3))  # 2 x 100^2 triangles
+    box = add_cube(bpy, "Box", size=0.5, location=(0, 0, 1))
+    loner = add_cube(bpy, "Loner", size=0.5, location=(1, 1, 1))
+    loner.mc_ao.occlude_others = False  # occludes only itself: not the floor's occluder
+    collection_of(bpy, "Heavy", heavy)
+    boxes = collection_of(bpy, "Boxes", box)
+    placed = bpy.data.objects.new("Placed", None)  # Boxes again, as a collection instance
+    placed.instance_type, placed.instance_collection = "COLLECTION", boxes
+    placed.location = (-1, -1, 0)
+    bpy.context.scene.collection.objects.link(placed)
+    bpy.context.view_layer.update()
+    select_only(bpy, floor)
+    s = scene.mc_ao
+    s.resolution, s.samples, s.processes, s.threads = 256, 64, 2, 0
+    heavy_triangles = 2 * 100 ** 2
+    assert len(heavy.data.loops) - 2 * len(heavy.data.polygons) == heavy_triangles
+
+    def estimate_and_plan():
+        settings = BakeSettings.from_properties(s)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        (job,) = baking.plan(depsgraph, [floor], settings, selected=[floor], view_layer=bpy.context.view_layer)
+        return baking.bake_cost(settings, [floor], depsgraph, selected=[floor]), occluder_triangles(job)
+
+    def expected(occluders):
+        processes, threads = bake_processes(scene, (2, occluders, 0))
+        return cost.estimate(256 * 256 * baking.uv_coverage(floor), 64, 2, image_texels=256 * 256, threads=threads,
+                             processes=processes, occluder_triangles=occluders)
+
+    every, occluders = estimate_and_plan()
+    assert occluders == heavy_triangles + 2 * 12  # the grid, the box and its instance; not the loner
+    assert every == expected(occluders)
+    assert shown_estimate(bpy) == f"Estimate: {every.describe()}"
+
+    s.exclude_collections.add().collection = bpy.data.collections["Heavy"]
+    fewer, occluders = estimate_and_plan()
+    assert occluders == 2 * 12
+    assert fewer == expected(occluders)
+    # 2 processes each hold the grid's occluder scenes, the parent its share while they bake.
+    assert every.bytes - fewer.bytes == heavy_triangles * (2 * cost.BYTES_PER_OCCLUDER_TRIANGLE
+                                                           + cost.BYTES_PER_PARENT_OTHER_TRIANGLE)
+    assert shown_estimate(bpy) == f"Estimate: {fewer.describe()}"
+    # The grid back in, disabled in renders instead: the panel counts again (the counts are kept only
+    # until the data changes).
+    s.exclude_collections.clear()
+    assert shown_estimate(bpy) == f"Estimate: {every.describe()}"
+    heavy.hide_render = True
+    assert shown_estimate(bpy) == f"Estimate: {fewer.describe()}"
+    assert estimate_and_plan() == (fewer, 2 * 12)
+
+    # Processes 0: as many as the bake picks for these counts (core.workers.auto_workers).
+    s.processes = 0
+    auto, occluders = estimate_and_plan()
+    assert auto == expected(occluders)
+    s.only_local = True  # the floor alone: no occluders
+    alone, occluders = estimate_and_plan()
+    assert occluders == 0 and alone == expected(0)
+
+
+def test_the_estimate_of_selected_to_active_prices_the_high_poly_apart(bpy, scene):
+    from mc_ao import baking, corelink, selected_to_active
+    from mc_ao.settings import BakeSettings
+
+    cost = corelink.load("cost")
+    low = add_plane(bpy, "Low", size=2)
+    high = grid(bpy, "High", 49, (0, 0, 0.01))  # 2 x 50^2 triangles
+    box = add_cube(bpy, "Box", size=0.5, location=(0, 0, 1))  # renders: an occluder of All Rendered
+    select_only(bpy, low, high)
+    s = scene.mc_ao
+    s.use_selected_to_active, s.resolution, s.samples, s.processes, s.threads = True, 128, 16, 2, 0
+    settings = BakeSettings.from_properties(s)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    job = selected_to_active.plan(depsgraph, low, [low, high], settings, view_layer=bpy.context.view_layer)
+    highpoly = sum(len(arrays.triangles) for arrays in job.highpoly)
+    assert highpoly == 2 * 50 ** 2 and occluder_triangles(job) == 12
+    estimate = baking.bake_cost(settings, [low], depsgraph, highpoly=[high])
+    processes, threads = bake_processes(scene, (2, 12, highpoly))
+    assert estimate == cost.estimate(128 * 128 * baking.uv_coverage(low), 16, 2, image_texels=128 * 128,
+                                     threads=threads, processes=processes, occluder_triangles=12,
+                                     highpoly_triangles=highpoly)
+    assert shown_estimate(bpy) == f"Estimate: {estimate.describe()}"
+
+
+def bake_processes(scene, triangles):
+    """(processes, threads each) that core.bake_ao takes for the scene's Processes and Threads and a
+    bake of ``triangles`` (target, occluders, high-poly)."""
     from mc_ao import corelink
 
-    return scene.mc_ao.threads or corelink.load("workers").cpu_count()
-
-
-def cost_processes(scene):
-    return scene.mc_ao.processes or cost_cores(scene)
+    workers = corelink.load("workers")
+    threads = scene.mc_ao.threads or None
+    return workers.processes_of("auto" if scene.mc_ao.processes == 0 else scene.mc_ao.processes, threads,
+                                types.SimpleNamespace(threads=threads or workers.cpu_count()), triangles)
 
 
 def test_no_setting_label_is_cut_off_at_the_sidebars_default_width(bpy, scene):
