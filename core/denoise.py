@@ -207,19 +207,22 @@ def _centre_barycentrics(xy, texel, tri, width):
     return bary
 
 
-def _choose(xy, edges, texel, tri, width):
+def _choose(xy, uvtris, texel, tri, width):
     """For candidate pairs (texel, triangle), sorted by texel: each texel's triangle by the guide's
     rule (the lowest triangle whose edge functions all hold at the centre; where none does, the
-    nearest to the centre, ties the lowest). Returns (texels, triangles, barycentrics)."""
+    nearest to the centre, ties the lowest). The edge functions are those of the candidates'
+    triangles only (``uvtris.edges_of``). Returns (texels, triangles, barycentrics)."""
     if not len(texel):
         return texel, tri, np.zeros((0, 3))
     row, col = np.divmod(texel, width)
     cx, cy = col + 0.5, row + 0.5
+    ids, which = np.unique(tri, return_inverse=True)
+    edges = uvtris.edges_of(ids)
     m = None
     for j in range(3):
-        v = np.take(np.ascontiguousarray(edges[:, j, 0]), tri) * cx
-        v += np.take(np.ascontiguousarray(edges[:, j, 1]), tri) * cy
-        v += np.take(np.ascontiguousarray(edges[:, j, 2]), tri)
+        v = np.take(np.ascontiguousarray(edges[:, j, 0]), which) * cx
+        v += np.take(np.ascontiguousarray(edges[:, j, 1]), which) * cy
+        v += np.take(np.ascontiguousarray(edges[:, j, 2]), which)
         m = v if m is None else np.minimum(m, v, out=m)
     ins = m >= 0
     it, ik = texel[ins], tri[ins]
@@ -302,7 +305,7 @@ def tile_guide(frag, uvtris, mesh, width):
         ci, ct = ci[keep], ct[keep]
         order = np.lexsort((ct, ci))
         ci, ct = ci[order], ct[order]
-        ct_t, ct_k, ct_b = _choose(xy, uvtris.edges, texels[ci], ct, width)
+        ct_t, ct_k, ct_b = _choose(xy, uvtris, texels[ci], ct, width)
         pos = np.searchsorted(texels, ct_t)
         tri[pos] = ct_k
         bary[pos] = ct_b

@@ -99,7 +99,11 @@ def test_the_guide_the_bake_builds_from_its_tiles_is_the_one_computed_from_the_m
 
     def record(m, resolution, radius=D.RADIUS, texels=None, threads=1, tris=None):
         seen.append((m, texels))
-        return compute(m, resolution, radius, texels=texels, tris=tris)
+        out = compute(m, resolution, radius, texels=texels, tris=tris)
+        # Nothing whole-mesh of the UV triangles was kept for the guide: its tiles asked for their
+        # own triangles' corners and edge functions.
+        assert "edges" not in vars(tris) and "xy" not in vars(tris)
+        return out
 
     monkeypatch.setattr(D, "surface_guide", record)
     r = bake_ao(mesh, resolution=res, samples=2, seed=1, threads=2, tile_size=16, denoise=True)
