@@ -281,6 +281,7 @@ def main():
                 start = process_memory()[0]
                 bake, shared, threads = _setup(job, current["cancel"], lambda work: reply("progress", bake_id, work),
                                                scene=(key, _SCENE))
+                tiles = 0
                 del job
                 ready = process_memory()[0]
                 reply("ready", bake_id)
@@ -289,6 +290,7 @@ def main():
             elif kind == "tile":
                 outs = []
                 run_all(lambda key: outs.append(bake.tile(key, directions=False)), [args[0]], threads, shared, None)
+                tiles += 1
                 reply("tile", bake_id, vars(outs[0]))
             elif kind == "finish":
                 shared.flush()
@@ -296,7 +298,7 @@ def main():
                                              trace_cpu_seconds=shared.trace_cpu_seconds,
                                              counters=bake.start.counters(),
                                              memory=dict(memory_entry("worker", (bake,), start, ready),
-                                                         scene_reused=bake.scene_reused)))
+                                                         scene_reused=bake.scene_reused, tiles=tiles)))
                 bake = shared = None
             elif kind == "exit":
                 return
@@ -548,10 +550,13 @@ class Pool:
             failure = None
             cancelled = False
 
-            def deal(w):
-                """Keep ``AHEAD`` tiles with the worker (it starts the next while its last result is on
-                its way); once none is left, ask it for its totals (once)."""
-                while len(w.busy) < AHEAD and todo and failure is None and not cancelled:
+            def deal(w, ahead=AHEAD):
+                """Keep ``ahead`` tiles with the worker (it starts the next while its last result is
+                on its way), one only once fewer tiles are left than workers (the last tiles go to
+                the workers that free up, not to one already holding another); once none is left,
+                ask it for its totals (once)."""
+                while todo and failure is None and not cancelled and (
+                        not w.busy or len(w.busy) < ahead and len(todo) >= len(self.workers)):
                     key = todo.pop()
                     w.busy.append(key)
                     w.send("tile", bake_id, key)
@@ -559,10 +564,12 @@ class Pool:
                     w.asked = True
                     w.send("finish", bake_id)
 
-            # The first tiles go with the set-up: a worker starts them the moment its scene is built,
-            # without waiting for its "ready" to reach this process and the tiles to come back.
-            for w in self.workers:
-                deal(w)
+            # The first tiles go with the set-up, one to each worker in turn before any gets its next:
+            # a worker starts them the moment its scene is built, without waiting for its "ready" to
+            # reach this process and the tiles to come back.
+            for ahead in range(1, AHEAD + 1):
+                for w in self.workers:
+                    deal(w, ahead)
             pending = set(self.workers)
             try:
                 while pending:

@@ -198,6 +198,14 @@ def test_a_worker_keeps_the_last_scene_and_a_changed_mesh_is_built_anew(moved):
         assert np.array_equal(getattr(again, name), getattr(fresh, name)), name
 
 
+def test_as_many_tiles_as_workers_give_each_worker_one():
+    target, occ = scene()
+    r = bake_ao(target, occ, resolution=32, samples=8, tile_size=(32, 16), workers=2)
+    assert [e["tiles"] for e in r.report["worker_memory"][1:]] == [1, 1]
+    r = bake_ao(target, occ, resolution=32, samples=8, tile_size=16, workers=2)
+    assert sum(e["tiles"] for e in r.report["worker_memory"][1:]) == 4
+
+
 def test_shutdown_ends_the_pool():
     target, occ = scene()
     bake_ao(target, occ, resolution=16, samples=4, workers=2)
