@@ -272,14 +272,20 @@ def main():
         kind, bake_id, *args = tasks.get()
         try:
             if kind == "setup":
-                bake = shared = None  # the last bake's scene goes before the next one is built
+                bake = shared = None  # the last bake's tables go before the next one's are built
                 job = args.pop()  # only the bake keeps what it needs of the input: the job's arrays go
+                key = scene_key(job)
+                if _SCENE.get("key") != key:
+                    _SCENE.clear()  # another scene: the last one's Embree scenes go before it is built
                 reset_peak()
                 start = process_memory()[0]
-                bake, shared, threads = _setup(job, current["cancel"], lambda work: reply("progress", bake_id, work))
+                bake, shared, threads = _setup(job, current["cancel"], lambda work: reply("progress", bake_id, work),
+                                               scene=(key, _SCENE))
                 del job
                 ready = process_memory()[0]
                 reply("ready", bake_id)
+            elif bake is None:
+                continue  # a tile or the totals of a bake whose set-up failed (its error was sent)
             elif kind == "tile":
                 outs = []
                 run_all(lambda key: outs.append(bake.tile(key, directions=False)), [args[0]], threads, shared, None)
@@ -289,7 +295,8 @@ def main():
                 reply("finish", bake_id, dict(rays=shared.rays, trace_seconds=shared.trace_seconds,
                                              trace_cpu_seconds=shared.trace_cpu_seconds,
                                              counters=bake.start.counters(),
-                                             memory=memory_entry("worker", (bake,), start, ready)))
+                                             memory=dict(memory_entry("worker", (bake,), start, ready),
+                                                         scene_reused=bake.scene_reused)))
                 bake = shared = None
             elif kind == "exit":
                 return
@@ -314,7 +321,63 @@ def self_test():
     return hashlib.sha256(r.ao.tobytes() + r.stderr.tobytes()).hexdigest()
 
 
-def _setup(job, cancel, progress):
+#: The last bake's occlusion scenes in this worker (see :func:`_setup`): ``key`` (:func:`scene_key`),
+#: ``count`` (the meshes its tracer holds: the target alone, or with its occluders) and ``tracer``.
+_SCENE = {}
+
+
+def scene_key(job):
+    """A digest of what a bake's occlusion scenes are built from: the target's and the occluders'
+    positions and triangles as sent (their dtypes and shapes too). The same key, the same scenes:
+    the meshes are moved into the bake's frame by the same arithmetic on the same bits."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=20)
+    for m in [job["target"]] + list(job["occluders"]):
+        for name in ("positions", "triangles"):
+            a = np.ascontiguousarray(m[name])
+            h.update(f"{name}{a.dtype.str}{a.shape};".encode())
+            h.update(memoryview(a).cast("B"))
+    return h.hexdigest()
+
+
+def _reuse_scene(pro, scene):
+    """Let the prologue ``pro`` trace in the last bake's Embree scenes where they were built from the
+    same meshes (``scene``: (its key, :data:`_SCENE`)): an artist baking again after changing the
+    samples, the resolution or the distance does not wait for them again. Returns what keeps them for
+    the next bake (:func:`_keep_scene`)."""
+    key, kept = scene if scene is not None else (None, None)
+    if kept and kept.get("key") == key:
+        meshes = [pro.target] + pro.occluders
+        if kept["count"] <= len(meshes):
+            # The tracer sees these meshes (bit for bit the ones it was built from): Prologue.tracer shares it.
+            pro._tracer = (meshes[:kept["count"]], kept["tracer"])
+    return key, kept
+
+
+def _reused(pro, scene):
+    """Whether ``pro`` traces in the last bake's scenes (its tracer is the one kept)."""
+    last = getattr(pro, "_tracer", None)
+    return bool(scene and scene[1] and last is not None and scene[1].get("tracer") is last[1])
+
+
+def _keep_scene(pro, scene):
+    """Keep the tracer ``pro`` traced in as the last scene (one scene at a time: memory does not grow)."""
+    key, kept = scene
+    if kept is None:
+        return
+    kept.clear()
+    last = getattr(pro, "_tracer", None)
+    if last is not None and key is not None:
+        meshes, tracer = last
+        tracer._meshes = list(meshes)  # this bake's meshes (the same bits): the last bake's go
+        kept.update(key=key, count=len(meshes), tracer=tracer)
+
+
+def _setup(job, cancel, progress, scene=None):
+    """The bake of ``job`` in this process: (bake, its scheduler, threads). ``scene``: (its key, the
+    last scene kept, :data:`_SCENE`) to trace in that scene's Embree scenes where the meshes are the
+    same, and to keep this bake's for the next one."""
     from .bake import Prologue, texel_bake
     from .settings import BakeSettings
 
@@ -323,16 +386,20 @@ def _setup(job, cancel, progress):
         from .vertices import vertex_bake
 
         pro = Prologue(_mesh(job["target"]), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=False)
+        scene = _reuse_scene(pro, scene)
         bake = vertex_bake(pro, s, job["corners"], job.get("quantities", [s.quantity]), job["merge"],
                            job["bent_normals"], job["block"])
         shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
         bake.trace_setup(shared, cancel)
+        bake.scene_reused = _reused(pro, scene)
+        _keep_scene(pro, scene)
         return bake, shared, s.threads
     # Popped: the job holds nothing of the target past its use (its UVs go once the bake has its UV triangles).
     pro = Prologue(_mesh(job.pop("target")), [_mesh(o) for o in job["occluders"]], s, cancel, uvs=True,
                    highpoly=None if job["highpoly"] is None else [_mesh(m) for m in job["highpoly"]],
                    extrusion=job["extrusion"], max_ray_distance=job["max_ray_distance"], cage=_mesh(job["cage"]),
                    bent_normals=job["bent_normals"])
+    scene = _reuse_scene(pro, scene) if pro.s2a is None else (None, scene[1] if scene else None)
     bake = texel_bake(pro, s, job.get("quantities", [s.quantity]), job["bent_normals"],
                       guide=job.get("guide", False))
     # The UVs served the UV triangles the bake now holds; a worker bakes tiles from those alone and
@@ -340,6 +407,8 @@ def _setup(job, cancel, progress):
     pro.target.uvs = None
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)
+    bake.scene_reused = _reused(pro, scene)
+    _keep_scene(pro, scene)
     return bake, shared, s.threads
 
 
@@ -470,7 +539,7 @@ class Pool:
             job = dict(job, quantum=quantum, settings=dict(job["settings"], threads=self.threads, auto_tiles=False))
             for w in self.workers:
                 w.send("setup", bake_id, job)
-                w.ready, w.busy = False, []
+                w.ready, w.busy, w.asked = False, [], False
             todo = list(keys)
             todo.reverse()
             out_standing = set()  # workers holding a tile or not yet ready
@@ -481,14 +550,19 @@ class Pool:
 
             def deal(w):
                 """Keep ``AHEAD`` tiles with the worker (it starts the next while its last result is on
-                its way); once none is left, ask it for its totals."""
+                its way); once none is left, ask it for its totals (once)."""
                 while len(w.busy) < AHEAD and todo and failure is None and not cancelled:
                     key = todo.pop()
                     w.busy.append(key)
                     w.send("tile", bake_id, key)
-                if not w.busy and failure is None and not cancelled:
+                if not w.busy and not w.asked and failure is None and not cancelled:
+                    w.asked = True
                     w.send("finish", bake_id)
 
+            # The first tiles go with the set-up: a worker starts them the moment its scene is built,
+            # without waiting for its "ready" to reach this process and the tiles to come back.
+            for w in self.workers:
+                deal(w)
             pending = set(self.workers)
             try:
                 while pending:

@@ -159,6 +159,45 @@ def test_no_worker_outlives_its_parent_killed():
     assert not any(_alive(p) for p in pids)
 
 
+@pytest.mark.parametrize("moved", ["occluder", "target"])
+def test_a_worker_keeps_the_last_scene_and_a_changed_mesh_is_built_anew(moved):
+    target, occ = scene()
+    args = dict(resolution=32, samples=16, max_distance=0.7, margin=2, workers=2)
+
+    def reused(r):
+        return [e["scene_reused"] for e in r.report["worker_memory"][1:]]
+
+    W.shutdown()
+    first = bake_ao(target, occ, **args)
+    assert reused(first) == [False, False]
+    # Baked again with other samples and resolution: the workers trace in the scene they kept.
+    again = bake_ao(target, occ, **dict(args, samples=24, resolution=40))
+    assert reused(again) == [True, True]
+    # One vertex moved (of the lid, or of the bumpy plane): the scene is built anew.
+    if moved == "occluder":
+        P = occ[0].positions.copy()
+        P[0, 2] = 0.1
+        occ = [Mesh(P, occ[0].triangles, name="lid")] + occ[1:]
+    else:
+        P = target.positions.copy()
+        P[len(P) // 2, 2] += 0.2
+        target = Mesh(P, target.triangles, uvs=target.uvs, name="bumps")
+    changed = bake_ao(target, occ, **args)
+    assert reused(changed) == [False, False]
+    assert not np.array_equal(changed.ao, first.ao)  # the vertex changes the bake
+    W.shutdown()  # a fresh pool's workers build every scene
+    fresh = bake_ao(target, occ, **args)
+    for name in FIELDS:
+        assert np.array_equal(getattr(changed, name), getattr(fresh, name)), name
+    assert changed.rays == fresh.rays
+    # And the re-bake in the kept scene is the bits of a fresh pool's.
+    W.shutdown()
+    target, occ = scene()
+    fresh = bake_ao(target, occ, **dict(args, samples=24, resolution=40))
+    for name in FIELDS:
+        assert np.array_equal(getattr(again, name), getattr(fresh, name)), name
+
+
 def test_shutdown_ends_the_pool():
     target, occ = scene()
     bake_ao(target, occ, resolution=16, samples=4, workers=2)
