@@ -81,7 +81,10 @@ class BakeResult:
         'worker N'): ``rss`` and ``peak`` resident bytes (VmRSS and VmHWM; a worker's peak is its
         bake's own, from ``start``, its size before it built the scene; ``ready``, after), and
         ``held``, the bytes of the arrays its bake holds (meshes, tables; Embree's scenes are not
-        arrays and are in ``ready - start``): :func:`core.workers.memory_entry`.
+        arrays and are in ``ready - start``, unless the worker kept them from its last bake):
+        :func:`core.workers.memory_entry`; a worker's also ``tiles`` (how many it baked) and
+        ``scene_reused`` (whether it traced in the Embree scenes it kept from its last bake of the
+        same meshes).
     bent : None, or with ``bent_normals``, (H, W, 3) float32 unit bent normals in the bake's
         ``bent_space`` (covered and margin texels; zero elsewhere), see :mod:`core.bent`.
 

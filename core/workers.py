@@ -29,6 +29,15 @@ How the processes are started and kept (each point is a trap met in Blender):
 - Progress counts the tiles' samples as they are traced, a message per 1/512 of a worker's share of
   the work, never per chunk; cancel reaches a worker between chunks, and a worker still building its
   scene is ended (the next bake starts a fresh one).
+- A worker keeps the last bake's occlusion scenes (Embree's, and the tracer's arrays) and traces in
+  them when the next bake sends the same meshes (a digest of the target's and the occluders'
+  positions and triangles, :func:`scene_key`): an artist baking again after changing the samples,
+  the resolution or the distance does not wait for them. One scene at a time: a bake of other meshes
+  drops it before building its own, so a worker's peak does not grow; between bakes an idle worker
+  holds it (what :func:`shutdown` or a bake of other meshes frees). Selected-to-active bakes keep none.
+- Tiles are dealt one to each worker in turn with the set-up (a worker starts its first the moment
+  its scene is built), then each gets its next as it returns one, ``AHEAD`` at most and one only once
+  fewer tiles are left than workers.
 - A worker that dies (killed, out of memory) fails the bake with :class:`BakeWorkerError`, nothing is
   written, and the next bake gets a fresh pool.
 - The self-test: a new pool's workers each bake a tiny scene first and must give this process's bits
