@@ -202,7 +202,9 @@ def test_the_report_says_what_each_process_held(workers):
         for e in mem:
             assert 0 < e["rss"] <= e["peak"] < 1 << 40
         for e in mem[1:]:
-            assert e["pid"] != os.getpid() and 0 < e["start"] <= e["peak"] and e["start"] < e["ready"]
+            # Sizes when the set-up began and when the scene was ready, both within the bake's peak (the
+            # set-up may free as much as it builds: a worker drops its last scene before building another).
+            assert e["pid"] != os.getpid() and 0 < e["start"] <= e["peak"] and 0 < e["ready"] <= e["peak"]
 
 
 def test_a_vertex_bake_reports_its_processes_memory_too():
