@@ -220,7 +220,10 @@ SETTINGS = (
             "are packed into the .blend file", key=None, targets=("image", "udim", "bent")),
     Setting("seed", "int", 0, "Seed", "Seed of the random scrambling; the same seed gives the same image",
             lo=0, hi="MAX_SEED", ui={"max": (1 << 31) - 1}),
-    Setting("threads", "int", 0, "Threads", "Worker threads; 0 uses the add-on preferences' default (all cores)",
+    Setting("threads", "int", 0, "Threads",
+            "Threads of each process that bakes; 0 uses the add-on preferences' default (all cores). With "
+            "Processes 0, as many processes bake as the cores hold at this many threads each (on 2 cores, "
+            "Threads 2 bakes in Blender's own process)",
             lo=0, hi=MAX_THREADS, zero="every core", ui={"soft_max": 256}),
     Setting("processes", "int", 0, "Processes",
             "Worker processes the bake's tiles are baked in, each with its own copy of the scene, so that every "
