@@ -384,7 +384,7 @@ def commit_together(pendings, error=FileWriteError):
     backups = []
     try:
         for p in pendings:
-            backups.append(_backup_of(p.target))
+            backups.append(backup_of(p.target))
     except OSError as exc:
         for p in pendings:
             p.discard()
@@ -402,13 +402,7 @@ def commit_together(pendings, error=FileWriteError):
         for p in pendings[done:]:
             p.discard()
         for p, b in zip(pendings[:done], backups[:done]):
-            try:
-                if b is None:
-                    os.unlink(p.target)
-                else:
-                    os.replace(b, p.target)
-            except OSError:
-                pass
+            roll_back(p.target, b)
         for b in backups[done:]:
             if b:
                 remove_quietly(b)
@@ -418,8 +412,9 @@ def commit_together(pendings, error=FileWriteError):
             remove_quietly(b)
 
 
-def _backup_of(target):
-    """Hard-link an existing ``target`` to a hidden name beside it; None when there is no target."""
+def backup_of(target):
+    """Hard-link an existing ``target`` to a hidden name beside it; None when there is no target.
+    Raises OSError where no link can be made (a filesystem without hard links)."""
     target = pathlib.Path(target)
     if not os.path.lexists(target):
         return None
@@ -431,6 +426,21 @@ def _backup_of(target):
             continue
         return candidate
     raise OSError(_errno.EEXIST, "no free backup file name")
+
+
+def roll_back(target, backup):
+    """Undo a committed rename of ``target``: its :func:`backup_of` put back over it, or, where there
+    was no old file (``backup`` None), the new one removed. True when the target is as it was."""
+    target = pathlib.Path(target)
+    try:
+        if backup is None:
+            os.unlink(target)
+        else:
+            os.replace(backup, target)
+    except OSError:
+        return False
+    fsync_dir(target.parent)
+    return True
 
 
 def write_file(target, write, verify=None, overwrite=True, error=FileWriteError, ext=None):

@@ -47,7 +47,7 @@ import re
 import numpy as np
 
 from ._version import __version__
-from .atomicfile import PendingFile, fsync_dir, io_error, remove_quietly, short_name
+from .atomicfile import PendingFile, backup_of, io_error, remove_quietly, roll_back
 from .errors import ChannelError, McAoError, SettingsError, ImageWriteError
 
 __all__ = [
@@ -289,7 +289,12 @@ def _verify(oiio, temp, data, oiio_type):
 
 def _write_temp(oiio, temp, target, ext, data, oiio_type, meta):
     """Write the image to ``temp``; raise RuntimeError with OpenImageIO's message when it says it failed."""
-    spec = _make_spec(oiio, ext, data.shape, oiio_type, meta)
+    _write_spec(oiio, temp, _make_spec(oiio, ext, data.shape, oiio_type, meta), data)
+
+
+def _write_spec(oiio, temp, spec, data):
+    """Write ``data`` to ``temp`` as ``spec`` says; raise RuntimeError with OpenImageIO's message when it
+    says it failed."""
     out = oiio.ImageOutput.create(os.fspath(temp))
     if out is None:
         raise RuntimeError(oiio.geterror() or "OpenImageIO has no writer for it")
@@ -517,33 +522,15 @@ def write_ao(path, result, *, bits=None, stderr_path=None, stderr_bits=None, met
 
 def _backup(target):
     """Hard-link an existing target to a hidden name; None if there is no target, False if impossible."""
-    if not os.path.lexists(target):
-        return None
-    for _ in range(100):
-        candidate = target.parent / short_name("bak", target.suffix)
-        try:
-            os.link(target, candidate)
-        except FileExistsError:
-            continue
-        except OSError:
-            return False
-        return candidate
-    return False
+    try:
+        return backup_of(target)
+    except OSError:
+        return False
 
 
 def _roll_back(target, backup):
     """Undo a committed rename; True if the target is back to its previous state."""
-    try:
-        if backup is None:
-            os.unlink(target)
-        elif backup is False:
-            return False
-        else:
-            os.replace(backup, target)
-    except OSError:
-        return False
-    fsync_dir(target.parent)
-    return True
+    return backup is not False and roll_back(target, backup)
 
 
 # -- one channel of an existing image ------------------------------------------------------------------
@@ -738,20 +725,7 @@ def write_channel(path, channel, values, *, source=None):
     out_spec.attribute("oiio:UnassociatedAlpha", 1)  # alpha is written as stored, as it was read
 
     def write(temp):
-        out = oiio.ImageOutput.create(os.fspath(temp))
-        if out is None:
-            raise RuntimeError(oiio.geterror() or "OpenImageIO has no writer for it")
-        opened = False
-        try:
-            opened = out.open(os.fspath(temp), out_spec)
-            if not opened or not out.write_image(new):
-                raise RuntimeError(out.geterror() or oiio.geterror() or "unknown OpenImageIO error")
-        except BaseException:
-            if opened:
-                out.close()
-            raise
-        if not out.close():
-            raise RuntimeError(out.geterror() or "closing the file failed")
+        _write_spec(oiio, temp, out_spec, new)
 
     def verify(temp):
         got, got_spec = _read_samples(oiio, os.fspath(temp))
