@@ -699,6 +699,20 @@ def _halo_pairs(guide, mask, r, F):
     return (rec, src) + F.pairs(rec, src) + (cheb,)
 
 
+def _accumulate(acc, g, x, here, there, c, o, tmp, mirrored):
+    """One offset's weights ``g`` of the texel pairs (c, o) into a band's sums: ``acc[here] += g``, or
+    ``g * x[o]`` where a plane ``x`` is gathered; with ``mirrored`` (an offset other than zero) the
+    pair's other texel too, ``acc[there] += g`` (or ``g * x[c]``). ``tmp`` takes the products."""
+    if x is None:
+        acc[here] += g
+        if mirrored:
+            acc[there] += g
+    else:
+        acc[here] += np.multiply(g, x[o], out=tmp)
+        if mirrored:
+            acc[there] += np.multiply(g, x[c], out=tmp)
+
+
 def _filter(F, halo, weights, gathers, radius=None, threads=1):
     """sum_j w_ij x_j for every texel i, every candidate weight and every value x.
 
@@ -742,14 +756,7 @@ def _filter(F, halo, weights, gathers, radius=None, threads=1):
                         if k not in sq:
                             sq[k] = np.multiply(ws[k], ws[k])
                         g = sq[k]
-                    if x is None:
-                        acc[lc] += g
-                        if dy or dx:
-                            acc[lo] += g
-                    else:
-                        acc[lc] += np.multiply(g, x[o], out=tmp)
-                        if dy or dx:
-                            acc[lo] += np.multiply(g, x[c], out=tmp)
+                    _accumulate(acc, g, x, lc, lo, c, o, tmp, dy or dx)
             out.append((a, loc))
         return out
 
@@ -837,15 +844,7 @@ def _candidates_and_bias(F, halo, weights, K, yp, vp, y, var, threads=1, bias=Tr
                     g = ws[k]
                     np.multiply(g, g, out=g2)
                     for j, (gg, x) in enumerate(((g, None), (g, yp), (g2, vp))):
-                        acc = loc[3 * k + j]
-                        if x is None:
-                            acc[lc] += gg
-                            if dy or dx:
-                                acc[lo] += gg
-                        else:
-                            acc[lc] += np.multiply(gg, x[o], out=tmp)
-                            if dy or dx:
-                                acc[lo] += np.multiply(gg, x[c], out=tmp)
+                        _accumulate(loc[3 * k + j], gg, x, lc, lo, c, o, tmp, dy or dx)
             out.append((a, loc, cache))
         return out
 
