@@ -53,6 +53,19 @@ def add_cube(bpy, name="Cube", size=2.0, location=(0, 0, 0)):
     return obj
 
 
+def run_bake(bpy, capfd):
+    """bpy.ops.object.mc_ao_bake() as a script calls it: (result, the error message or None, what it
+    printed: its reports)."""
+    capfd.readouterr()
+    result = error = None
+    try:
+        result = bpy.ops.object.mc_ao_bake()
+    except RuntimeError as exc:
+        error = str(exc)
+    out, _ = capfd.readouterr()
+    return result, error, out
+
+
 def select_only(bpy, *objects):
     for obj in bpy.context.view_layer.objects:
         if obj is not None:

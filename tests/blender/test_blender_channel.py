@@ -10,22 +10,11 @@ import sys
 import numpy as np
 import pytest
 
-from blender_helpers import ROOT, add_plane, pattern_image, select_only
+from blender_helpers import ROOT, add_plane, pattern_image, run_bake as run, select_only
 
 pytestmark = pytest.mark.blender
 
 SCRIPT = str(ROOT / "scripts" / "bake_ao.py")
-
-
-def run(bpy, capfd):
-    capfd.readouterr()
-    result = error = None
-    try:
-        result = bpy.ops.object.mc_ao_bake()
-    except RuntimeError as exc:
-        error = str(exc)
-    out, _ = capfd.readouterr()
-    return result, error, out
 
 
 def floor_under_lid(bpy, scene):

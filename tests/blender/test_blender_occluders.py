@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from blender_helpers import ROOT, add_cube, add_plane, clean_scene, image_ao, select_only
+from blender_helpers import ROOT, add_cube, add_plane, clean_scene, image_ao, run_bake, select_only
 
 pytestmark = pytest.mark.blender
 
@@ -24,13 +24,7 @@ DARK, OPEN = 0.93, 0.98  # a half under a box is below DARK, an open one above O
 
 def run(bpy, capfd):
     """bpy.ops.object.mc_ao_bake() as a script calls it: (result, error, reports)."""
-    capfd.readouterr()
-    result = error = None
-    try:
-        result = bpy.ops.object.mc_ao_bake()
-    except RuntimeError as exc:
-        error = str(exc)
-    out, _ = capfd.readouterr()
+    result, error, out = run_bake(bpy, capfd)
     reports = [tuple(line.split(": ", 1)) for line in out.splitlines() if line.startswith(("Info:", "Warning:",
                                                                                             "Error:"))]
     return result, error, reports

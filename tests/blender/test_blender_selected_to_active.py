@@ -14,20 +14,14 @@ import types
 import numpy as np
 import pytest
 
-from blender_helpers import add_cube, add_plane, image_ao, select_only
+from blender_helpers import add_cube, add_plane, image_ao, run_bake, select_only
 
 pytestmark = pytest.mark.blender
 
 
 def run(bpy, capfd):
     """bpy.ops.object.mc_ao_bake() as a script calls it: (result, error, reports)."""
-    capfd.readouterr()
-    result = error = None
-    try:
-        result = bpy.ops.object.mc_ao_bake()
-    except RuntimeError as exc:
-        error = str(exc)
-    out, _ = capfd.readouterr()
+    result, error, out = run_bake(bpy, capfd)
     reports = []
     for line in out.splitlines():
         kind, sep, message = line.partition(": ")
