@@ -10,6 +10,7 @@ from core import (Mesh, SettingsError, bake_ao, bake_maps, bake_udim, bake_udim_
                   bake_vertex_maps)
 from core import bake as bake_module, tilebaker, tracing
 from scenes import QUAD, box, plane
+from test_mc_ao_outputs import run as service_run  # the service run to its end, its outcomes
 from test_workers import dask_client  # noqa: F401  (the module's Dask cluster fixture)
 
 FIELDS = ("ao", "stderr", "samples", "mask", "bent", "miss", "raw_ao", "raw_stderr", "unit")
@@ -228,25 +229,6 @@ def arrays(mesh, name):
     return MeshArrays(name, mesh.positions, mesh.triangles.astype(np.int32),
                       None if mesh.uvs is None else mesh.uvs.astype(np.float32),
                       None if mesh.normals is None else mesh.normals.astype(np.float32))
-
-
-def service_run(plan):
-    from mc_ao import service
-
-    got = []
-
-    class Handler:
-        def on_outcome(self, outcome):
-            got.append(outcome)
-
-    bake = service.Bake(plan, threads=1)
-    bake.start()
-    try:
-        while not bake.handle(bake.next_message(), Handler()):
-            pass
-    finally:
-        bake.stop()
-    return got
 
 
 @pytest.mark.parametrize("extra", [dict(), dict(ground="AUTO", ignore_backfaces=True), dict(use_udim=True),
