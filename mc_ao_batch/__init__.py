@@ -3,8 +3,7 @@
 No bpy here: the batch side plans tasks, runs ``scripts/bake_ao.py`` once per .blend file in a process
 of its own (Blender, or a Python with the bpy module), and collects each run's ``--summary-json``. The
 engines are other people's: a pool of local processes (``concurrent.futures``), Dask
-(``distributed``), Flamenco and Open Job Description (``farm/``). See the README, "Baking an asset
-library".
+(``distributed``), Flamenco and Open Job Description (``farm/``). See docs/batch.md.
 
 - :mod:`mc_ao_batch.manifest`: reading and checking a manifest, planning its tasks.
 - :mod:`mc_ao_batch.task`: one task: skip when done, else run the bake and read its summary.

@@ -6,8 +6,8 @@
 
 Writes DIR/<blend file stem>/<object>_AO.<ext>, DIR/mc_ao_batch.json (every task's status, seconds,
 rays, files and error), a progress bar and a table; exits with 0 only when every task succeeded.
---runner flamenco and --runner openjd hand the same tasks to a render farm. See the README, "Baking
-an asset library", and mc_ao_batch/.
+--runner flamenco and --runner openjd hand the same tasks to a render farm. See docs/batch.md
+and mc_ao_batch/.
 """
 
 import sys

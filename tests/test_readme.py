@@ -1,5 +1,7 @@
-"""The README's promises: its Python example runs, its two commands are the ones CI and users run, and
-every command of its quick start runs on the shipped sample scenes and writes the files it names."""
+"""The README's and docs/' promises: the README is short and says what a newcomer needs first, its
+Python example runs, its two commands are the ones CI and users run, and every command line of the
+README and of docs/ runs on the shipped sample scenes and writes the files its text names (lines
+that need what this checkout does not bring are marked, and run where that is here)."""
 
 import importlib.util
 import os
@@ -15,11 +17,180 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
+DOCS = {path.name: path.read_text() for path in sorted((ROOT / "docs").glob("*.md"))}
+#: The README's most lines: what it is, requirements, the two commands, a line per feature, links.
+MOST_LINES = 300
+#: The section of the README that has a command for each feature.
+FEATURES = "Every feature, one command each"
+#: Features that must each have a section with a command there (a word of its title, lower case).
+FEATURE_WORDS = ("blender", "error map", "denois", "udim", "bent normals", "colour attributes",
+                 "selected to active", "thickness", "python", "library")
+#: What a command line may need that this checkout does not bring (its "# needs ..." comment says
+#: which), and how a line shows it needs it.
+NEEDS = {
+    "blender": re.compile(r"^blender "),
+    "Dask scheduler": re.compile(r"--scheduler "),
+    "Flamenco Manager": re.compile(r"--manager "),
+}
+#: Commands the test does not run, each with the reason.
+NOT_RUN = {
+    "bash scripts/bootstrap.sh && .venv/bin/python -m pytest":
+        "the test suite itself; .ci/run runs it (test_ci_runs_the_readme_test_command)",
+    '.venv/bin/python -m pytest -q -m "not blender and not slow"':
+        "a part of this test suite (test_quick_subset_is_a_part_of_the_suite)",
+}
+#: Commands not run, by a pattern: each with the reason.
+NOT_RUN_LIKE = {
+    re.compile(r" -m bench\b"): "a bench run (minutes to hours; bench/README.md)",
+}
+#: Sizes a command runs at here: its own when smaller (what a command does is kept; only its cost falls).
+SMALL = {"--resolution": 64, "--samples": 16}
+#: The manifest's sizes when the batch's commands run here.
+SMALL_MANIFEST = {"resolution": 32, "samples": 4}
+
+
+# --- reading Markdown ------------------------------------------------------------------------------
+
+def without_fences(text):
+    return re.sub(r"^```.*?^```", "", text, flags=re.S | re.M)
+
+
+def section(text, title, level=2):
+    """The text of ``text``'s section ``title`` (its heading line excluded), up to the next of its level."""
+    mark = "#" * level + " "
+    match = re.search(rf"^{mark}{re.escape(title)}\n(.*?)(?=^#{{1,{level}}} |\Z)", text, re.S | re.M)
+    assert match, f"no section {mark}{title}"
+    return match.group(1)
+
+
+#: How a command line starts (an indented block's other lines are code or formulas shown).
+COMMAND = re.compile(r"(\.venv[\w-]*/bin/|bash |blender )")
+
+
+def blocks(text):
+    """The command blocks of ``text``: each indented code block (fenced blocks are not commands) as a
+    list of (needs, line): its command lines (a trailing backslash continues a line) and what the
+    "# needs ..." comment right above a line says it needs ("" when none). Other comments are skipped."""
+    found, block, pending, needs = [], [], "", ""
+    for line in without_fences(text).splitlines() + ["(end)"]:
+        if not line.startswith("    "):
+            if line.strip() == "" and block and not pending:
+                continue  # a blank line inside an indented block is part of it only if more follows
+            if block:
+                found.append(block)
+            block, pending, needs = [], "", ""
+            continue
+        stripped = line.strip()
+        if stripped.startswith("#"):
+            needs = stripped[1:].strip()[len("needs "):] if stripped.startswith("# needs ") else ""
+            continue
+        line = pending + stripped
+        if line.endswith("\\"):
+            pending = line[:-1] + " "
+            continue
+        pending = ""
+        if COMMAND.match(line):  # not a snippet of Python or a formula
+            block.append((needs, line))
+        needs = ""
+    return found
+
+
+def command_lines(text):
+    return [line for block in blocks(text) for _, line in block]
+
+
+def need_of(needs):
+    """The NEEDS key that a "# needs ..." comment names, or None."""
+    needs = re.sub(r"^(a|an) ", "", needs.lower())
+    return next((key for key in NEEDS if needs.startswith(key.lower())), None)
+
+
+def features():
+    """(title, text) of each ### section of the README's feature list."""
+    parts = re.split(r"^### (.+)\n", section(README, FEATURES), flags=re.M)
+    return list(zip(parts[1::2], parts[2::2]))
+
+
+# --- the README's shape ---------------------------------------------------------------------------
+
+def test_readme_is_short():
+    assert len(README.splitlines()) <= MOST_LINES, f"README.md has {len(README.splitlines())} lines"
+
+
+def test_readme_says_what_it_needs_before_the_commands():
+    """Requirements come first: the Python, the disk for .venv, the suite's time and a quick subset."""
+    requirements = section(README, "Requirements")
+    assert README.index("## Requirements") < README.index("## Quick start") < README.index("## Run the tests")
+    for needed in ("Python 3.11", "GB", "minutes", "2 cores"):
+        assert needed in requirements, needed
+    assert [line for line in command_lines(requirements) if "pytest" in line], "no quick subset to run first"
+
+
+def test_quick_subset_is_a_part_of_the_suite():
+    """The quick subset's markers exist (pytest.ini) and it leaves Blender out: it runs without bpy."""
+    line = next(line for line in command_lines(section(README, "Requirements")) if "pytest" in line)
+    marks = set(re.findall(r"not (\w+)", line))
+    declared = set(re.findall(r"^\s+(\w+):", (ROOT / "pytest.ini").read_text(), re.M))
+    assert marks and marks <= declared and "blender" in marks, (marks, declared)
+
+
+def test_ci_runs_the_readme_test_command():
+    command = "bash scripts/bootstrap.sh && .venv/bin/python -m pytest"
+    assert command_lines(section(README, "Run the tests")) == [command]
+    assert command in (ROOT / ".ci" / "run").read_text()
+
+
+def test_readme_main_job_names_a_scene_that_exists():
+    (line,) = command_lines(section(README, "Quick start"))
+    assert line.startswith("bash scripts/bootstrap.sh && .venv/bin/python scripts/bake_ao.py sample_scenes/")
+    blend = re.search(r"sample_scenes/\S+\.blend", line).group(0)
+    assert (ROOT / blend).is_file()
+
+
+def test_every_feature_has_a_command():
+    titles = [title for title, _ in features()]
+    for word in FEATURE_WORDS:
+        assert any(word in title.lower() for title in titles), f"no feature section for {word!r}: {titles}"
+    assert all(command_lines(text) for _, text in features()), "a feature section without a command"
+
+
+def test_lines_that_need_more_are_marked():
+    """A command that needs a Blender on the PATH, a Dask scheduler or a Flamenco Manager says so in
+    a "# needs ..." comment, and every such comment names one of those."""
+    for name, text in [("README.md", README), *DOCS.items()]:
+        for block in blocks(text):
+            for needs, line in block:
+                wanted = [key for key, pattern in NEEDS.items() if pattern.search(line)]
+                assert wanted == ([need_of(needs)] if needs else []), f"{name}: {needs!r} for: {line}"
+
+
+def test_every_command_writes_into_a_folder_of_its_own():
+    """Feature commands write under out/<folder>/, each its own (a batch runner into another's folder
+    would find every task done and bake nothing); the quick start alone writes into out/."""
+    runners, bare = {}, []
+    for text in [README, *DOCS.values()]:
+        for line in command_lines(text):
+            args = shlex.split(line)
+            if "--output" not in args:
+                continue
+            folder = args[args.index("--output") + 1].rstrip("/")
+            if folder == "out":
+                bare.append(line)
+            if "scripts/bake_batch.py" in args and not folder.startswith("/shared"):
+                runner = args[args.index("--runner") + 1] if "--runner" in args else "local"
+                runners.setdefault(folder, set()).add(runner)
+    assert bare == command_lines(section(README, "Quick start")), bare
+    assert {folder: r for folder, r in runners.items() if len(r) > 1} == {}
+
+
+# --- the Python example ---------------------------------------------------------------------------
+
+def python_example():
+    return re.search(r"```python\n(.*?)```", README, re.S).group(1)
 
 
 def test_python_example_runs_and_writes_its_files(tmp_path):
-    code = re.search(r"```python\n(.*?)```", README, re.S).group(1)
-    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", python_example()], cwd=tmp_path, capture_output=True, text=True,
                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
     assert out.returncode == 0, out.stderr
     assert "Mrays/s" in out.stdout
@@ -30,10 +201,9 @@ def test_python_example_runs_as_a_file_from_the_repository_root(tmp_path):
     """As the README says to run it: saved as a file in the repository root (beside core/), run by the
     project's Python with nothing on PYTHONPATH. The root is mirrored in tmp_path (core/ linked) so
     that the example's out/ folder is not the checkout's."""
-    code = re.search(r"```python\n(.*?)```", README, re.S).group(1)
     how = README[: README.index("```python")].rstrip().rsplit("\n\n", 1)[1]
     assert "repository root" in how and ".venv/bin/python example.py" in how, how
-    (tmp_path / "example.py").write_text(code)
+    (tmp_path / "example.py").write_text(python_example())
     try:
         (tmp_path / "core").symlink_to(ROOT / "core", target_is_directory=True)
     except OSError:  # no symbolic links here: a copy of the same files
@@ -44,106 +214,26 @@ def test_python_example_runs_as_a_file_from_the_repository_root(tmp_path):
     assert "Mrays/s" in out.stdout and (tmp_path / "out" / "ground_AO.exr").is_file()
 
 
-def test_sample_manifest_plans_every_sample_scene(tmp_path):
-    """sample_scenes/library.toml, the batch's sample manifest, passes the batch's own checks (every
-    setting against scripts/bake_ao.py's parser) and says how to run it."""
-    from mc_ao_batch import manifest
-
-    path = ROOT / "sample_scenes" / "library.toml"
-    tasks = manifest.plan(path, tmp_path / "out")
-    assert {Path(t.blend).name for t in tasks} == {"suzanne.blend", "room.blend", "analytic.blend", "rock.blend", "udim.blend"}
-    assert all(Path(t.blend).is_file() for t in tasks)
-    assert "scripts/bake_batch.py sample_scenes/library.toml --output" in path.read_text()
-
-
-def test_ci_runs_the_readme_test_command():
-    command = "bash scripts/bootstrap.sh && .venv/bin/python -m pytest"
-    assert command in README
-    assert command in (ROOT / ".ci" / "run").read_text()
-
-
-def test_readme_main_job_names_a_scene_that_exists():
-    line = next(l for l in README.splitlines() if "scripts/bake_ao.py sample_scenes/" in l)
-    blend = re.search(r"sample_scenes/\S+\.blend", line).group(0)
-    assert (ROOT / blend).is_file()
-
-
-# --- The quick start, run: every command of it, on the shipped sample scenes, at a small size ------
-
-#: Quick-start commands the test does not run, each with the reason. Every other command line of the
-#: quick start runs (test_quick_start_runs); this list must name only commands the README has.
-NOT_RUN = {
-    "bash scripts/bootstrap.sh && .venv/bin/python -m pytest":
-        "the test suite itself; .ci/run runs it (test_ci_runs_the_readme_test_command)",
-}
-#: Sizes a command runs at here: its own when smaller (what a command does is kept; only its cost falls).
-SMALL = {"--resolution": 64, "--samples": 16}
-#: The manifest's sizes when the batch's command runs here.
-SMALL_MANIFEST = {"resolution": 32, "samples": 4}
-
-
-def section(title, level=2):
-    """The text of the README's section ``title`` (its heading line excluded), up to the next of its level."""
-    mark = "#" * level + " "
-    match = re.search(rf"^{mark}{re.escape(title)}\n(.*?)(?=^#{{1,{level}}} |\Z)", README, re.S | re.M)
-    assert match, f"the README has no section {mark}{title}"
-    return match.group(1)
-
-
-def command_lines(text):
-    """The command lines of ``text``: its indented code blocks' lines (a trailing backslash continues
-    a line), without comments; fenced blocks (the Python example, JSON, TOML) are not commands."""
-    text = re.sub(r"^```.*?^```", "", text, flags=re.S | re.M)
-    lines, pending = [], ""
-    for line in text.splitlines():
-        if not line.startswith("    ") or line.strip().startswith("#"):
-            continue
-        line = pending + line.strip()
-        if line.endswith("\\"):
-            pending = line[:-1] + " "
-            continue
-        pending = ""
-        lines.append(line)
-    return lines
-
-
-def quick_start():
-    """(title, text, commands) of each part of the quick start: its opening, then each ### section."""
-    text = section("Quick start")
-    parts = re.split(r"^### (.+)\n", text, flags=re.M)
-    named = [("(opening)", parts[0])] + list(zip(parts[1::2], parts[2::2]))
-    return [(title, body, command_lines(body)) for title, body in named]
-
-
-QUICK_START = quick_start()
-
-
-def test_quick_start_has_a_command_for_each_feature():
-    titles = " / ".join(title for title, _, commands in QUICK_START if commands)
-    for feature in ("Blender", "error map", "UDIM", "Bent normals", "Colour attributes", "Selected to Active",
-                    "library", "Python", "tests"):
-        assert feature.lower() in titles.lower(), f"no quick start for {feature!r}: {titles}"
-    assert all(commands for _, _, commands in QUICK_START), "a quick-start section without a command"
-    every = [c for _, _, commands in QUICK_START for c in commands]
-    assert set(NOT_RUN) <= set(every), "NOT_RUN names a command the quick start no longer has"
-
+# --- running the commands -------------------------------------------------------------------------
 
 def test_commands_name_files_that_exist():
-    """No placeholder in any command of the README (``scene.blend``, ``library.toml``): every .blend,
-    .toml, .py, .sh, .yaml and .js path a command line names is a file of the checkout, or one an
-    earlier command writes (under out/)."""
-    for line in command_lines(README):
-        for word in shlex.split(line):
-            word = word.split("file://", 1)[-1]
-            if re.search(r"\.(blend|toml|py|sh|yaml|js)$", word) and not word.startswith(("out/", "/")):
-                assert (ROOT / word).is_file(), f"{word!r} in: {line}"
+    """No placeholder in any command (``scene.blend``, ``library.toml``): every .blend, .toml, .py,
+    .sh, .yaml and .js path a command line names is a file of the checkout, or one an earlier command
+    writes (under out/)."""
+    for name, text in [("README.md", README), *DOCS.items()]:
+        for line in command_lines(text):
+            for word in shlex.split(line):
+                word = word.split("file://", 1)[-1]
+                if re.search(r"\.(blend|toml|py|sh|yaml|js)$", word) and not word.startswith(("out/", "/")):
+                    assert (ROOT / word).is_file(), f"{name}: {word!r} in: {line}"
 
 
 def shrink(args):
-    """``args`` with every size in SMALL lowered to at most its value there."""
+    """``args`` with every size in SMALL lowered to at most its value there. A bake into another image's
+    channel (--into) keeps its resolution: that image's size decides it."""
     args = list(args)
     for option, most in SMALL.items():
-        if option in args:
+        if option in args and not (option == "--resolution" and "--into" in args):
             i = args.index(option) + 1
             args[i] = str(min(int(args[i]), most))
     return args
@@ -157,10 +247,12 @@ def mirror(root):
     for path in ROOT.iterdir():
         if path.name not in skip and not path.name.startswith(".venv"):
             (root / path.name).symlink_to(path, target_is_directory=path.is_dir())
+    (root / ".venv").mkdir()
+    (root / ".venv" / "bin").symlink_to(Path(sys.executable).parent, target_is_directory=True)
     scenes = root / "sample_scenes"
     scenes.mkdir()
     for path in (ROOT / "sample_scenes").iterdir():
-        if path.suffix == ".blend" or path.suffix == ".py":
+        if path.suffix in (".blend", ".py"):
             (scenes / path.name).symlink_to(path)
     manifest = (ROOT / "sample_scenes" / "library.toml").read_text()
     for key, value in SMALL_MANIFEST.items():
@@ -170,11 +262,16 @@ def mirror(root):
 
 
 def run_command(line, cwd):
-    """Run a README command line in ``cwd`` with this Python for .venv/bin/python; its sizes shrunk."""
+    """Run a command line in ``cwd``: this Python for .venv/bin/python (.venv/bin/ is this Python's
+    folder in the mirror), its sizes shrunk."""
     line = line.removeprefix("bash scripts/bootstrap.sh && ")  # .venv is the environment running this
     args = shlex.split(line)
-    assert args[0] == ".venv/bin/python", f"a quick-start command that is not .venv/bin/python: {line}"
-    args = [sys.executable, *shrink(args[1:])]
+    if args[0] == ".venv/bin/python":
+        args = [sys.executable, *shrink(args[1:])]
+    elif args[0] == "blender":
+        args = [shutil.which("blender"), *shrink(args[1:])]
+    else:
+        assert args[0].startswith(".venv/bin/"), f"a command that is not the project's: {line}"
     if "scripts/build_extension.py" in args:  # its zips into the mirror's dist/, its wheels where they live
         args += ["--output-dir", str(cwd / "dist"), "--wheel-dir", str(ROOT / "wheels")]
     # PWD as a shell sets it: Blender takes its working folder from $PWD before getcwd() (bpy 4.2 saves
@@ -183,27 +280,82 @@ def run_command(line, cwd):
     return subprocess.run(args, cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
 
 
+def not_run(line):
+    """Why the test does not run ``line`` (NOT_RUN, NOT_RUN_LIKE), or None."""
+    return NOT_RUN.get(line) or next((why for pattern, why in NOT_RUN_LIKE.items() if pattern.search(line)), None)
+
+
+def runnable(needs):
+    """Why a block whose lines need ``needs`` cannot run here, or None."""
+    need = need_of(needs)
+    if need == "blender":
+        return None if shutil.which("blender") else "no blender on the PATH"
+    return f"needs a {need}" if need else None
+
+
+def all_blocks():
+    """(id, file, block, text whose out/ and dist/ files it must write) of every command block: the
+    README's by section (the quick start and each feature), docs/ by page."""
+    found = [("README: Quick start", "README.md", block, section(README, "Quick start"))
+             for block in blocks(section(README, "Quick start"))]
+    for title, text in features():
+        found += [(f"README: {title}", "README.md", block, text) for block in blocks(text)]
+    for name, text in DOCS.items():
+        found += [(f"{name} {i}: {block[0][1][:70]}", name, block, "") for i, block in enumerate(blocks(text))]
+    return found
+
+
+BLOCKS = all_blocks()
+
+
 @pytest.mark.blender
-@pytest.mark.parametrize("title", [title for title, _, _ in QUICK_START])
-def test_quick_start_runs(title, tmp_path):
-    """Each quick-start command runs on a fresh layout of the checkout (at most 64 x 64 and 16
-    samples), exits with 0, warns of nothing, and writes every out/ and dist/ file its text names."""
+@pytest.mark.parametrize("ident", [ident for ident, *_ in BLOCKS])
+def test_command_block_runs(ident, tmp_path):
+    """Each command block runs in a fresh layout of the checkout (at most 64 x 64 and 16 samples), its
+    lines in order; each exits with 0 and warns of nothing, and a README section's out/ and dist/
+    files that its text names are written. Lines that need what is not here are skipped, saying so."""
     if importlib.util.find_spec("bpy") is None:
-        pytest.skip("the quick start bakes .blend files: it needs the bpy module")
-    _, text, commands = next(part for part in QUICK_START if part[0] == title)
+        pytest.skip("the commands bake .blend files: they need the bpy module")
+    _, _, block, text = next(entry for entry in BLOCKS if entry[0] == ident)
+    lines = [(needs, line) for needs, line in block if not_run(line) is None]
+    if not lines:
+        pytest.skip("; ".join(not_run(line) for _, line in block))
+    skipped = [f"{line} ({runnable(needs)})" for needs, line in lines if runnable(needs)]
+    if len(skipped) == len(lines):
+        pytest.skip("; ".join(skipped))
     mirror(tmp_path)
-    for line in commands:
-        if line in NOT_RUN:
+    for needs, line in lines:
+        if runnable(needs):
             continue
         proc = run_command(line, tmp_path)
         assert proc.returncode == 0, f"{line}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
         assert "warning" not in (proc.stdout + proc.stderr).lower(), f"{line}\n{proc.stdout}\n{proc.stderr}"
+    for _, line in lines:  # a batch runner bakes into its own folder (one into another's bakes nothing)
+        args = shlex.split(line)
+        if "scripts/bake_batch.py" in args and args[args.index("--output") + 1].startswith("out/"):
+            if (args[args.index("--runner") + 1] if "--runner" in args else "local") in ("local", "dask", "openjd"):
+                folder = tmp_path / args[args.index("--output") + 1]
+                assert (folder / "suzanne" / "Suzanne_AO.png").is_file(), f"{line}: baked nothing into {folder}"
     named = re.findall(r"`((?:out|dist)/[^`<>*\s]+)`", text)
     if "linux_x64" not in f"{sys.platform}_{platform.machine()}".replace("x86_64", "x64"):
         named = [name for name in named if not name.startswith("dist/")]  # the README names Linux's zip
     for name in named:
         if not name.endswith("/"):
-            assert (tmp_path / name).is_file(), f"{title}: the README says {name} is written"
+            assert (tmp_path / name).is_file(), f"{ident}: the text says {name} is written"
+
+
+# --- docs/ ----------------------------------------------------------------------------------------
+
+def test_sample_manifest_plans_every_sample_scene(tmp_path):
+    """sample_scenes/library.toml, the batch's sample manifest, passes the batch's own checks (every
+    setting against scripts/bake_ao.py's parser) and says how to run it."""
+    from mc_ao_batch import manifest
+
+    path = ROOT / "sample_scenes" / "library.toml"
+    tasks = manifest.plan(path, tmp_path / "out")
+    assert {Path(t.blend).name for t in tasks} == {"suzanne.blend", "room.blend", "analytic.blend", "rock.blend", "udim.blend"}
+    assert all(Path(t.blend).is_file() for t in tasks)
+    assert "scripts/bake_batch.py sample_scenes/library.toml --output" in path.read_text()
 
 
 def table_values(text):
@@ -212,13 +364,13 @@ def table_values(text):
 
 
 def test_performance_figures_are_the_bench_tables():
-    """What the README says about performance is the bench's current table (bench/README.md), value
-    for value, so that a new bench run that changes a figure shows where the README must follow."""
+    """What docs/performance.md says is the bench's current table (bench/README.md), value for value,
+    so that a new bench run that changes a figure shows where the page must follow."""
     bench = (ROOT / "bench" / "README.md").read_text()
     current = table_values(re.search(r"^## Where mc_ao stands\n(.*?)(?=^## |\Z)", bench, re.S | re.M).group(1))
-    ours = [v for v in table_values(section("Performance")) if v not in ("value", "---")]
+    ours = [v for v in table_values(DOCS["performance.md"]) if v not in ("value", "---")]
     assert len(ours) >= 10
-    assert [v for v in ours if v not in current] == [], "README figures that the bench's table does not have"
+    assert [v for v in ours if v not in current] == [], "figures that the bench's table does not have"
 
 
 def anchor(heading, seen):
@@ -229,58 +381,47 @@ def anchor(heading, seen):
     return f"{slug}-{n}" if n else slug
 
 
-def test_links_within_the_readme_lead_somewhere():
+def anchors(path):
     seen = {}
-    anchors = {anchor(h, seen) for h in re.findall(r"^#+ (.+)$", re.sub(r"^```.*?^```", "", README, flags=re.S | re.M), re.M)}
-    links = re.findall(r"\]\(#([^)]+)\)", README)
-    assert links and [link for link in links if link not in anchors] == []
-    for target in re.findall(r"\]\(([^)#:]+)\)", README):  # pictures and files
-        assert (ROOT / target).exists(), target
+    return {anchor(h, seen) for h in re.findall(r"^#+ (.+)$", without_fences(path.read_text()), re.M)}
 
 
-def reference_commands():
-    """The command lines after the quick start that need nothing but this checkout: no Blender
-    executable, farm manager, scheduler or shared folder (those are the farm's, shown as examples)."""
-    rest = README[README.index("\n## Sample scenes\n"):]
-    return [line for line in command_lines(rest)
-            if line.startswith(".venv/bin/python scripts/") and not re.search(r"https?://|tcp://|/shared/", line)]
+@pytest.mark.parametrize("page", ["README.md", *[f"docs/{name}" for name in DOCS]])
+def test_links_lead_somewhere(page):
+    """Every link of the README and of docs/ leads to a file of the checkout, and an anchor to a
+    heading of its page."""
+    path = ROOT / page
+    for target in re.findall(r"\]\(([^)\s]+)\)", path.read_text()):
+        if re.match(r"[a-z]+://", target):
+            continue
+        file, _, fragment = target.partition("#")
+        linked = (path.parent / file).resolve() if file else path
+        assert linked.exists(), f"{page}: {target}"
+        if fragment and linked.suffix == ".md":
+            assert fragment in anchors(linked), f"{page}: {target}"
 
 
-def test_reference_has_local_commands():
-    assert len(reference_commands()) >= 3, reference_commands()
-
-
-@pytest.mark.blender
-@pytest.mark.parametrize("line", reference_commands())
-def test_reference_command_runs(line, tmp_path):
-    """The reference's own commands (the script, the batch's local, Dask and Open Job Description
-    runners) run as the quick start's do, small."""
-    if importlib.util.find_spec("bpy") is None:
-        pytest.skip("the commands bake .blend files: they need the bpy module")
-    if "--runner dask" in line and importlib.util.find_spec("distributed") is None:
-        pytest.skip("--runner dask needs distributed (requirements-batch.txt)")
-    mirror(tmp_path)
-    proc = run_command(line, tmp_path)
-    assert proc.returncode == 0, f"{line}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-    assert "warning" not in (proc.stdout + proc.stderr).lower(), f"{line}\n{proc.stdout}\n{proc.stderr}"
+def test_docs_are_linked_from_the_readme():
+    linked = set(re.findall(r"\]\(docs/([\w.-]+\.md)", README))
+    assert set(DOCS) - linked == set(), "pages of docs/ that the README does not link"
 
 
 def test_manifest_shown_is_the_sample_manifest():
-    """The README's TOML is sample_scenes/library.toml as shipped (below its opening comment)."""
-    shown = re.search(r"```toml\n(.*?)```", README, re.S).group(1)
+    """docs/batch.md's TOML is sample_scenes/library.toml as shipped (below its opening comment)."""
+    shown = re.search(r"```toml\n(.*?)```", DOCS["batch.md"], re.S).group(1)
     shipped = (ROOT / "sample_scenes" / "library.toml").read_text()
     assert shown.strip() == shipped[shipped.index("[defaults]"):].strip()
 
 
 @pytest.mark.blender
 def test_summary_json_example_has_the_scripts_fields(tmp_path):
-    """The README's --summary-json example has the fields the script writes, for the command it names."""
+    """docs/script.md's --summary-json example has the fields the script writes, for the command it names."""
     if importlib.util.find_spec("bpy") is None:
         pytest.skip("the command bakes a .blend file: it needs the bpy module")
     import json
 
-    shown = json.loads(re.search(r"```json\n(.*?)```", README, re.S).group(1))
-    text = section("The background script")
+    text = DOCS["script.md"]
+    shown = json.loads(re.search(r"```json\n(.*?)```", text, re.S).group(1))
     line = next(l for l in command_lines(text) if l.startswith(".venv/bin/python"))
     assert "the second command" in text
     mirror(tmp_path)
@@ -292,6 +433,8 @@ def test_summary_json_example_has_the_scripts_fields(tmp_path):
     assert [sorted(o) for o in shown["objects"]] == [sorted(o) for o in written["objects"]]
     assert [o["object"] for o in shown["objects"]] == [o["object"] for o in written["objects"]]
     assert shown["blend"] == written["blend"] and shown["settings"]["samples"] == int(line.split("--samples ")[1].split()[0])
+    assert [Path(f).relative_to("/abs") for o in shown["objects"] for f in o["files"]] == [
+        Path(f).relative_to(tmp_path.resolve()) for o in written["objects"] for f in o["files"]]
 
 
 def script_options(script):
@@ -301,16 +444,17 @@ def script_options(script):
     return set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", out.stdout))
 
 
-def test_options_the_readme_names_exist():
-    """Every option of the Settings table and of the README's bake_ao.py and bake_batch.py command
-    lines is one the script has (its --help lists it)."""
+def test_options_the_docs_name_exist():
+    """Every option of docs/settings.md's table and of every bake_ao.py and bake_batch.py command line
+    is one the script has (its --help lists it)."""
     if importlib.util.find_spec("bpy") is None:
         pytest.skip("the scripts' --help runs under the bpy module's Python")
-    named = {"bake_ao.py": set(re.findall(r"`(--[a-z][a-z0-9-]*)", section("Settings"))), "bake_batch.py": set()}
-    for line in command_lines(README):
-        for script in named:
-            if f"scripts/{script}" in line:
-                after = line.split(f"scripts/{script}", 1)[1].split(" -- ", 1)[-1]
-                named[script] |= set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", after))
+    named = {"bake_ao.py": set(re.findall(r"`(--[a-z][a-z0-9-]*)", DOCS["settings.md"])), "bake_batch.py": set()}
+    for text in [README, *DOCS.values()]:
+        for line in command_lines(text):
+            for script in named:
+                if f"scripts/{script}" in line:
+                    after = line.split(f"scripts/{script}", 1)[1].split(" -- ", 1)[-1]
+                    named[script] |= set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", after))
     for script, options in named.items():
         assert options and options - script_options(script) == set(), script
