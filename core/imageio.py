@@ -46,7 +46,7 @@ import pathlib
 import re
 import numpy as np
 
-from ._version import __version__
+from ._version import OUTPUT_VERSION, __version__
 from .atomicfile import PendingFile, backup_of, io_error, remove_quietly, roll_back
 from .errors import ChannelError, McAoError, SettingsError, ImageWriteError
 
@@ -168,7 +168,8 @@ def _check_pixels(pixels, bits):
 
 
 def _check_metadata(metadata):
-    """Return a plain dict of str -> str/int/float/bool, with mc_ao:version filled in."""
+    """Return a plain dict of str -> str/int/float/bool, with mc_ao:version and mc_ao:output_version
+    (:data:`core._version.OUTPUT_VERSION`) filled in."""
     out = {}
     for key, value in (metadata or {}).items():
         if not isinstance(key, str) or not _KEY_RE.match(key):
@@ -184,6 +185,7 @@ def _check_metadata(metadata):
             )
         out[key] = value
     out.setdefault("version", __version__)
+    out.setdefault("output_version", OUTPUT_VERSION)
     return out
 
 
@@ -329,7 +331,8 @@ def write_image(path, pixels, *, bits=None, metadata=None, overwrite=True, make_
         (no sRGB encoding) and refuse NaN; float formats store values as they are.
     metadata : dict of str -> str, int, float or bool, optional
         Written as ``mc_ao:<key>`` attributes and as a JSON record (see the module docstring for
-        which formats keep what). ``version`` is filled in with the package version if absent.
+        which formats keep what). ``version`` is filled in with the package version if absent, ``output_version`` with
+        :data:`core._version.OUTPUT_VERSION`.
         ``Software`` is always ``"mc_ao <version>"``.
     overwrite : bool
         If False and ``path`` exists, raise :class:`ImageWriteError` (errno EEXIST) and write nothing.

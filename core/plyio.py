@@ -29,7 +29,7 @@ import os
 
 import numpy as np
 
-from ._version import __version__
+from ._version import OUTPUT_VERSION, __version__
 from .atomicfile import write_file
 from .errors import ImageWriteError, McAoError, SettingsError
 
@@ -68,6 +68,7 @@ def write_ply(path, positions, face_sizes, face_vertices, ao, metadata=None):
         raise SettingsError("face_vertices index vertices that do not exist")
     record = dict(metadata or {})
     record.setdefault("version", __version__)
+    record.setdefault("output_version", OUTPUT_VERSION)
     text = json.dumps({"mc_ao": record}, sort_keys=True)
     if "\n" in text:
         raise SettingsError("metadata must fit on one line")

@@ -44,7 +44,8 @@ baked; 130 on Ctrl-C.
 --summary-json PATH writes, at the end of every run (also one that exits with 1, 2 or 130), and
 atomically, a JSON record of it:
 
-    {"mc_ao": version, "blend": the .blend path as given, "exit_code": int, "error": str or null,
+    {"mc_ao": version, "output_version": the version of what the bake writes (each file records it too),
+     "blend": the .blend path as given, "exit_code": int, "error": str or null,
      "settings": {the bake's settings, as written into each file's metadata; {} when the
                   arguments were refused},
      "objects": [{"object": name, "status": "ok" or "failed", "seconds": the bake's wall time,
@@ -301,10 +302,11 @@ class Summary:
         if self.path is None:
             return True
         atomicfile = corelink.load("atomicfile")
-        __version__ = corelink.load("_version").__version__
+        version = corelink.load("_version")
 
         record = {
-            "mc_ao": __version__, "blend": self.blend, "exit_code": exit_code,
+            "mc_ao": version.__version__, "output_version": version.OUTPUT_VERSION, "blend": self.blend,
+            "exit_code": exit_code,
             "error": self.error if exit_code else None,
             "settings": self.settings, "objects": self.objects,
         }

@@ -13,7 +13,8 @@ from pathlib import Path
 from core._version import __version__
 
 from .manifest import BATCH_SUMMARY, ManifestError, plan
-from .report import Progress, counts, output_problem, table, write_json_atomic
+from .report import Progress, counts, older_text, output_problem, table, write_json_atomic
+from .task import why_not_done
 
 EPILOG = """\
 engines:
@@ -46,6 +47,9 @@ def make_parser():
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="dask: connect to this scheduler (tcp://host:8786) instead of starting a local cluster")
     p.add_argument("--force", action="store_true", help="bake every task, also those already done")
+    p.add_argument("--rebake-older", action="store_true",
+                   help="bake again the tasks whose files an older output version of mc_ao made (default: report "
+                        "them and keep them; rebake_older = true in the manifest does the same per entry)")
     p.add_argument("--blender", default="auto", metavar="PATH|auto|bpy",
                    help="the Blender executable that bakes; auto (default): $BLENDER or blender on the "
                         "PATH, else the bpy module of this Python; bpy: the bpy module")
@@ -91,6 +95,9 @@ def main(argv=None):
         if not 1 <= args.entry <= len(tasks):
             return _fail(f"--entry {args.entry}: the manifest has entries 1 to {len(tasks)}")
         tasks = [tasks[args.entry - 1]]
+    if args.rebake_older:
+        for task in tasks:
+            task.rebake_older = True
 
     summary_path = args.summary
     if summary_path is None and args.entry is None:
@@ -160,7 +167,10 @@ def main(argv=None):
     if records:
         print(table(records))
     c = counts(records)
-    line = f"bake_batch: {c['ok']} baked, {c['skipped']} already done, {c['failed']} failed of {len(tasks)} in {seconds:.1f} s"
+    line = f"bake_batch: {c['ok']} baked, {c['skipped']} already done, "
+    if c["older"]:
+        line += f"{older_text(c['older'])}, "
+    line += f"{c['failed']} failed of {len(tasks)} in {seconds:.1f} s"
     if code == 130:
         line += "; interrupted"
     if summary_path is not None:
@@ -188,7 +198,9 @@ def _flamenco(args, tasks, inputs):
     job, skipped = flamenco_job(tasks, output=args.output.resolve(), name=name, mc_ao_root=args.farm_root,
                                 force=args.force)
     todo = len(tasks) - len(skipped)
-    print(f"bake_batch: {todo} tasks to bake, {len(skipped)} already done")
+    older = sum(1 for t in skipped if why_not_done(t) is not None)  # skipped, not done: an older version's, kept
+    print(f"bake_batch: {todo} tasks to bake, {len(skipped) - older} already done"
+          + (f", {older_text(older)}" if older else ""))
     if args.job_file:
         if not _write_json(args.job_file, job, inputs, "the Flamenco job"):
             return 1

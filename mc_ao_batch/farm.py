@@ -21,17 +21,19 @@ import urllib.request
 from core._version import __version__
 
 from . import ROOT
-from .task import why_not_done
+from .task import keeps_older, why_not_done
 
 JOB_TYPE = "mc-ao-bake"  # Flamenco names a job type after its script: mc_ao_bake.js
 OPENJD_TEMPLATE = ROOT / "farm" / "openjd" / "mc_ao_bake.yaml"
 
 
 def flamenco_job(tasks, *, output, name, mc_ao_root=None, force=False, priority=50):
-    """A Flamenco ``SubmittedJob`` (a dict) for the tasks not done yet; ``(job, skipped tasks)``."""
+    """A Flamenco ``SubmittedJob`` (a dict) for the tasks not done yet; ``(job, skipped tasks)``: those
+    done and those an older output version made and that are kept (see :func:`mc_ao_batch.task.keeps_older`)."""
     todo, skipped = [], []
     for task in tasks:
-        (todo if force or why_not_done(task) is not None else skipped).append(task)
+        # an older output version's complete bake is kept unless the task asks to bake it again
+        (todo if force or (why_not_done(task) is not None and keeps_older(task) is None) else skipped).append(task)
     plan = [{"name": t.name, "blend": t.blend, "args": t.args, "summary": os.path.basename(t.summary),
              "threads": t.threads} for t in todo]
     job = {

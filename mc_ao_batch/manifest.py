@@ -11,6 +11,8 @@ A manifest::
     blend = "props/chair.blend"   # relative to the manifest's folder
     objects = ["Chair"]           # optional: default, as bake_ao.py (every mesh with a UV map ...)
     samples = 256                 # overrides [defaults] for this file
+    rebake_older = true           # optional (also in [defaults]): bake it again when its files were
+                                  # made by an older output version (default: report them and keep them)
 
 Every setting is checked against the bake script's own argument parser (mc_ao.cli) before anything runs,
 so an unknown name or a bad value stops the whole batch with exit status 2 and a message naming the
@@ -32,7 +34,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from core._version import __version__
+from core._version import OUTPUT_VERSION
 from core.filenames import safe_file_stem
 
 
@@ -48,6 +50,11 @@ _NO_EFFECT = {"threads", "processes", "quiet", "output", "summary_json", "blend"
 _ADDED_AT_DEFAULT = {"denoise": False, "occluder_collections": [], "exclude_collections": [], "only_local": False,
                      "ground": False, "ground_height": None, "quantity": ["ao"], "channel": "none", "into": ""}
 _ENTRY_KEYS = {"blend"}
+# Keys of [defaults] and [[bake]] entries that are the batch's own, not bake_ao.py settings: never on
+# the bake's command line, never in a fingerprint.
+_BATCH_KEYS = {"rebake_older"}
+#: The mc_ao version whose fingerprints had no output version in them: output version 1's.
+_LEGACY_MC_AO = "0.1.0"
 # bake_ao.py options a batch task cannot take, and why (one --save path for every task
 # would have each task replace the last one's file).
 _NOT_IN_BATCH = {
@@ -74,11 +81,19 @@ class Task:
     threads: int = 0         # --threads for the bake; 0 = all cores of the machine that runs it
     fingerprint: str = ""    # hash of everything that decides the output's bytes
     objects: list = field(default_factory=list)  # the objects the entry names ([] = bake_ao's default)
+    # [output version, fingerprint] of the same task under every older output version, newest first:
+    # where a library made by an older version keeps its summary.
+    older: list = field(default_factory=list)
+    rebake_older: bool = False  # bake again what an older output version made (else keep it)
 
     @property
     def summary(self):
         """Where bake_ao.py writes this task's --summary-json: its name carries the fingerprint."""
-        return os.path.join(self.output, f"mc_ao-{self.fingerprint[:16]}.json")
+        return self.summary_of(self.fingerprint)
+
+    def summary_of(self, fingerprint):
+        """The summary's path of this task under ``fingerprint`` (its own, or an older output version's)."""
+        return os.path.join(self.output, f"mc_ao-{fingerprint[:16]}.json")
 
     @property
     def log(self):
@@ -201,6 +216,12 @@ def _check_keys(where, table, spec, allowed_extra):
         )
 
 
+def _check_batch_keys(where, table):
+    value = table.get("rebake_older", False)
+    if not isinstance(value, bool):
+        raise ManifestError(f"{where}: rebake_older must be true or false, not {value!r}")
+
+
 def load(path):
     """Read a manifest file: ``(defaults, entries)`` as plain dicts, checked for shape only."""
     path = Path(path)
@@ -238,10 +259,14 @@ def _blend_identity(path):
     return {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
 
 
-def _fingerprint(blend_given, identity, namespace):
+def _fingerprint(blend_given, identity, namespace, output_version=OUTPUT_VERSION):
+    """The hash of everything that decides a task's output: the .blend file, the settings and the output
+    version (``output_version`` 1: the record of the versions before output versions, which named the
+    mc_ao version instead, so that their libraries are found)."""
     settings = {k: v for k, v in vars(namespace).items()
                 if k not in _NO_EFFECT and not (k in _ADDED_AT_DEFAULT and v == _ADDED_AT_DEFAULT[k])}
-    record = {"mc_ao": __version__, "blend": blend_given, "file": identity, "settings": settings}
+    made_by = {"mc_ao": _LEGACY_MC_AO} if output_version == 1 else {"output_version": int(output_version)}
+    record = dict(made_by, blend=blend_given, file=identity, settings=settings)
     text = json.dumps(record, sort_keys=True, default=lambda v: list(v) if isinstance(v, tuple) else str(v))
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -277,7 +302,8 @@ def plan(manifest_path, output, *, threads=0):
     output = Path(output).resolve()
 
     where = f"{manifest_path}: [defaults]"
-    _check_keys(where, defaults, spec, set())
+    _check_keys(where, defaults, spec, _BATCH_KEYS)
+    _check_batch_keys(where, defaults)
     if "objects" in defaults:
         raise ManifestError(f"{where}: objects belong to a [[bake]] entry, not to [defaults]")
 
@@ -288,7 +314,8 @@ def plan(manifest_path, output, *, threads=0):
         if not isinstance(blend, str) or not blend.strip():
             raise ManifestError(f"{where}: blend = \"path/to/file.blend\" is required")
         where += f" ({blend})"
-        _check_keys(where, entry, spec, _ENTRY_KEYS)
+        _check_keys(where, entry, spec, _ENTRY_KEYS | _BATCH_KEYS)
+        _check_batch_keys(where, entry)
         resolved = os.path.normpath(base / os.path.expanduser(blend))
         if resolved in seen:
             raise ManifestError(
@@ -306,6 +333,7 @@ def plan(manifest_path, output, *, threads=0):
         where = f"{manifest_path}: [[bake]] entry {n} ({blend})"
         settings = dict(defaults)
         settings.update({k: v for k, v in entry.items() if k not in _ENTRY_KEYS})
+        rebake_older = settings.pop("rebake_older", False)
         args = []
         for key in sorted(settings):
             args += _value_args(where, key, settings[key], spec[key])
@@ -326,6 +354,10 @@ def plan(manifest_path, output, *, threads=0):
             index=n, name=names[blend], blend=blend_path, blend_given=blend,
             output=str(output / names[blend]), args=args, threads=task_threads, objects=objects,
         )
-        task.fingerprint = _fingerprint(Path(blend).as_posix(), _blend_identity(blend_path), namespace)
+        identity = _blend_identity(blend_path)
+        task.fingerprint = _fingerprint(Path(blend).as_posix(), identity, namespace)
+        task.older = [[v, _fingerprint(Path(blend).as_posix(), identity, namespace, v)]
+                      for v in range(OUTPUT_VERSION - 1, 0, -1)]
+        task.rebake_older = rebake_older
         tasks.append(task)
     return tasks

@@ -14,6 +14,19 @@ from mc_ao.terminal import escape
 STATUS_WORDS = {"ok": "ok", "skipped": "skipped (done)", "failed": "FAILED"}
 
 
+def status_word(record):
+    """How a task's record reads: a kept task made by an older output version says so."""
+    if record["status"] == "skipped" and record.get("older"):
+        return f"kept (made by output version {record['older']})"
+    return STATUS_WORDS[record["status"]]
+
+
+def older_text(n):
+    """The batch's line about tasks an older output version made: kept, and how to bake them again."""
+    return (f"{n} task{'s' if n != 1 else ''} made by an older version (kept; --rebake-older or "
+            "rebake_older = true bakes them again)")
+
+
 class Progress:
     """Redrawn on the runner's events (a task started or ended), never on a clock.
 
@@ -73,7 +86,7 @@ class Progress:
         self.failed += record["status"] == "failed"
         self.skipped += record["status"] == "skipped"
         if not self.quiet or record["status"] == "failed":
-            text = f"[{self.done}/{self.total}] {escape(record['task'])}: {STATUS_WORDS[record['status']]}"
+            text = f"[{self.done}/{self.total}] {escape(record['task'])}: {status_word(record)}"
             if record["status"] != "skipped":
                 text += f", {len(record['objects'])} objects, {record['seconds']:.1f} s"
             if record["error"]:
@@ -96,7 +109,7 @@ def table(records):
     header = ("#", "asset", "status", "objects", "seconds", "Mrays/s", "files")
     rows = []
     for r in sorted(records, key=lambda r: r["index"]):
-        rows.append((str(r["index"]), escape(r["task"]), STATUS_WORDS[r["status"]], str(len(r["objects"])),
+        rows.append((str(r["index"]), escape(r["task"]), status_word(r), str(len(r["objects"])),
                      f"{r['seconds']:.1f}", f"{_mrays(r):.2f}" if r["status"] == "ok" else "-",
                      str(len(r["files"]))))
     widths = [max(len(row[i]) for row in rows + [header]) for i in range(len(header))]
@@ -112,9 +125,10 @@ def table(records):
 
 
 def counts(records):
-    out = {"ok": 0, "skipped": 0, "failed": 0}
+    """Tasks baked, done already, made by an older output version and kept, failed."""
+    out = {"ok": 0, "skipped": 0, "older": 0, "failed": 0}
     for r in records:
-        out[r["status"]] += 1
+        out["older" if r["status"] == "skipped" and r.get("older") else r["status"]] += 1
     return out
 
 

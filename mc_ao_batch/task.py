@@ -6,13 +6,16 @@ module. Its summary, at a path that carries the task's fingerprint (:attr:`Task.
 later run reads back to decide whether the task is done:
 
 - the summary's run ended with exit status 0 and every object in it has status "ok";
-- it was made by this version of mc_ao;
+- it was made by this output version (:data:`core._version.OUTPUT_VERSION`);
 - every file it lists exists and carries, in its metadata, the settings the summary records (all but
-  the choice of objects, such as match_suffix, which no file carries).
+  the choice of objects, such as match_suffix, which no file carries) and the same output version.
 
 The fingerprint covers the .blend file (path, size, modification time), every setting that changes
-the output and the mc_ao version, so a changed asset or setting bakes again and everything else is
-skipped; ``force`` bakes regardless.
+the output and the output version, so a changed asset or setting bakes again and everything else is
+skipped; ``force`` bakes regardless. A task whose output an older output version made, complete by
+the same rules under that version's fingerprint, is *kept* (reported as made by an older version,
+its files untouched) unless ``rebake_older`` (``--rebake-older``, or ``rebake_older = true`` in the
+manifest) asks for it to be baked again.
 
 :func:`run_task` returns a plain dict (the batch summary's record of the task) and raises nothing for
 a failed bake: a crash or a broken file fails its own task only.
@@ -31,7 +34,7 @@ import sys
 import time
 from importlib.util import find_spec
 
-from core._version import __version__
+from core._version import OUTPUT_VERSION
 from mc_ao.terminal import escape
 
 from . import BAKE_SCRIPT
@@ -101,9 +104,40 @@ def _same(a, b):
     return a == b
 
 
+def output_version_of(record):
+    """The output version a summary or a file's metadata records (1: made before output versions)."""
+    try:
+        return int(record.get("output_version", 1))
+    except (TypeError, ValueError):
+        return None
+
+
 def why_not_done(task):
     """None when the task's output is complete and current; else why it must be baked (a short text)."""
-    summary = read_summary(task.summary)
+    return _why_not_complete(task, task.summary, OUTPUT_VERSION)
+
+
+def made_by_older(task):
+    """(output version, summary path) of the newest older output version whose bake of ``task`` is
+    complete (its summary, every file it lists, their settings and output version), or None."""
+    for version, fingerprint in task.older:
+        path = task.summary_of(fingerprint)
+        if os.path.isfile(path) and _why_not_complete(task, path, version) is None:
+            return version, path
+    return None
+
+
+def keeps_older(task, rebake_older=False):
+    """(output version, summary path) when ``task`` is not done but an older output version's complete
+    bake of it is kept (neither ``rebake_older`` nor the task's own ``rebake_older`` asks for a new
+    one); else None."""
+    if rebake_older or task.rebake_older:
+        return None
+    return made_by_older(task)
+
+
+def _why_not_complete(task, summary_path, version):
+    summary = read_summary(summary_path)
     if summary is None:
         return "not baked with these settings yet"
     if summary.get("exit_code") != 0 or summary.get("error"):
@@ -111,8 +145,8 @@ def why_not_done(task):
     objects = summary.get("objects") or []
     if not objects or any(o.get("status") != "ok" for o in objects):
         return "the last bake did not finish every object"
-    if summary.get("mc_ao") != __version__:
-        return f"baked by mc_ao {summary.get('mc_ao')}, this is {__version__}"
+    if output_version_of(summary) != version:
+        return f"made by output version {summary.get('output_version', 1)}, this is {version}"
     settings = summary.get("settings") or {}
     from core.imageio import ImageReadError, read_image
 
@@ -139,6 +173,8 @@ def why_not_done(task):
                 return f"{path} has no mc_ao metadata to check"
             if metadata.get("object", obj.get("object")) != obj.get("object"):
                 return f"{path} holds the bake of {metadata['object']!r}, not of {obj.get('object')!r}"
+            if output_version_of(metadata) != version:
+                return f"{path} was made by output version {metadata.get('output_version', 1)}, not {version}"
             for key, value in settings.items():
                 if key in _RUN_ONLY_SETTINGS:
                     continue
@@ -223,8 +259,11 @@ def _remove_stale(task):
                 pass
 
 
-def run_task(task, *, force=False, blender=None, on_start=None, on_process=None, env=None):
+def run_task(task, *, force=False, rebake_older=False, blender=None, on_start=None, on_process=None, env=None):
     """Bake one task unless it is done; return its record (a dict). Never raises for a failed bake.
+
+    A task whose output an older output version made is kept (a "skipped" record with ``older``: that
+    version) unless ``rebake_older`` or the task's own ``rebake_older``; ``force`` bakes every task.
 
     ``task``: a :class:`Task` or its dict. ``blender``: see :func:`find_baker`. ``on_start(info)``
     is called once the bake process runs, with the task's name, this process's pid and the bake's
@@ -239,6 +278,12 @@ def run_task(task, *, force=False, blender=None, on_start=None, on_process=None,
         if reason is None:
             record = _record(task, "skipped", exit_code=0, attempts=0)
             _from_summary(record, read_summary(task.summary), task)
+            record["seconds"] = time.perf_counter() - t0
+            return record
+        kept = keeps_older(task, rebake_older)
+        if kept is not None:
+            record = _record(task, "skipped", exit_code=0, attempts=0, older=kept[0], summary=kept[1])
+            _from_summary(record, read_summary(kept[1]), task)
             record["seconds"] = time.perf_counter() - t0
             return record
     try:

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from core import imageio
+from core._version import OUTPUT_VERSION
 from mc_ao_batch import cli
 from mc_ao_batch.manifest import plan
 from mc_ao_batch.task import why_not_done
@@ -35,7 +36,7 @@ def test_local_runner_bakes_every_asset_and_the_broken_one_fails_alone(local_run
     out, proc = local_run
     assert proc.returncode == 1, proc.stderr
     data, tasks = summary(out)
-    assert data["exit_code"] == 1 and data["counts"] == {"ok": 5, "skipped": 0, "failed": 1}
+    assert data["exit_code"] == 1 and data["counts"] == {"ok": 5, "skipped": 0, "older": 0, "failed": 1}
     broken = tasks["broken.blend"]
     assert broken["status"] == "failed" and broken["objects"] == [] and broken["files"] == []
     assert "cannot open" in broken["error"] and "broken.blend" in broken["error"]
@@ -79,7 +80,7 @@ def test_dask_runner_gives_byte_identical_files(library, local_run, tmp_path):
     proc = batch(library, "--output", tmp_path, "--runner", "dask", "--workers", 2, "--blender", "bpy")
     assert proc.returncode == 1, proc.stderr
     data, tasks = summary(tmp_path)
-    assert data["runner"] == "dask" and data["counts"] == {"ok": 5, "skipped": 0, "failed": 1}
+    assert data["runner"] == "dask" and data["counts"] == {"ok": 5, "skipped": 0, "older": 0, "failed": 1}
     assert "cannot open" in tasks["broken.blend"]["error"]
     assert len({t["pid"] for t in data["tasks"]}) == 2  # two worker processes did the work
     local, dask = images(out), images(tmp_path)
@@ -95,7 +96,7 @@ def test_second_run_skips_every_finished_task(library, local_run, tmp_path):
     proc = batch(library, "--output", copy, "--workers", 2, "--blender", "bpy", "--verbose")
     assert proc.returncode == 1, proc.stderr
     data, tasks = summary(copy)
-    assert data["counts"] == {"ok": 0, "skipped": 5, "failed": 1}
+    assert data["counts"] == {"ok": 0, "skipped": 5, "older": 0, "failed": 1}
     # only the broken asset was started again; nothing was rewritten
     started = [m.group("task") for m in map(STARTED.match, proc.stdout.splitlines()) if m]
     assert started == ["broken"]
@@ -143,12 +144,17 @@ def test_a_task_bakes_again_when_its_asset_settings_or_files_change(library, loc
     shutil.copyfile(work / "torus" / "Ground_AO.exr", bulb / "Ground_AO.exr")
     why = reasons()["more/lamp.blend"]
     assert why.startswith(f"{bulb / 'Ground_AO.exr'}: ") and why.endswith(", the bake recorded 16")
-    # the version that baked it
+    # the output version that made it (its summary says another): not this version's bake
     record = next(bulb.glob("mc_ao-*.json"))
     data = json.loads(record.read_text())
+    data["output_version"] = 1
+    record.write_text(json.dumps(data))
+    assert reasons()["more/lamp.blend"] == f"made by output version 1, this is {OUTPUT_VERSION}"
+    # the mc_ao version alone decides nothing: a release that writes the same values finds it done
+    data["output_version"] = OUTPUT_VERSION
     data["mc_ao"] = "0.0.1"
     record.write_text(json.dumps(data))
-    assert reasons()["more/lamp.blend"].startswith("baked by mc_ao 0.0.1")
+    assert reasons()["more/lamp.blend"].startswith(f"{bulb / 'Ground_AO.exr'}: ")
 
 
 def test_force_bakes_again_and_gives_the_same_bytes(library, local_run, tmp_path):
@@ -246,7 +252,7 @@ def test_killing_a_dask_worker_mid_run_still_completes_the_batch(library, local_
     assert killed is not None, "".join(lines)
     assert proc.returncode == 1, "".join(lines) + stderr
     data, tasks = summary(tmp_path)
-    assert data["counts"] == {"ok": 5, "skipped": 0, "failed": 1}
+    assert data["counts"] == {"ok": 5, "skipped": 0, "older": 0, "failed": 1}
     record = next(t for t in data["tasks"] if t["task"] == killed[0])
     assert record["status"] == "ok" and record["attempts"] == 2 and record["pid"] != killed[1]
     # the retried task's bake ran twice; only the second one counts
@@ -376,7 +382,7 @@ def test_dask_runner_uses_a_running_scheduler(library, local_run, tmp_path):
             worker_pids = set(client.run(os.getpid).values())
     assert proc.returncode == 1, proc.stdout + proc.stderr
     data, tasks = summary(tmp_path)
-    assert data["runner"] == "dask" and data["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
+    assert data["runner"] == "dask" and data["counts"] == {"ok": 1, "skipped": 0, "older": 0, "failed": 1}
     assert "cannot open" in tasks["broken.blend"]["error"]
     assert {t["pid"] for t in data["tasks"]} <= worker_pids  # run by that cluster's worker
     assert images(tmp_path / "chair") == images(out / "chair")

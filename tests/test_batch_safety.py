@@ -157,7 +157,7 @@ def test_an_interrupted_batch_records_the_tasks_that_finished(library, tmp_path)
     tasks = {t["blend"]: t for t in data["tasks"]}
     assert tasks["chair.blend"]["status"] == "ok" and tasks["chair.blend"]["files"]
     assert tasks["torus.blend"]["status"] == "failed" and "interrupted" in tasks["torus.blend"]["error"]
-    assert data["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
+    assert data["counts"] == {"ok": 1, "skipped": 0, "older": 0, "failed": 1}
 
 
 def test_a_bad_manifest_value_is_a_manifest_error_naming_the_entry(tmp_path):

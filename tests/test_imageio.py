@@ -12,7 +12,7 @@ import pytest
 OpenImageIO = pytest.importorskip("OpenImageIO")
 
 from core import imageio  # noqa: E402
-from core._version import __version__  # noqa: E402
+from core._version import OUTPUT_VERSION, __version__  # noqa: E402
 from core.errors import ImageWriteError, McAoError, SettingsError  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -31,6 +31,7 @@ METADATA = {
     "sample_source": "sobol-owen",
     "max_distance": 0.1,  # not a float32 value
     "version": "9.9.9",
+    "output_version": 7,
 }
 
 
@@ -205,7 +206,7 @@ def test_metadata_special_values(tmp_path):
     for ext in (".exr", ".png", ".tif"):
         _, meta = imageio.read_image(imageio.write_image(tmp_path / f"s{ext}", ramp(), metadata=md))
         assert meta == {"max_distance": float("inf"), "adaptive": True, "note": "h\u00e9llo", "n": 7,
-                        "x": 0.5, "version": __version__}
+                        "x": 0.5, "version": __version__, "output_version": OUTPUT_VERSION}
         assert type(meta["n"]) is int and type(meta["adaptive"]) is bool
 
 
@@ -213,7 +214,8 @@ def test_metadata_special_values(tmp_path):
 def test_software_and_version_are_written(tmp_path, ext):
     path = imageio.write_image(tmp_path / f"v{ext}", ramp())
     _, meta = imageio.read_image(path)
-    assert meta == {"version": __version__}
+    assert meta == {"version": __version__, "output_version": OUTPUT_VERSION}
+    assert type(meta["output_version"]) is int
     inp = OpenImageIO.ImageInput.open(str(path))
     try:
         assert inp.spec().get_string_attribute("Software") == f"mc_ao {__version__}"
@@ -569,14 +571,15 @@ def test_write_ao_alone(tmp_path):
     assert out == tmp_path / "ao.png"
     y, meta = imageio.read_image(out)
     assert np.all(np.abs(y - r.ao) <= error_bound(16, r.ao))
-    assert meta == {"samples": 64, "seed": 4, "content": "ao", "version": __version__}
+    assert meta == {"samples": 64, "seed": 4, "content": "ao", "version": __version__,
+                    "output_version": OUTPUT_VERSION}
     assert files_in(tmp_path) == ["ao.png"]
 
 
 def test_write_ao_without_metadata_attribute(tmp_path):
     r = types.SimpleNamespace(ao=np.zeros((2, 2), np.float32))
     _, meta = imageio.read_image(imageio.write_ao(tmp_path / "ao.exr", r))
-    assert meta == {"content": "ao", "version": __version__}
+    assert meta == {"content": "ao", "version": __version__, "output_version": OUTPUT_VERSION}
 
 
 def test_write_ao_with_stderr(tmp_path):

@@ -7,11 +7,12 @@
 Each case runs in a fresh interpreter (``--child``), which builds its meshes from numpy arrays (no
 Blender), starts the worker pool, reads the workers' resident size once they are idle (an
 interpreter with numpy, embreex and the core: their baseline), then bakes while a thread polls the
-resident size (VmRSS) of itself and of every worker every 20 ms: the largest sum is the peak of all
-processes together. After the bake each process's own peak (VmHWM, read from /proc/PID/status) is
-taken, and the bake's ``report['worker_memory']`` where the core gives one. RSS counts shared
-library pages once per process (tens of MB each), so the sum slightly overstates what the machine
-gives up.
+resident size (VmRSS) and the proportional set size (PSS, /proc/PID/smaps_rollup) of itself and of
+every worker every 20 ms: the largest sum of PSS is the peak of all processes together, the figure
+the targets are read against (PSS shares each page among the processes that map it, so shared
+libraries and shared arrays count once; RSS counts them once per process and overstates the sum).
+After the bake each process's own peak (VmHWM, read from /proc/PID/status) is taken, and the bake's
+``report['worker_memory']`` where the core gives one.
 
 Cases (all core.bake_ao, 1 thread per worker):
 
@@ -60,6 +61,19 @@ def status(pid="self", field="VmRSS"):
     return None
 
 
+def pss(pid="self"):
+    """The proportional set size of a process in bytes (/proc/PID/smaps_rollup; None if the process is
+    gone or the kernel has no smaps_rollup)."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as f:
+            for line in f:
+                if line.startswith("Pss:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
 def grid(n, uvs, size=4.0, amplitude=0.25):
     """An n x n quad grid (2 n^2 triangles) over [-size/2, size/2]^2 displaced by smooth bumps:
     positions (V, 3) float64, triangles (T, 3) int64, and per-corner UVs (T, 3, 2) or None. Built
@@ -98,24 +112,31 @@ def grid_side(triangles):
 
 
 class Poller:
-    """The resident sizes of this process and ``pids`` every ``step`` seconds: the largest sum, and
-    each process's largest."""
+    """The resident sizes (RSS) and proportional set sizes (PSS) of this process and ``pids`` every
+    ``step`` seconds: the largest sum of each, and each process's largest."""
 
     def __init__(self, pids, step=0.02):
         self.pids, self.step = ["self"] + list(pids), step
         self.peak_total, self.peak = 0, {p: 0 for p in self.pids}
+        self.peak_pss_total, self.peak_pss = 0, {p: 0 for p in self.pids}
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self.run, daemon=True)
 
     def run(self):
         while not self.stop.is_set():
-            total = 0
-            for p in self.pids:
-                v = status(p) or 0
-                total += v
-                self.peak[p] = max(self.peak[p], v)
-            self.peak_total = max(self.peak_total, total)
+            self.sample()
             time.sleep(self.step)
+
+    def sample(self):
+        total = total_pss = 0
+        for p in self.pids:
+            v, q = status(p) or 0, pss(p) or 0
+            total += v
+            total_pss += q
+            self.peak[p] = max(self.peak[p], v)
+            self.peak_pss[p] = max(self.peak_pss[p], q)
+        self.peak_total = max(self.peak_total, total)
+        self.peak_pss_total = max(self.peak_pss_total, total_pss)
 
     def __enter__(self):
         self.thread.start()
@@ -193,6 +214,8 @@ def child(case, triangles, workers, res, spp):
     out["seconds"] = time.perf_counter() - t0
     out["peak_total_polled"] = poll.peak_total
     out["peak_polled"] = [poll.peak[p] for p in poll.pids]
+    out["peak_total_pss"] = poll.peak_pss_total
+    out["peak_pss"] = [poll.peak_pss[p] for p in poll.pids]
     out["parent_hwm"] = status("self", "VmHWM")
     out["worker_hwm"] = [status(p, "VmHWM") for p in pids]
     out["covered_texels"] = int(r.mask.sum())
@@ -227,6 +250,7 @@ def figures(rows):
             continue
         T = r["triangles"]
         d = r["derived"] = {"peak_total_gb": r["peak_total_polled"] / 1e9,
+                            "peak_total_pss_gb": r["peak_total_pss"] / 1e9 if "peak_total_pss" in r else None,
                             "parent_peak_gb": r["parent_hwm"] / 1e9,
                             "parent_peak_beyond_inputs_per_triangle": (r["parent_hwm"] - r["parent_rss_before"]) / T}
         if r["workers"] > 1:
@@ -259,7 +283,10 @@ def table(rows, stem):
                 f"worker{'s' if r['workers'] > 1 else ''} ({'in this process' if r['workers'] == 1 else 'processes'}),"
                 f" {r['seconds']:.1f} s")
         lines.append(head)
-        lines.append(f"    all processes together (polled): {d['peak_total_gb']:.2f} GB; parent peak "
+        if d.get("peak_total_pss_gb") is not None:
+            lines.append(f"    all processes together, summed PSS (polled): {d['peak_total_pss_gb']:.2f} GB; per process "
+                         + ", ".join(f"{b / 1e9:.2f}" for b in r["peak_pss"]) + " GB (parent first)")
+        lines.append(f"    all processes together, summed RSS (polled): {d['peak_total_gb']:.2f} GB; parent peak "
                      f"{d['parent_peak_gb']:.2f} GB ({d['parent_peak_beyond_inputs_per_triangle']:.0f} B/tri beyond "
                      f"its inputs, {r['input_bytes'] / r['triangles']:.0f} B/tri of inputs)")
         if r["workers"] > 1:
@@ -302,9 +329,9 @@ def main(argv=None):
     print(text)
     record = {"started": started, "machine": machine(), "git": git_state(), "load_before": load_before,
               "load_after": load_average(),
-              "targets": {"highpoly 10M, 256^2 x 16, 2 workers": "all processes < 4 GB",
+              "targets": {"highpoly 10M, 256^2 x 16, 2 workers": "summed PSS of all processes < 3 GB",
                           "target 2M, 1024^2 x 16": "each worker: Embree + 150 B/tri",
-                          "8192^2 x 4": "parent + every worker < 2 GB"},
+                          "8192^2 x 4": "summed PSS of the parent and every worker < 1.5 GB"},
               "rows": rows}
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / f"{args.stem}.json").write_text(json.dumps(record, indent=1) + "\n")

@@ -329,7 +329,7 @@ def test_a_bad_uv_map_fails_that_object_and_the_others_are_baked(blends, tmp_pat
 
 def test_the_summary_records_the_settings_every_file_carries(blends, tmp_path):
     from core import imageio
-    from core._version import __version__
+    from core._version import OUTPUT_VERSION, __version__
 
     summary = tmp_path / "summary.json"
     out = tmp_path / "out"
@@ -338,8 +338,9 @@ def test_the_summary_records_the_settings_every_file_carries(blends, tmp_path):
                       "--uv-map", "UVMap", *FAST)
     assert proc.returncode == 0, proc.stderr
     record = json.loads(summary.read_text())
-    assert list(record) == ["mc_ao", "blend", "exit_code", "error", "settings", "objects"]
+    assert list(record) == ["mc_ao", "output_version", "blend", "exit_code", "error", "settings", "objects"]
     assert record["mc_ao"] == __version__ and record["exit_code"] == 0 and record["error"] is None
+    assert record["output_version"] == OUTPUT_VERSION
     assert record["blend"] == str(blends["unselected"])
     assert record["settings"] == {
         "samples": 4, "min_samples": 4, "target_error": 0.05, "sample_source": "sobol", "distribution": "cosine",
@@ -357,4 +358,5 @@ def test_the_summary_records_the_settings_every_file_carries(blends, tmp_path):
             metadata = imageio.read_image(path)[1]
             assert {k: metadata[k] for k in record["settings"]} == record["settings"], path
             assert metadata["object"] == obj["object"]
+            assert metadata["output_version"] == OUTPUT_VERSION, path
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "summary.json"]
