@@ -135,14 +135,6 @@ def _dask_task(task, force, blender):
     return run_task(task, force=force, blender=blender, on_start=on_start, env=bake_environment())
 
 
-def _suspicious_counts(dask_scheduler, keys):
-    out = {}
-    for key in keys:
-        ts = dask_scheduler.tasks.get(key)
-        out[key] = ts.suspicious if ts is not None else 0
-    return out
-
-
 def start_local_cluster(workers):
     """A ``LocalCluster`` of ``workers`` single-threaded worker processes, listening on 127.0.0.1 only."""
     import dask
@@ -166,14 +158,17 @@ def run_dask(tasks, *, workers, progress, scheduler=None, force=False, blender=N
             "--runner dask needs the distributed package: pip install -r requirements-batch.txt"
         ) from None
 
+    from .daskboot import suspicious_counts, submittable
+
     cluster = None if scheduler else start_local_cluster(workers)
     client = Client(scheduler or cluster, timeout="60s")
+    boot = submittable()  # imports the batch's code on the worker, or fails the task saying why
     events = queue.Queue()
     try:
         client.subscribe_topic(TOPIC, lambda event: events.put(("started", event[1])))
         futures = {}
         for task in tasks:
-            future = client.submit(_dask_task, task.to_dict(), force, blender, pure=False,
+            future = client.submit(boot, task.to_dict(), force, blender, pure=False,
                                    key=f"mc_ao-bake-{task.index}-{os.urandom(4).hex()}")
             futures[future.key] = (future, task)
             future.add_done_callback(lambda f: events.put(("done", f.key)))
@@ -200,13 +195,15 @@ def run_dask(tasks, *, workers, progress, scheduler=None, force=False, blender=N
                 record = _record(task, "failed", error="cancelled")
             except Exception as exc:
                 record = _bug_record(task, exc)
+            if "cannot_import" in record:  # the worker could not import the batch's code (mc_ao_batch.daskboot)
+                record = _record(task, "failed", error=record["cannot_import"])
             records[payload] = record
             progress.finished(record)
         try:
             # the scheduler knows how many workers died running each task
-            deaths = client.run_on_scheduler(_suspicious_counts, keys=list(futures))
+            deaths = client.run_on_scheduler(suspicious_counts, keys=list(futures))
             tries = {key: n + 1 for key, n in deaths.items()}
-        except Exception:  # a scheduler that cannot import mc_ao_batch: count the starts seen
+        except Exception:  # a scheduler that cannot tell: count the starts seen
             tries = {key: max(1, starts.get(futures[key][1].index, 0)) for key in futures}
         for key, record in records.items():
             record["attempts"] = tries.get(key, 1) if record["status"] != "skipped" else 0
