@@ -529,13 +529,13 @@ def check_save(args, input_blend):
     save = getattr(args, "save", None)
     if save is None:
         return
-    if input_blend and os.path.abspath(save) == os.path.abspath(input_blend) and not args.overwrite_input:
+    from . import filecheck
+
+    if input_blend and filecheck.same_file(save, input_blend) and not args.overwrite_input:
         raise UsageError(f"--save {str(save)!r} is the .blend file being baked; give another path, or "
                          "--overwrite-input to replace it")
     if save.is_dir():
         raise UsageError(f"--save {str(save)!r} is a folder; give a .blend file path")
-    from . import filecheck
-
     inputs = [] if args.overwrite_input else [(input_blend, "the .blend file being baked")]
     problem = filecheck.output_problem(save, "--save", inputs=inputs,
                                        outputs=[(args.summary_json, "the --summary-json file")],

@@ -16,7 +16,8 @@ import json
 import os
 import struct
 
-__all__ = ["file_kind", "folder_problem", "output_problem", "replace_problem", "check_blend_complete", "same_file", "BlendFileError",
+__all__ = ["file_kind", "folder_problem", "output_problem", "replace_problem", "check_blend_complete", "same_file",
+           "file_key", "BlendFileError",
            "KIND_OF_EXTENSION"]
 
 _ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
@@ -35,11 +36,29 @@ class BlendFileError(ValueError):
 
 
 def same_file(a, b):
-    """True when the paths name one file (the same inode, or the same absolute path when either is missing)."""
+    """True when the paths reach one file, compared by the file they reach, never by how they are spelt.
+
+    Two existing files: the same device and inode (a symlink, a hard link, ``..``, a folder reached
+    through a link, another case on a case-insensitive disk are all seen through). A path where
+    nothing is yet (an output about to be written): its folder's real path plus its name, compared
+    without case (Windows' and macOS's disks ignore it; two outputs that differ only in case are one
+    file there, so they are refused everywhere). An existing file and a path where nothing is are two
+    files.
+    """
+    return file_key(a) == file_key(b)
+
+
+def file_key(path):
+    """What identifies the file ``path`` reaches (see :func:`same_file`): ``("file", device, inode)``
+    where a file is, else ``("path", its folder's real path joined with its name, case-folded)``
+    (links resolved as far as they exist)."""
     try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return os.path.normcase(os.path.abspath(a)) == os.path.normcase(os.path.abspath(b))
+        st = os.stat(path)
+        return ("file", st.st_dev, st.st_ino)
+    except (OSError, ValueError):
+        pass
+    folder, name = os.path.split(os.path.abspath(os.fspath(path)))
+    return ("path", os.path.normcase(os.path.join(os.path.realpath(folder), name)).casefold())
 
 
 def file_kind(path):

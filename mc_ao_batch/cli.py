@@ -33,6 +33,45 @@ def default_workers():
     return max(1, min(os.cpu_count() or 1, 4))
 
 
+#: Bytes of one bake process before its bake (the bpy 5.0 module with a small scene open: 421 MiB
+#: resident, measured), what each task at a time costs beyond its bake's worker processes.
+BYTES_PER_BAKE_PROCESS = 450 << 20
+
+
+def batch_share(asked, cores=None, memory=None):
+    """(tasks at a time, worker processes of each task's bake, why fewer than asked or None) on this
+    machine: at most a task a core, each bake's processes sharing the cores its task has (tasks x
+    processes x threads never above the cores: each process bakes on one thread), and every task's
+    Blender and its bake's worker processes within 80% of the memory (core.cost's process model; what
+    a scene adds on top is each bake's own to check, as it does for its processes)."""
+    from core import cost
+    from core.workers import cpu_count, memory_limit
+
+    cores = cpu_count() if cores is None else cores
+    memory = memory_limit() if memory is None else memory
+    tasks = max(1, min(int(asked), cores))
+    processes = max(1, cores // tasks)
+    why = []
+    if tasks < asked:
+        why.append(f"{cores} cores")
+    if memory is not None:
+        budget = 0.8 * memory
+
+        def fits(n, k):
+            return n * (BYTES_PER_BAKE_PROCESS + (k * cost.process_bytes(0) if k > 1 else 0)) <= budget
+
+        fit = tasks
+        while fit > 1 and not fits(fit, 1):
+            fit -= 1
+        each = max(1, cores // fit)
+        while each > 1 and not fits(fit, each):
+            each -= 1
+        if fit < tasks or each < processes:
+            why.append(f"memory for {fit} x {each} processes ({memory / 2 ** 30:.1f} GiB available)")
+        tasks, processes = fit, each
+    return tasks, processes, ", ".join(why) or None
+
+
 def make_parser():
     p = argparse.ArgumentParser(
         prog="bake_batch.py", description="Bake AO of every .blend file in a manifest, one process per file.",
@@ -43,7 +82,8 @@ def make_parser():
                    help="output folder; each .blend file bakes into OUTPUT/<file stem>/")
     p.add_argument("--runner", choices=("local", "dask", "flamenco", "openjd"), default="local")
     p.add_argument("--workers", "-j", type=int, default=None,
-                   help=f"tasks at a time (local, dask); default: the cores, at most 4 (here {default_workers()})")
+                   help=f"tasks at a time (local, dask); default: the cores, at most 4 (here {default_workers()}); "
+                        "at most the cores and what the memory holds, each task's bake on its share of the cores")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="dask: connect to this scheduler (tcp://host:8786) instead of starting a local cluster")
     p.add_argument("--force", action="store_true", help="bake every task, also those already done")
@@ -84,11 +124,16 @@ def main(argv=None):
     if args.scheduler and args.runner != "dask":
         return _fail("--scheduler is for --runner dask")
     workers = args.workers or default_workers()
-    threads = 0
+    threads, processes, clamped = 0, 0, None
     if args.runner == "local" or (args.runner == "dask" and not args.scheduler):
-        threads = max(1, (os.cpu_count() or 1) // workers)
+        # this machine runs the tasks: each gets its share of the cores, one thread a process
+        asked = workers
+        workers, processes, why = batch_share(asked)
+        threads = 1
+        if why is not None:
+            clamped = f"--workers {asked}: {workers} tasks at a time ({why})"
     try:
-        tasks = plan(args.manifest, args.output, threads=threads)
+        tasks = plan(args.manifest, args.output, threads=threads, processes=processes)
     except ManifestError as exc:
         return _fail(str(exc))
     if args.entry is not None:
@@ -114,6 +159,8 @@ def main(argv=None):
     if args.runner == "openjd":
         return _openjd(args, tasks, inputs)
 
+    if clamped is not None:
+        print(f"bake_batch: {clamped}", file=sys.stderr, flush=True)
     blender = _blender_option(args.blender)
     if args.runner == "local" or not args.scheduler:
         from .task import NoBakerError, find_baker
@@ -124,7 +171,8 @@ def main(argv=None):
             return _fail(str(exc))
         if not args.quiet:
             how = f"Blender {exe}" if kind == "blender" else f"the bpy module of {exe}"
-            print(f"bake_batch: {len(tasks)} tasks, {workers} at a time ({args.runner}), baked by {how}",
+            each = f", {processes} processes each" if processes > 1 else ""
+            print(f"bake_batch: {len(tasks)} tasks, {workers} at a time{each} ({args.runner}), baked by {how}",
                   flush=True)
 
     progress = Progress(len(tasks), verbose=args.verbose, quiet=args.quiet)
@@ -157,7 +205,8 @@ def main(argv=None):
         try:
             write_json_atomic(summary_path, {
                 "mc_ao": __version__, "manifest": str(args.manifest.resolve()), "output": str(args.output.resolve()),
-                "runner": args.runner, "workers": workers, "exit_code": code, "seconds": seconds,
+                "runner": args.runner, "workers": workers, **({"workers_asked": args.workers} if clamped else {}),
+                "exit_code": code, "seconds": seconds,
                 "counts": counts(records), "tasks": sorted(records, key=lambda r: r["index"]),
             }, inputs, replaces=("an mc_ao batch summary",))
         except OSError as exc:

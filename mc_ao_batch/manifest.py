@@ -36,6 +36,7 @@ from pathlib import Path
 
 from core._version import OUTPUT_VERSION
 from core.filenames import safe_file_stem
+from mc_ao.filecheck import file_key
 
 
 #: The batch summary's file name in the output folder; no task folder may take it.
@@ -79,6 +80,7 @@ class Task:
     output: str              # absolute path of OUTPUT/<name>
     args: list               # bake_ao.py settings (no --output, --summary-json, --quiet, --threads)
     threads: int = 0         # --threads for the bake; 0 = all cores of the machine that runs it
+    processes: int = 0       # --processes for the bake; 0 = the bake's own choice (the entry's, or from the cores)
     fingerprint: str = ""    # hash of everything that decides the output's bytes
     objects: list = field(default_factory=list)  # the objects the entry names ([] = bake_ao's default)
     # [output version, fingerprint] of the same task under every older output version, newest first:
@@ -259,6 +261,16 @@ def _blend_identity(path):
     return {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
 
 
+def _into_file(base, into):
+    """The Into file of an entry as a full path, when ``into`` names a file relative to the manifest's folder
+    ``base`` (as ``blend`` does) or an absolute one; None when it names no file there (a Blender image of the
+    .blend file, which the bake looks up by name)."""
+    if not isinstance(into, str) or not into:
+        return None
+    path = os.path.normpath(base / os.path.expanduser(into))
+    return path if os.path.isfile(path) else None
+
+
 def _fingerprint(blend_given, identity, namespace, output_version=OUTPUT_VERSION):
     """The hash of everything that decides a task's output: the .blend file, the settings and the output
     version (``output_version`` 1: the record of the versions before output versions, which named the
@@ -289,10 +301,11 @@ def _folder_names(entries):
     return names
 
 
-def plan(manifest_path, output, *, threads=0):
+def plan(manifest_path, output, *, threads=0, processes=0):
     """The tasks of a manifest, every setting checked: a list of :class:`Task`.
 
-    ``threads``: --threads for tasks whose entry does not set it (0 = all cores).
+    ``threads``: --threads for tasks whose entry does not set it (0 = all cores); ``processes``:
+    --processes for tasks whose entry sets neither (0: the bake picks them).
     Raises :class:`ManifestError` for anything that stops the whole batch.
     """
     manifest_path = Path(manifest_path)
@@ -316,7 +329,7 @@ def plan(manifest_path, output, *, threads=0):
         where += f" ({blend})"
         _check_keys(where, entry, spec, _ENTRY_KEYS | _BATCH_KEYS)
         _check_batch_keys(where, entry)
-        resolved = os.path.normpath(base / os.path.expanduser(blend))
+        resolved = file_key(os.path.normpath(base / os.path.expanduser(blend)))  # by the file it reaches
         if resolved in seen:
             raise ManifestError(
                 f"{where}: the same file as entry {seen[resolved]}; one entry per .blend file "
@@ -334,6 +347,10 @@ def plan(manifest_path, output, *, threads=0):
         settings = dict(defaults)
         settings.update({k: v for k, v in entry.items() if k not in _ENTRY_KEYS})
         rebake_older = settings.pop("rebake_older", False)
+        into_given = settings.get("into")
+        into_file = _into_file(base, into_given)
+        if into_file is not None:
+            settings["into"] = into_file  # the bake runs elsewhere: the file beside the manifest, by its full path
         args = []
         for key in sorted(settings):
             args += _value_args(where, key, settings[key], spec[key])
@@ -344,6 +361,7 @@ def plan(manifest_path, output, *, threads=0):
         except (ManifestError, argparse.ArgumentError) as exc:
             raise ManifestError(f"{where}: {exc}") from None
         task_threads = threads
+        task_processes = 0 if "processes" in settings or "threads" in settings else processes
         if "threads" in settings:
             # the runner passes --threads itself, for every task
             task_threads = namespace.threads
@@ -352,9 +370,15 @@ def plan(manifest_path, output, *, threads=0):
         objects = list(namespace.objects or [])
         task = Task(
             index=n, name=names[blend], blend=blend_path, blend_given=blend,
-            output=str(output / names[blend]), args=args, threads=task_threads, objects=objects,
+            output=str(output / names[blend]), args=args, threads=task_threads, processes=task_processes,
+            objects=objects,
         )
         identity = _blend_identity(blend_path)
+        if into_file is not None:
+            # the Into file is an input too: a changed file bakes again; the path as given, so that a
+            # library moved with its manifest still counts as done
+            namespace = argparse.Namespace(**dict(vars(namespace), into=into_given,
+                                                  into_file=_blend_identity(into_file)))
         task.fingerprint = _fingerprint(Path(blend).as_posix(), identity, namespace)
         task.older = [[v, _fingerprint(Path(blend).as_posix(), identity, namespace, v)]
                       for v in range(OUTPUT_VERSION - 1, 0, -1)]

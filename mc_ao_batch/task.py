@@ -80,7 +80,7 @@ def bake_command(task, baker):
     kind, exe = baker
     tail = list(task.args) + [
         "--output", task.output, "--summary-json", task.summary, "--threads", str(task.threads), "--quiet",
-    ]
+    ] + (["--processes", str(task.processes)] if task.processes else [])
     if kind == "blender":
         # no --factory-startup: it would leave the user's preferences unread, and with them the mc_ao
         # extension whose bundled embreex the bake needs

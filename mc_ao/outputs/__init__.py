@@ -59,8 +59,14 @@ def output_files(kinds, folder, jobs, formats):
     for kind in kinds:
         for job in jobs:
             for name in kind.file_names(job):
+                other = owners.setdefault(name, kind)
+                if other is not kind:  # two kinds' files under one name: one would replace the other
+                    from .. import corelink
+
+                    raise corelink.load().SettingsError(
+                        f"{job.object_name}: its {other.what} and its {kind.what} would both be saved as "
+                        f"{name!r}; one would replace the other: {kind.clash_hint()}")
                 names.append(name)
-                owners.setdefault(name, kind)
     plan = filewriter.output_files(folder, names, formats, stderr=stderr)
     first = kinds[0] if kinds else None
     for name, kind in owners.items():

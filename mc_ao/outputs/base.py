@@ -40,6 +40,8 @@ class OutputKind:
     """
 
     name = "output"
+    #: What its files hold, in a message ("image", "copy of the Into image").
+    what = "output"
     #: The core result this kind is made from: None for the job's own bake (its ``quantity``, "ao"
     #: or "thickness"), else a core quantity baked once more for it.
     quantity = None
@@ -53,6 +55,10 @@ class OutputKind:
     def applies(cls, settings):
         """Whether a bake with ``settings`` has this output."""
         return False
+
+    def clash_hint(self):
+        """What to change when its file would have the name of another kind's file."""
+        return "rename one of the images"
 
     # 1. before any work
     def check(self, job):

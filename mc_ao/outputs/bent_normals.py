@@ -6,6 +6,7 @@ from .maps import MapOutput
 
 class BentNormalsOutput(MapOutput):
     name = "bent_normals"
+    what = "bent normals image"
     content = "bent_normal"
 
     @classmethod

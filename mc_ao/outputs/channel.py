@@ -29,6 +29,7 @@ INDEX = {"R": 0, "G": 1, "B": 2, "A": 3}
 
 class ChannelOutput(OutputKind):
     name = "channel"
+    what = "copy of the Into image"
     quantity = None  # the job's own bake
 
     def __init__(self, settings):
@@ -75,6 +76,10 @@ class ChannelOutput(OutputKind):
     def file_names(self, job):
         return [self.stem()] if self.mine(job) else []
 
+    def clash_hint(self):
+        return (f"the copy of Into {self.settings.into!r} keeps its name; give the object's image another name "
+                "(Image Name) or choose another Into")
+
     def paths(self, job, files):
         """Its paths in the output folder: the planned ones, with Into's file's extension where it has
         a file (the copy keeps its format); one per format otherwise."""
@@ -101,6 +106,10 @@ class ChannelOutput(OutputKind):
     def check(self, job):
         from .. import images
 
+        if self.settings.into == job.image_name:  # the object's own image would take the whole AO over it
+            raise images.ImageError(f"image {job.image_name!r} is both its own image and the Into image whose "
+                                    f"{self.settings.channel} channel gets the AO: one would replace the other; "
+                                    "give its image another name (Image Name) or choose another Into")
         if not self.mine(job):
             return
         problem = self._one_object(job)
@@ -140,9 +149,11 @@ class ChannelOutput(OutputKind):
             problems.append(problem)
         if self.udim_problem():
             problems.append(self.udim_problem())
+        from .. import filecheck
+
         source = self.source_file()
         for path in self.planned(job, files):
-            if source and os.path.normcase(os.path.abspath(path)) == os.path.normcase(os.path.abspath(source)):
+            if source and filecheck.same_file(path, source):  # by the file it reaches: a linked output folder too
                 problems.append(f"{path!r} is the Into image's own file, which the bake does not replace: choose "
                                 "another output folder")
         return problems

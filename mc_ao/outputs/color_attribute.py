@@ -10,6 +10,7 @@ from .base import FileWrite, OutputKind
 
 class ColorAttributeOutput(OutputKind):
     name = "color_attribute"
+    what = "colour attribute's file"
     #: Its files' formats, whatever the Format setting.
     file_formats = [("PLY", None)]
 

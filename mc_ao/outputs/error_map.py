@@ -6,6 +6,7 @@ from .maps import MapOutput
 
 class ErrorMapOutput(MapOutput):
     name = "error_map"
+    what = "error map"
     content = "stderr"
     float_image = True
     #: Its files are the AO files' standard-error companions (mc_ao.filewriter.OutputFile.stderr_path).

@@ -8,6 +8,7 @@ class ImageOutput(MapOutput):
     """The baked AO (or the bake's quantity) in the object's image, plain or tiled, and its files."""
 
     name = "image"
+    what = "own image"
 
     @classmethod
     def applies(cls, settings):

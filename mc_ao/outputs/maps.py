@@ -18,6 +18,7 @@ class MapOutput(OutputKind):
     """An image over the object's UVs (a tiled one for a UDIM bake) and its files."""
 
     name = "map"
+    what = "map"
     #: The files' metadata "content" (core.imageio reads it back).
     content = "ao"
     #: The image's float buffer: None for the settings' 32-bit Float, else always this.
