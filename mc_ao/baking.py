@@ -484,20 +484,15 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
     from . import occluders as occluder_sets
 
     max_bytes = id_name_max_bytes()
-    image_names = {}
+    images = []
     for obj in targets:
         names = [settings.quantity_image_name_for(obj.name, q, max_bytes) for q in settings.quantities]
         if settings.error_map and not settings.vertex_colors:
             names += [settings.quantity_image_name_for(obj.name, q, max_bytes, "_stderr") for q in settings.quantities]
         if settings.bent_normals and not settings.vertex_colors:
             names.append(settings.bent_image_name_for(obj.name, max_bytes))
-        for name in names:
-            if name in image_names:
-                raise ExtractError(
-                    f"{image_names[name]} and {obj.name} would both bake into image {name!r}; "
-                    "put {object} into the image name"
-                )
-            image_names[name] = obj.name
+        images += [(obj.name, name) for name in names]
+    check_image_names(images)
 
     check_channel(settings)
     notes = []
@@ -520,6 +515,17 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
         jobs[0].notes.extend(notes)
     check_plan(jobs, settings, {obj.name: obj for obj in targets})
     return jobs
+
+
+def check_image_names(images):
+    """Raise ExtractError when two objects would bake into one image; ``images``: [(object name,
+    image name)] of every image a bake makes."""
+    owners = {}
+    for obj, name in images:
+        if name in owners:
+            raise ExtractError(f"{owners[name]} and {obj} would both bake into image {name!r}; "
+                               "put {object} into the image name")
+        owners[name] = obj
 
 
 # Channel index of each Channel setting.

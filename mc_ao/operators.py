@@ -34,7 +34,8 @@ import traceback
 
 import bpy
 
-from . import bakerun, baking, corelink, filecheck, filewriter, images, schema, selected_to_active, service
+from . import bakerun, baking, corelink, filecheck, filewriter, images, schema, service, vertex_colors
+from .choose import ChoiceError, Pick, choose
 from .extract import ExtractError
 from .outputs.store import Store
 from .properties import resolve_threads
@@ -86,24 +87,26 @@ def _redraw(context):
 
 def why_not(context):
     """Why the Bake AO button is disabled in ``context`` (the poll message, the panel's hint), or None."""
-    settings = getattr(context.scene, "mc_ao", None)
-    if settings is not None and settings.use_selected_to_active:
-        return (selected_to_active.unsupported(settings)
-                or selected_to_active.why_not(context.selected_objects, context.active_object,
-                                              selected_to_active.cage_of(settings)))
-    needs_uvs = settings is None or settings.target != "VERTEX_COLORS"
-    reason = baking.why_not_bakeable(context.selected_objects, needs_uvs)
-    if reason is None and not needs_uvs:
+    return choice_of(context)[1]
+
+
+def choice_of(context):
+    """``(choice, None)``: what Bake AO would bake in ``context`` (mc_ao.choose.Choice, no geometry
+    read), or ``(None, why not)``."""
+    props = getattr(context.scene, "mc_ao", None)
+    settings = BakeSettings() if props is None else BakeSettings.from_properties(props)
+    try:
+        choice = choose(settings, Pick(list(context.selected_objects), context.active_object), context.view_layer)
+    except ChoiceError as exc:
+        return None, str(exc)
+    if settings.vertex_colors:
         # A color attribute bake that every selected mesh's modifiers make impossible is greyed out
         # too, with the reason, rather than refused after the click.
-        from . import vertex_colors
-
         depsgraph = context.evaluated_depsgraph_get() if hasattr(context, "evaluated_depsgraph_get") else None
-        problems = [vertex_colors.modifier_problem(obj, depsgraph) for obj in context.selected_objects
-                    if baking.can_be_target(obj, needs_uvs)]
+        problems = [vertex_colors.modifier_problem(obj, depsgraph) for obj in choice.targets]
         if problems and all(problems):
-            return problems[0] if len(problems) == 1 else "; ".join(problems)
-    return reason
+            return None, problems[0] if len(problems) == 1 else "; ".join(problems)
+    return choice, None
 
 
 def is_running():
@@ -239,32 +242,16 @@ class BakeSession:
                 f"{names[field].name if field in names else field} {message}" for field, message in problems
             ) + "; nothing was baked")
             return False
-        selected = list(context.selected_objects)
-        needs_uvs = baking.needs_uvs(settings)
-        if settings.use_selected_to_active:
-            # Selected to Active: the active object from the other selected ones (their cage aside).
-            active, cage = context.active_object, selected_to_active.cage_of(settings)
-            reason = selected_to_active.unsupported(settings) or selected_to_active.why_not(selected, active, cage)
-            objects = [] if reason else [active]
-            skipped = [obj for obj in selected if obj is not active and obj is not cage
-                       and obj not in selected_to_active.high_objects(selected, active, cage)]
-        else:
-            objects = baking.targets_of(selected, needs_uvs)
-            reason = baking.why_not_bakeable(selected, needs_uvs) or "Nothing to bake"
-            skipped = [obj for obj in selected if obj not in objects]
-        if not objects:
-            # The poll refuses this already; a script that gets past it (or a changed selection)
-            # hears the same reason.
-            self.report({"ERROR"}, reason)
+        try:
+            # Nothing to bake: the poll refuses this already; a script that gets past it (or a changed
+            # selection) hears the same reason.
+            choice = choose(settings, Pick(list(context.selected_objects), context.active_object), context.view_layer)
+        except ChoiceError as exc:
+            self.report({"ERROR"}, str(exc))
             return False
         try:
             folder = _output_dir(settings) if settings.save_to_file else None
-            depsgraph = context.evaluated_depsgraph_get()
-            if settings.use_selected_to_active:
-                jobs = [selected_to_active.plan(depsgraph, objects[0], selected, settings,
-                                                view_layer=context.view_layer)]
-            else:
-                jobs = baking.plan(depsgraph, objects, settings, selected=selected, view_layer=context.view_layer)
+            jobs = choice.jobs(context.evaluated_depsgraph_get())
             plan = service.plan(settings, jobs, folder, [(settings.file_format, settings.file_bits)],
                                 check_blender=True)
         except (ExtractError, OutputError, images.ImageError, corelink.load().McAoError) as exc:
@@ -273,8 +260,8 @@ class BakeSession:
         self.warnings = 0  # warnings reported, counted in the summary of the whole bake
         self.unsummarised = 0  # warnings since the last summary line, counted in the next one
         self.unsummarised_errors = 0  # errors (a file not saved) since the last summary line
-        for obj in skipped:
-            self._warn(baking.skip_note(obj, settings.occluders, needs_uvs))
+        for obj in choice.skipped:
+            self._warn(baking.skip_note(obj, settings.occluders, baking.needs_uvs(settings)))
         for job in jobs:
             for note in job.notes:
                 self._warn(f"{job.object_name}: {note}")

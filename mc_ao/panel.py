@@ -103,18 +103,16 @@ class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
 
 def draw_targets(layout, context):
     """What the button will bake, or why it cannot; the selected objects it will skip."""
-    selected = context.selected_objects
     settings = BakeSettings.from_properties(context.scene.mc_ao)
-    needs_uvs = not settings.vertex_colors
     # The button greys out when its poll fails; say why under it.
-    reason = operators.why_not(context)
+    choice, reason = operators.choice_of(context)
     if reason is not None:
         wrapped_label(layout, context, reason, icon="INFO")
         return
     if settings.use_selected_to_active:
         draw_selected_to_active(layout, context)
         return
-    targets = baking.targets_of(selected, needs_uvs)
+    targets = choice.targets
     if settings.vertex_colors:
         domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
         what = f"color attribute {settings.attribute_name} ({domain})"
@@ -133,7 +131,7 @@ def draw_targets(layout, context):
         each = "one tiled image each" if settings.use_udim else "one image each"
         layout.label(text=f"{len(targets)} objects, {each}", icon="IMAGE_DATA")
     draw_cost(layout, context, settings, targets)
-    skipped = [obj for obj in selected if obj not in targets]
+    skipped = choice.skipped
     for obj in skipped[:MAX_SKIPPED_LINES]:
         why = "no UV map" if obj.type == "MESH" else "not a mesh"
         wrapped_label(layout, context, f"Skipped: {obj.name} ({why})", icon="ERROR")

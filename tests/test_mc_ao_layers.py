@@ -14,10 +14,10 @@ UI = {"operators", "panel", "preview", "properties"}
 # mc_ao/README.md's layers, top to bottom: a module imports modules of its own layer or below.
 LAYERS = [
     {"__init__"} | UI,
-    {"cli"},
+    {"cli", "cli.*"},
     {"service"},
     {"outputs", "outputs.*"},
-    {"selected_to_active", "baking", "occluders"},
+    {"choose", "selected_to_active", "baking", "occluders"},
     {"udim", "vertex_colors", "bent"},
     {"bakerun", "filewriter", "filecheck"},
     {"images"},

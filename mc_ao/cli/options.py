@@ -1,0 +1,172 @@
+"""The script's command line: its options (one per mc_ao.schema setting that has one, and the
+script's own: what to bake, where files go), the arguments under Blender or a plain Python, and
+UsageError, a refusal before anything is baked (exit status 2). No bpy."""
+
+import argparse
+import sys
+from pathlib import Path
+
+from .. import schema
+from ..terminal import escape
+
+# --format choice -> Blender's file format name (mc_ao.settings.FILE_FORMATS)
+FORMATS = {"png": "PNG", "exr": "OPEN_EXR", "tif": "TIFF", "ply": "PLY"}
+BITS = {"8": 8, "16": 16, "half": "half", "float": "float"}
+
+
+class UsageError(Exception):
+    """Bad arguments or input: exit status 2. ``usage``: the usage text to show after the message.
+
+    ``message``: one problem (text), or a list of them, one line each; names in them are escaped
+    (mc_ao.terminal.escape), so a name's newline cannot start a line of its own.
+    """
+
+    def __init__(self, message, usage=""):
+        problems = message if isinstance(message, list) else [message]
+        super().__init__("\n".join(escape(str(p)) for p in problems))
+        self.usage = usage
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but a bad argument raises UsageError (exit 2 with the summary written) instead of exiting."""
+
+    def error(self, message):
+        raise UsageError(message, self.format_usage())
+
+
+def run_by_blender():
+    """True when the Blender executable runs this script: it has imported bpy before running it."""
+    return "bpy" in sys.modules
+
+
+def script_argv(argv=None):
+    if argv is not None:
+        return list(argv)
+    if run_by_blender():
+        return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    return sys.argv[1:]
+
+
+def parse_resolution(text):
+    try:
+        parts = [int(p) for p in text.lower().split("x")]
+    except ValueError:
+        parts = []
+    if len(parts) not in (1, 2) or min(parts) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a size: use N or WxH, e.g. 1024 or 2048x1024")
+    return parts[0], parts[-1]
+
+
+def _add_setting(parser, setting):
+    """The option of one schema setting (mc_ao.schema): its type, choices, default and help."""
+    option, dest = setting.option, setting.option_key
+    default = setting.default
+    help_text = setting.help.replace("%", "%%")  # argparse formats help with %
+    if setting.kind == "bool" or setting.flag is not None:
+        parser.add_argument(option, dest=dest, action="store_true", help=help_text)
+        return
+    kwargs = {"dest": dest, "help": f"{help_text} (default: {default!r})"}
+    if setting.sets:  # not given: None, so that giving it can set another setting
+        kwargs["default"] = None
+    if setting.kind in ("enum", "flags"):
+        # any case: --channel R
+        kwargs.update(choices=[schema.cli_value(i) for i in setting.identifiers], type=str.lower)
+        if setting.kind == "enum":
+            kwargs["default"] = schema.cli_value(default)
+            kwargs["help"] = f"{help_text} (default: {schema.cli_value(default)})"
+        else:
+            kwargs.update(nargs="+", default=[schema.cli_value(d) for d in default])
+            kwargs["help"] = f"{help_text} (default: {' '.join(schema.cli_value(d) for d in default)})"
+    elif setting.kind == "collections":
+        kwargs.update(nargs="+", default=[], metavar="COLLECTION", help=f"{help_text} (default: none)")
+    elif setting.kind == "int":
+        kwargs.update(type=int, default=default, metavar="N")
+    elif setting.kind in ("float", "distance"):
+        kwargs.setdefault("default", default)
+        kwargs.update(type=float, metavar="D" if setting.kind == "distance" else "X")
+    else:
+        kwargs.update(default=default, metavar="NAME")
+    parser.add_argument(option, **kwargs)
+
+
+def make_parser(with_blend):
+    """The script's options: every mc_ao.schema setting that has an option (its manifest key is the
+    option's name with '_' for '-'), and the script's own (what to bake, where files go)."""
+    parser = Parser(
+        prog="bake_ao.py",
+        description="Bake ambient occlusion of objects in a .blend file into image files.",
+        epilog="Under Blender: blender -b scene.blend --python scripts/bake_ao.py -- [options]. "
+               "Exit status: 0 all baked and written, 1 a bake or file failed, 2 bad arguments or "
+               "input (nothing baked), 130 Ctrl-C.",
+    )
+    if with_blend:
+        parser.add_argument("blend", help=".blend file to open")
+    parser.add_argument("--objects", nargs="+", metavar="NAME",
+                        help="mesh objects to bake (default: the selected ones with a UV map, "
+                             "else every mesh with a UV map in the view layer)")
+    parser.add_argument("--output", "-o", type=Path, default=Path("out"),
+                        help="output folder, created if missing (default: out)")
+    parser.add_argument("--format", nargs="+", choices=sorted(FORMATS), default=None,
+                        help="file formats to write, one file each (default: png; ply for --target "
+                             "vertex-colors)")
+    parser.add_argument("--bits", choices=sorted(BITS),
+                        help="sample type of the files: png 8|16, exr half|float, tif 8|16|float "
+                             "(default: 8-bit PNG and TIFF, half EXR)")
+    parser.add_argument("--resolution", type=parse_resolution, default=(1024, 1024), metavar="N|WxH",
+                        help="image size, N or WxH (default: 1024)")
+    parser.add_argument("--attribute-type", choices=("float", "byte"), default="float",
+                        help="type of a new color attribute: float (linear) or byte (sRGB-encoded, as "
+                             "Blender stores byte colors) (default: float)")
+    parser.add_argument("--save", type=Path, metavar="PATH.blend",
+                        help="with --target vertex-colors: save the .blend file with the baked color "
+                             "attributes to PATH (atomically; never the input file unless "
+                             "--overwrite-input is given)")
+    parser.add_argument("--overwrite-input", action="store_true",
+                        help="allow --save to replace the .blend file the bake read")
+    for setting in schema.SETTINGS:
+        if setting.option_key is not None and "selected_to_active" not in setting.targets:
+            _add_setting(parser, setting)
+    s2a = parser.add_argument_group(
+        "selected to active", "bake the AO of high-poly objects into a low-poly's UVs (Cycles' Selected to Active)")
+    for setting in schema.SETTINGS:
+        if setting.option_key is not None and "selected_to_active" in setting.targets:
+            _add_setting(s2a, setting)
+    s2a.add_argument("--active", metavar="NAME",
+                     help="the low-poly to bake onto (default: the file's active object)")
+    s2a.add_argument("--cage", metavar="NAME", nargs="?", const="",
+                     help="cast the rays from a cage (Cycles' Cage): alone, the low-poly extruded along its "
+                          "smooth vertex normals; with NAME, that object, a copy of the low-poly with its "
+                          "vertices moved outwards (the extrusion is then not used)")
+    s2a.add_argument("--match-suffix", nargs=2, metavar=("HIGH", "LOW"),
+                     help="bake each object named <base>HIGH onto <base>LOW (e.g. _high _low: Chair_high "
+                          "onto Chair_low), one image per low-poly; implies --selected-to-active")
+    parser.add_argument("--summary-json", type=Path, metavar="PATH",
+                        help="write a JSON record of the run (settings, each object's status, time, "
+                             "rays and files) to PATH at the end, whatever the exit status")
+    parser.add_argument("--quiet", "-q", action="store_true", help="no progress")
+    return parser
+
+
+def default_formats(args):
+    """--format's default: png for images, ply for --target vertex-colors."""
+    if getattr(args, "format", None) is None:
+        args.format = ["ply"] if getattr(args, "target", "") == "vertex-colors" else ["png"]
+    return args.format
+
+
+def early_summary_args(argv, in_blender):
+    """(summary path, .blend path) from the raw arguments, so that the summary is written even
+    when the arguments are refused."""
+    pre = Parser(add_help=False)
+    pre.add_argument("--summary-json", type=Path)
+    if not in_blender:
+        pre.add_argument("blend", nargs="?")
+    try:
+        known, _ = pre.parse_known_args(argv)
+    except UsageError:  # a --summary-json without its path: the full parse says so
+        return None, None
+    if in_blender:
+        import bpy
+
+        return known.summary_json, bpy.data.filepath or None
+    return known.summary_json, known.blend

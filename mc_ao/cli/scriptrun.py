@@ -1,0 +1,105 @@
+"""The script's side of one bake (mc_ao.service.Bake): progress, each object's outcome into the
+summary, the --save file at the end, and the result table; the exit status."""
+
+import sys
+import time
+
+from .. import baking, service
+from ..outputs.store import Store
+from ..terminal import escape
+from . import table
+from .blendsave import save_baked
+from .progress import Progress
+from .summary import s2a_record
+
+
+class ScriptRun:
+    """The script's side of one bake (mc_ao.service.Bake): progress on stderr, each object's outcome
+    (its files written by the service, Ctrl-C held off meanwhile) into the summary and the table."""
+
+    def __init__(self, plan, args, summary):
+        import bpy
+
+        self.plan, self.settings, self.args, self.summary = plan, plan.settings, args, summary
+        store = None
+        if plan.settings.vertex_colors and getattr(args, "save", None) is not None:
+            # --save: the colour attributes go into the .blend file the run saves at its end
+            store = Store(plan.settings, plan.folder, plan.files,
+                          lambda kind, text: print(f"bake_ao: {escape(text)}", file=sys.stderr))
+        self.run = service.Bake(plan, args.threads or None, live=False, store=store,
+                                store_kinds={"color_attribute"}, blend=bpy.data.filepath, hold_interrupts=True,
+                                store_after_save=True)
+        self.progress = Progress(enabled=not args.quiet)
+        self.rows, self.failures = [], 0
+
+    def begin(self, i):
+        jobs = self.plan.jobs
+        if i < len(jobs):
+            name = escape(jobs[i].object_name)
+            print(f"bake_ao: [{i + 1}/{len(jobs)}] baking {name}", flush=True)
+            self.progress.begin(f"[{i + 1}/{len(jobs)}] {name}")
+
+    def on_progress(self, i, fraction):
+        self.progress.update(fraction)
+
+    def on_outcome(self, outcome):
+        self.progress.end()
+        job, settings = outcome.job, self.settings
+        name = escape(job.object_name)
+        if outcome.trace:
+            print(outcome.trace, file=sys.stderr, end="")
+        result = outcome.result
+        for note in outcome.notes:
+            print(f"bake_ao: {name}: warning: {escape(note)}", file=sys.stderr)
+        if result is not None and job.selected_to_active:
+            print(f"bake_ao: {name}: from {', '.join(escape(h.name) for h in job.highpoly)}"
+                  f"{baking.miss_summary(result)}", file=sys.stderr)
+        if not outcome.baked or outcome.file_error:
+            error = outcome.error if not outcome.baked else (
+                f"none of its files was written (any file already there is unchanged): {outcome.file_error}")
+            if outcome.trace:
+                error += "; the traceback is above"
+            print(f"bake_ao: {name}: {escape(error)}", file=sys.stderr)
+            self.failures += 1
+            if result is None:
+                seconds = time.monotonic() - self.run.started.get(outcome.index, time.monotonic())
+                self.summary.add(job.object_name, "failed", seconds, error=error, **s2a_record(job))
+            else:
+                per_texel, _ = baking.throughput(result)
+                self.summary.add(job.object_name, "failed", result.seconds, result.rays, per_texel, outcome.files,
+                                 error, **s2a_record(job, result))
+        else:
+            per_texel, _ = baking.throughput(result)
+            self.summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, outcome.files,
+                             **s2a_record(job, result))
+            self.rows.append(table.row(name, result, settings, outcome.files))
+        self.begin(outcome.index + 1)
+
+
+def bake(plan, args, summary):
+    """Bake the plan's jobs on a worker thread, each finished one's files written here; the exit status."""
+    handler = ScriptRun(plan, args, summary)
+    run, settings = handler.run, plan.settings
+    handler.begin(0)
+    run.start()
+    try:
+        while not run.handle(run.next_message(), handler):
+            pass
+    except BaseException as exc:
+        run.stop()  # a "cancelled" message comes only from here: the cancel is this Ctrl-C's
+        handler.progress.end()
+        why = "cancelled (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else "the run stopped"
+        for outcome in run.cancel_rest():
+            summary.add(outcome.object_name, "failed", error=f"not baked: {why}")
+        raise
+    run.stop()
+    rows, failures = handler.rows, handler.failures
+    if getattr(args, "save", None) is not None and rows:
+        if not save_baked(args.save, settings, [r[0] for r in rows], summary):
+            failures += 1
+    table.show(rows)
+    print(f"bake_ao: baked {len(rows)} of {len(plan.jobs)} objects" + (f", {failures} failed" if failures else ""))
+    if failures and summary.error is None:
+        summary.error = f"{failures} of {len(plan.jobs)} objects failed"
+    return 1 if failures else 0
+
