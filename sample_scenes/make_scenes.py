@@ -28,6 +28,10 @@ test_sample_scenes.py checks that). Scenes:
                   UV Project; --match-suffix _high _low pairs them), on a ground plane.
   udim.blend      UDIM tiles: Suzanne on a pedestal, one mesh (Bust) whose head is in tile 1001 and
                   pedestal in tile 1002, on a ground plane.
+  props.blend     props without a floor, in collections: Crate and Barrel (Props), two bottles
+                  (Clutter, inside Props), a wall (Backdrop); the crate's material reads an
+                  occlusion-roughness-metallic image, Crate_ORM: the ground, occluder collections and
+                  channel packing.
 """
 
 import argparse
@@ -45,6 +49,9 @@ ANALYTIC = {"plane_half_size": 1.0, "disk_radius": 0.5, "disk_height": 0.4, "dis
 #: The rock's numbers: its high-poly reaches displacement / 2 outside the sphere of its radius, and the
 #: low-poly's flat faces lie inside that sphere, so an extrusion of 0.1 (the README's) covers the gap.
 ROCK = {"radius": 0.5, "displacement": 0.12, "cell": 0.15}
+#: The props scene's numbers: the size of its occlusion-roughness-metallic image (the bake into its
+#: red channel is this size).
+PROPS = {"orm_size": 512}
 
 
 def reset():
@@ -271,7 +278,78 @@ def udim():
     save("udim.blend")
 
 
-SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense, "rock": rock, "udim": udim}
+def cylinder(name, location, radius, depth, vertices=24):
+    bpy.ops.mesh.primitive_cylinder_add(vertices=vertices, radius=radius, depth=depth, location=location)
+    obj = bpy.context.active_object
+    obj.name = obj.data.name = name
+    smart_uv(obj)
+    return obj
+
+
+def collection(name, parent=None):
+    """A new collection ``name`` inside ``parent`` (default: the scene's)."""
+    coll = bpy.data.collections.new(name)
+    (parent or bpy.context.scene.collection).children.link(coll)
+    return coll
+
+
+def move_to(obj, coll):
+    for old in list(obj.users_collection):
+        old.objects.unlink(obj)
+    coll.objects.link(obj)
+
+
+def orm_material(obj, image_name, size=PROPS["orm_size"]):
+    """A material whose Principled BSDF reads roughness and metallic from a glTF occlusion-roughness-
+    metallic image (a generated one: red, the occlusion, 1; green, the roughness, 0.6; blue, the
+    metallic, 0), the image a bake packs its AO into with Channel R and Into it."""
+    image = bpy.data.images.new(image_name, size, size, alpha=False)
+    image.generated_color = (1.0, 0.6, 0.0, 1.0)
+    image.colorspace_settings.name = "Non-Color"
+    mat = bpy.data.materials.new(obj.name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    bsdf = nodes["Principled BSDF"]
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.location = (-600, 0)
+    split = nodes.new("ShaderNodeSeparateColor")
+    split.location = (-300, 0)
+    links.new(tex.outputs["Color"], split.inputs["Color"])
+    links.new(split.outputs["Green"], bsdf.inputs["Roughness"])
+    links.new(split.outputs["Blue"], bsdf.inputs["Metallic"])
+    obj.data.materials.append(mat)
+
+
+def props():
+    """Props as an asset library has them, without a floor: a crate and a barrel in collection Props,
+    bottles beside the crate in Clutter (inside Props), a wall behind them in Backdrop; the crate's
+    material reads a generated occlusion-roughness-metallic image, Crate_ORM. For the ground
+    (--ground: the props' contact shadow without a floor mesh), occluder collections (--occluder-
+    collections Props --exclude-collections Clutter) and channel packing (--channel r --into Crate_ORM)."""
+    reset()
+    props_coll = collection("Props")
+    clutter = collection("Clutter", props_coll)
+    backdrop = collection("Backdrop")
+    crate = cube("Crate", (0.0, 0.0, 0.4), (0.8, 0.8, 0.8))
+    bpy.ops.object.transform_apply(scale=True)
+    smart_uv(crate)
+    orm_material(crate, "Crate_ORM")
+    barrel = cylinder("Barrel", (0.95, 0.05, 0.45), 0.3, 0.9)
+    shade(barrel, True)
+    for obj in (crate, barrel):
+        move_to(obj, props_coll)
+    for i, (x, y) in enumerate([(-0.55, -0.15), (-0.6, 0.12)]):
+        move_to(cylinder(f"Bottle{i}", (x, y, 0.15), 0.06, 0.3, vertices=12), clutter)
+    wall = cube("Wall", (0.3, 0.75, 0.75), (3.0, 0.1, 1.5))
+    bpy.ops.object.transform_apply(scale=True)
+    smart_uv(wall)
+    move_to(wall, backdrop)
+    save("props.blend")
+
+
+SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense, "rock": rock, "udim": udim,
+          "props": props}
 
 
 #: Where save() writes; main() sets it.

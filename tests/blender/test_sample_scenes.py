@@ -81,7 +81,7 @@ def bake(blend, out, *args):
 
 
 def test_there_are_scenes():
-    assert SCENES == ["analytic", "dense", "rock", "room", "suzanne", "udim"]
+    assert SCENES == ["analytic", "dense", "props", "rock", "room", "suzanne", "udim"]
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -227,3 +227,22 @@ def test_suzanne_islands_do_not_overlap_at_1024(fresh):
     problems = {key: count for key, count in report.items()
                 if key not in ("covered_texels", "worker_memory") and count}
     assert problems == {}
+
+
+def test_props_scene_has_its_collections_and_orm_image(fresh):
+    """props.blend as the README's ground, collection and channel-packing lines use it: no floor mesh;
+    Crate and Barrel in Props, the bottles in Clutter inside Props, the wall in Backdrop; the crate's
+    material reads Crate_ORM (red 1, green 0.6, blue 0) for its roughness and metallic."""
+    bpy = fresh
+    open_scene(bpy, SAMPLES / "props.blend")
+    members = {c.name: sorted(o.name for o in c.objects) for c in bpy.data.collections}
+    assert members == {"Props": ["Barrel", "Crate"], "Clutter": ["Bottle0", "Bottle1"], "Backdrop": ["Wall"]}
+    assert [c.name for c in bpy.data.collections["Props"].children] == ["Clutter"]
+    assert min(min((o.matrix_world @ v.co).z for v in o.data.vertices) for o in bpy.data.objects) > -1e-6
+    image = bpy.data.images["Crate_ORM"]
+    assert tuple(image.size) == (512, 512) and image.source == "GENERATED"
+    np.testing.assert_allclose(image.generated_color[:3], (1.0, 0.6, 0.0))
+    nodes = bpy.data.objects["Crate"].active_material.node_tree
+    fed = {link.to_socket.name: link.from_socket.name for link in nodes.links}
+    assert fed["Roughness"] == "Green" and fed["Metallic"] == "Blue"
+    assert any(n.type == "TEX_IMAGE" and n.image == image for n in nodes.nodes)
