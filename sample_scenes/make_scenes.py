@@ -32,6 +32,10 @@ test_sample_scenes.py checks that). Scenes:
                   (Clutter, inside Props), a wall (Backdrop); the crate's material reads an
                   occlusion-roughness-metallic image, Crate_ORM: the ground, occluder collections and
                   channel packing.
+  atlas.blend     a texture atlas: a kit of four objects (Base, Column, Ball, Block) resting on each
+                  other, sharing one material whose active Image Texture node reads the image Atlas;
+                  each object's UVs fill one quarter of the one UV square, so the four bake into
+                  one image (--atlas Atlas, or the materials' image).
 """
 
 import argparse
@@ -52,6 +56,10 @@ ROCK = {"radius": 0.5, "displacement": 0.12, "cell": 0.15}
 #: The props scene's numbers: the size of its occlusion-roughness-metallic image (the bake into its
 #: red channel is this size).
 PROPS = {"orm_size": 512}
+#: The atlas scene's numbers: the shared image's size, and each object's quarter of the UV square
+#: (lower-left corner), its islands inset by ``inset`` of the quarter's side.
+ATLAS = {"image_size": 1024, "image": "Atlas", "inset": 0.03,
+         "quarters": {"Base": (0.0, 0.0), "Column": (0.5, 0.0), "Ball": (0.0, 0.5), "Block": (0.5, 0.5)}}
 
 
 def reset():
@@ -348,8 +356,58 @@ def props():
     save("props.blend")
 
 
+def into_quarter(obj, corner, inset):
+    """Move ``obj``'s UVs (inside [0, 1]) into the quarter of the UV square whose lower-left corner is
+    ``corner``, inset by ``inset`` of its side on every border: the objects of an atlas share one UV
+    square without sharing a texel."""
+    scale = 0.5 * (1.0 - 2.0 * inset)
+    for loop in obj.data.uv_layers.active.data:
+        u, v = loop.uv
+        loop.uv = (corner[0] + 0.5 * inset + scale * u, corner[1] + 0.5 * inset + scale * v)
+
+
+def atlas():
+    """A kit of four objects baked into one image (a texture atlas): Base, a slab; Column standing on
+    it; Ball (an icosphere) resting on the column; Block leaning against the column on the base. They share one
+    material, Kit, whose active Image Texture node reads the image Atlas (generated, 8-bit,
+    Non-Color, black), as Cycles' bake finds its target; each object's UVs fill its quarter of the
+    UV square (ATLAS), so no texel belongs to two objects."""
+    reset()
+    a = ATLAS
+    base = cube("Base", (0.0, 0.0, 0.1), (1.6, 1.2, 0.2))
+    bpy.ops.mesh.primitive_cylinder_add(vertices=24, radius=0.18, depth=1.0, location=(0.0, 0.0, 0.7))
+    column = bpy.context.active_object
+    column.name = column.data.name = "Column"
+    shade(column, True)
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=0.3, location=(0.0, 0.0, 1.47))
+    ball = bpy.context.active_object
+    ball.name = ball.data.name = "Ball"
+    shade(ball, True)
+    block = cube("Block", (0.45, 0.1, 0.4), (0.4, 0.4, 0.4))
+    block.rotation_euler = (0.0, 0.0, math.radians(20))
+    objects = {"Base": base, "Column": column, "Ball": ball, "Block": block}
+    image = bpy.data.images.new(a["image"], a["image_size"], a["image_size"], alpha=True)
+    image.colorspace_settings.name = "Non-Color"
+    mat = bpy.data.materials.new("Kit")
+    mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.location = (-400, 0)
+    nodes.active = tex
+    for name, obj in objects.items():
+        active(obj)
+        bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)
+        smart_uv(obj, margin=0.03)
+        into_quarter(obj, a["quarters"][name], a["inset"])
+        obj.data.materials.append(mat)
+    for obj in objects.values():  # nothing selected: the script bakes every mesh of the file
+        obj.select_set(False)
+    save("atlas.blend")
+
+
 SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense, "rock": rock, "udim": udim,
-          "props": props}
+          "props": props, "atlas": atlas}
 
 
 #: Where save() writes; main() sets it.

@@ -81,7 +81,7 @@ def bake(blend, out, *args):
 
 
 def test_there_are_scenes():
-    assert SCENES == ["analytic", "dense", "props", "rock", "room", "suzanne", "udim"]
+    assert SCENES == ["analytic", "atlas", "dense", "props", "rock", "room", "suzanne", "udim"]
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -246,3 +246,22 @@ def test_props_scene_has_its_collections_and_orm_image(fresh):
     fed = {link.to_socket.name: link.from_socket.name for link in nodes.links}
     assert fed["Roughness"] == "Green" and fed["Metallic"] == "Blue"
     assert any(n.type == "TEX_IMAGE" and n.image == image for n in nodes.nodes)
+
+
+def test_atlas_scene_shares_one_image_over_one_uv_square(fresh):
+    """atlas.blend: four objects, one material (Kit) whose active Image Texture node reads Atlas (1024,
+    8-bit, Non-Color), each object's UVs inside its own quarter of the UV square, so that no texel's
+    centre lies under two objects' islands."""
+    bpy = fresh
+    data = mesh_data(bpy, SAMPLES / "atlas.blend")
+    assert sorted(data) == ["Ball", "Base", "Block", "Column"]
+    quarters = {"Base": (0, 0), "Column": (1, 0), "Ball": (0, 1), "Block": (1, 1)}
+    for name, (_, _, uvs) in data.items():
+        q = np.floor(uvs.reshape(-1, 2) * 2).astype(int)
+        assert {tuple(c) for c in q.tolist()} == {quarters[name]}, name
+    image = bpy.data.images["Atlas"]
+    assert tuple(image.size) == (1024, 1024) and not image.is_float
+    assert image.colorspace_settings.name == "Non-Color"
+    for name in data:
+        mat = bpy.data.objects[name].active_material
+        assert mat.name == "Kit" and mat.node_tree.nodes.active.image == image, name
