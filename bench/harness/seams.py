@@ -453,7 +453,9 @@ def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.
     # Bounds by an active set: texels the solution takes past a bound are held there and the rest
     # solved again (from where they were), until none crosses or BOUND_ROUNDS have been solved.
     pinned, total, start = None, 0, None
+    sys_ = None
     for round_ in range(BOUND_ROUNDS):
+        sys_ = None  # the last round's system goes before the next is built
         sys_ = _System(*flat, lookups, owner, seam_weight, margin_weight, pinned)
         if round_ == 0:
             if sys_.n == 0:
