@@ -1,7 +1,7 @@
 """What to bake: pick the targets, gather their geometry and their occluders, run core.bake_ao.
 
-plan() reads Blender data and must run in the main thread; Job.run() touches no bpy and runs on a
-worker thread (the operator's, scripts/bake_ao.py's), so that the main thread stays free.
+plan() reads Blender data and must run in the main thread; Job.run() and Job.run_maps() (one core
+call, Job._bake, for every kind) touch no bpy and run on a worker thread (the operator's, scripts/bake_ao.py's), so that the main thread stays free.
 """
 
 from dataclasses import dataclass, field
@@ -97,65 +97,19 @@ class Job:
     # job for each, each with its own image.
     quantity: str = "ao"
 
-    def bake_kwargs(self, settings, threads=None, quantity=None):
-        """core.bake_ao's keyword arguments for this job: the settings' (BakeSettings.bake_kwargs), and
-        for a thickness map its quantity, without the ground (only the object itself occludes it).
-        ``quantity``: another quantity than the job's own (an output that needs a second one), which
-        comes without bent normals (the core makes them with the job's own bake)."""
-        kw = settings.bake_kwargs(threads)
-        quantity = quantity or self.quantity
-        if quantity != "ao":  # the ground and back faces are the AO's (core refuses them for thickness)
-            kw.pop("ground", None)
-            kw.pop("ignore_backfaces", None)
-            kw["quantity"] = quantity
-        if quantity != self.quantity:
-            kw.pop("bent_normals", None)
-        return kw
-
-    def occluders_for(self, quantity=None):
-        """The occluders of its bake of ``quantity`` (its own by default): none for a thickness map."""
-        return self.occluders if (quantity or self.quantity) == "ao" else []
-
     @property
     def selected_to_active(self):
         return bool(self.highpoly)
 
     def run(self, settings, threads=None, progress=None, cancel=None, on_tile=None, quantity=None):
-        """core.bake_ao of this job; returns its result. Needs no bpy (safe in a worker thread).
+        """The core's bake of this job; returns its result. Needs no bpy (safe in a worker thread).
 
         ``quantity``: bake this core quantity (core.bake_ao's ``quantity``, e.g. "thickness") instead
-        of the job's own (an output that needs a second quantity; see bake_kwargs()).
-        Raises core.McAoError subclasses (core.BakeCancelled when ``cancel`` fires).
+        of the job's own (an output that needs a second quantity), without bent normals (the core
+        makes them with the job's own bake). Raises core.McAoError subclasses (core.BakeCancelled
+        when ``cancel`` fires).
         """
-        if settings.vertex_colors or settings.use_udim or settings.bent_normals:
-            return _run_other(self, settings, threads, progress=progress, cancel=cancel, on_tile=on_tile,
-                              quantity=quantity)
-        core = corelink.load()
-
-        def mesh(arrays):
-            return core.Mesh(
-                positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs,
-                normals=arrays.normals, name=arrays.name,
-            )
-
-        extra = {}
-        if self.highpoly:
-            # Extrusion 0 (the default) is measured from the meshes (core.highpoly's automatic extrusion:
-            # how far the high-poly lies outside the low-poly), never Cycles' trap of no extrusion at all.
-            extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
-            extra = dict(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
-                         max_ray_distance=self.max_ray_distance,
-                         cage=None if self.cage is None else mesh(self.cage))
-        return core.bake_ao(
-            mesh(self.target),
-            occluders=[mesh(o) for o in self.occluders_for(quantity)],
-            **self.bake_kwargs(settings, threads, quantity),
-            progress=progress,
-            cancel=cancel,
-            on_tile=on_tile,
-            **extra,
-        )
-
+        return self._bake(settings, threads, (quantity or self.quantity,), False, progress, cancel, on_tile)
 
     def shares_bake_with(self, other):
         """Whether ``other`` bakes the same object from the same geometry (another quantity of it): the
@@ -172,34 +126,54 @@ class Job:
         what :meth:`run` returns for it from this job (its occluders for the AO, none for a thickness
         map; the ground, back faces and bent normals for the AO only, the bent normals only where the
         AO is the job's own quantity). ``on_tile(quantity, rows, cols, block)``. Needs no bpy."""
+        return self._bake(settings, threads, tuple(quantities), True, progress, cancel, on_tile)
+
+    def _bake(self, settings, threads, quantities, maps, progress, cancel, on_tile):
+        """The one core call of every bake: an image, UDIM tiles or a colour attribute (core.bake_ao,
+        bake_udim, bake_vertex_ao; with ``maps`` several ``quantities`` at once, core.bake_maps,
+        bake_udim_maps, bake_vertex_maps), from the settings' options (BakeSettings.bake_kwargs)."""
         core = corelink.load()
 
         def mesh(arrays, uvs=True):
-            return core.Mesh(positions=arrays.positions, triangles=arrays.triangles,
-                             uvs=arrays.uvs if uvs else None, normals=arrays.normals, name=arrays.name)
+            return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
+                             normals=arrays.normals, name=arrays.name)
 
-        kw = self.bake_kwargs(settings, threads, "ao")
-        kw.pop("quantity", None)
-        if "ao" not in quantities:
+        # The quantity whose options the bake takes: a bake of maps takes the AO's.
+        main = "ao" if maps else quantities[0]
+        kw = settings.bake_kwargs(threads)
+        if "ao" not in quantities:  # the ground and back faces are the AO's (core refuses them for thickness)
             kw.pop("ground", None)
             kw.pop("ignore_backfaces", None)
-        occluders = [mesh(o) for o in self.occluders_for("ao")] if "ao" in quantities else []
+        if not maps and main != "ao":
+            kw["quantity"] = main
+        if main != self.quantity:
+            kw.pop("bent_normals", None)
+        if maps:
+            kw["quantities"] = tuple(quantities)
+        occluders = [mesh(o) for o in self.occluders] if "ao" in quantities else []  # a thickness map: none
+        tiles = {}
         if settings.vertex_colors:
             for key in ("resolution", "margin", "bent_normals"):
                 kw.pop(key, None)
-            return core.bake_vertex_maps(mesh(self.target, uvs=False), occluders, corners=self.target.extra["corners"],
-                                         quantities=tuple(quantities), progress=progress, cancel=cancel, **kw)
-        if kw.get("bent_normals"):
-            kw["bent_space"] = (self.target.extra or {}).get("bent_space")
-        if self.highpoly and not (settings.use_udim or settings.bent_normals):  # as run() passes it
-            extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
-            kw.update(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
-                      max_ray_distance=self.max_ray_distance, cage=None if self.cage is None else mesh(self.cage))
-        if settings.use_udim:
-            return core.bake_udim_maps(mesh(self.target), occluders, quantities=tuple(quantities), progress=progress,
-                                       cancel=cancel, **kw)
-        return core.bake_maps(mesh(self.target), occluders, quantities=tuple(quantities), progress=progress,
-                              cancel=cancel, on_tile=on_tile, **kw)
+            bake = core.bake_vertex_maps if maps else core.bake_vertex_ao
+            kw["corners"] = self.target.extra["corners"]
+            target = mesh(self.target, uvs=False)
+        else:
+            if kw.get("bent_normals"):
+                kw["bent_space"] = (self.target.extra or {}).get("bent_space")
+            if self.highpoly and not (settings.use_udim or settings.bent_normals):
+                # Extrusion 0 (the default) is measured from the meshes (core.highpoly's automatic
+                # extrusion: how far the high-poly lies outside the low-poly), never Cycles' trap of none.
+                extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
+                kw.update(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
+                          max_ray_distance=self.max_ray_distance, cage=None if self.cage is None else mesh(self.cage))
+            if settings.use_udim:
+                bake = core.bake_udim_maps if maps else core.bake_udim
+            else:
+                bake = core.bake_maps if maps else core.bake_ao
+                tiles = {"on_tile": on_tile}
+            target = mesh(self.target)
+        return bake(target, occluders, progress=progress, cancel=cancel, **tiles, **kw)
 
 
 # core's BakeResult.report keys that point at a problem in the input, and the sentence that says
@@ -235,28 +209,6 @@ _TARGET_NOTES = {
         "{n} face corners lie on triangles with no area; their normals stand in for the faces'",
     ),
 }
-
-
-def _run_other(job, settings, threads, progress=None, cancel=None, on_tile=None, quantity=None):
-    """The core's bake of ``job`` for a colour-attribute, UDIM or bent-normal bake (Job.run's)."""
-    core = corelink.load()
-
-    def mesh(arrays, uvs=True):
-        return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
-                         normals=arrays.normals, name=arrays.name)
-
-    kw = job.bake_kwargs(settings, threads, quantity)
-    occluders = [mesh(o) for o in job.occluders_for(quantity)]
-    if settings.vertex_colors:
-        for key in ("resolution", "margin", "bent_normals"):
-            kw.pop(key, None)
-        return core.bake_vertex_ao(mesh(job.target, uvs=False), occluders, corners=job.target.extra["corners"],
-                                   progress=progress, cancel=cancel, **kw)
-    if kw.get("bent_normals"):
-        kw["bent_space"] = (job.target.extra or {}).get("bent_space")
-    if settings.use_udim:
-        return core.bake_udim(mesh(job.target), occluders, progress=progress, cancel=cancel, **kw)
-    return core.bake_ao(mesh(job.target), occluders, progress=progress, cancel=cancel, on_tile=on_tile, **kw)
 
 
 def needs_uvs(settings):

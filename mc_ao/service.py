@@ -282,10 +282,16 @@ class Bake:
         return saved
 
 
+def not_written(file_error):
+    """What became of the files of a baked object one of whose files failed (``file_error``, the
+    failure): none was written, each file already there is as it was (the files are written all or
+    none, mc_ao.outputs.save_files)."""
+    return f"none of its files was written (any file already there is unchanged): {file_error}"
+
+
 def file_error_message(outcome):
     """The report of a baked object whose files were not written: where the bake is, that none of
     its files was written (the old ones unchanged), and which failed."""
     where = f"the bake is in {outcome.where}, but" if outcome.where else "the bake finished, but"
-    return (f"{outcome.object_name}: {where} none of its files was written (any file already there is "
-            f"unchanged): {outcome.file_error}")
+    return f"{outcome.object_name}: {where} {not_written(outcome.file_error)}"
 

@@ -141,9 +141,12 @@ def start_local_cluster(workers):
     from distributed import LocalCluster
 
     with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
+        # No dashboard; the scheduler's HTTP server (health, metrics) on a free port: on its default,
+        # 8787, a second cluster on the machine printed a UserWarning into every batch's output.
         return LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
             dashboard_address=None, silence_logs=logging.ERROR,
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         )
 
 

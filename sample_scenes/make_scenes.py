@@ -28,6 +28,14 @@ test_sample_scenes.py checks that). Scenes:
                   UV Project; --match-suffix _high _low pairs them), on a ground plane.
   udim.blend      UDIM tiles: Suzanne on a pedestal, one mesh (Bust) whose head is in tile 1001 and
                   pedestal in tile 1002, on a ground plane.
+  props.blend     props without a floor, in collections: Crate and Barrel (Props), two bottles
+                  (Clutter, inside Props), a wall (Backdrop); the crate's material reads an
+                  occlusion-roughness-metallic image, Crate_ORM: the ground, occluder collections and
+                  channel packing.
+  atlas.blend     a texture atlas: a kit of four objects (Base, Column, Ball, Block) resting on each
+                  other, sharing one material whose active Image Texture node reads the image Atlas;
+                  each object's UVs fill one quarter of the one UV square, so the four bake into
+                  one image (--atlas Atlas, or the materials' image).
 """
 
 import argparse
@@ -45,6 +53,13 @@ ANALYTIC = {"plane_half_size": 1.0, "disk_radius": 0.5, "disk_height": 0.4, "dis
 #: The rock's numbers: its high-poly reaches displacement / 2 outside the sphere of its radius, and the
 #: low-poly's flat faces lie inside that sphere, so an extrusion of 0.1 (the README's) covers the gap.
 ROCK = {"radius": 0.5, "displacement": 0.12, "cell": 0.15}
+#: The props scene's numbers: the size of its occlusion-roughness-metallic image (the bake into its
+#: red channel is this size).
+PROPS = {"orm_size": 512}
+#: The atlas scene's numbers: the shared image's size, and each object's quarter of the UV square
+#: (lower-left corner), its islands inset by ``inset`` of the quarter's side.
+ATLAS = {"image_size": 1024, "image": "Atlas", "inset": 0.03,
+         "quarters": {"Base": (0.0, 0.0), "Column": (0.5, 0.0), "Ball": (0.0, 0.5), "Block": (0.5, 0.5)}}
 
 
 def reset():
@@ -271,7 +286,128 @@ def udim():
     save("udim.blend")
 
 
-SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense, "rock": rock, "udim": udim}
+def cylinder(name, location, radius, depth, vertices=24):
+    bpy.ops.mesh.primitive_cylinder_add(vertices=vertices, radius=radius, depth=depth, location=location)
+    obj = bpy.context.active_object
+    obj.name = obj.data.name = name
+    smart_uv(obj)
+    return obj
+
+
+def collection(name, parent=None):
+    """A new collection ``name`` inside ``parent`` (default: the scene's)."""
+    coll = bpy.data.collections.new(name)
+    (parent or bpy.context.scene.collection).children.link(coll)
+    return coll
+
+
+def move_to(obj, coll):
+    for old in list(obj.users_collection):
+        old.objects.unlink(obj)
+    coll.objects.link(obj)
+
+
+def orm_material(obj, image_name, size=PROPS["orm_size"]):
+    """A material whose Principled BSDF reads roughness and metallic from a glTF occlusion-roughness-
+    metallic image (a generated one: red, the occlusion, 1; green, the roughness, 0.6; blue, the
+    metallic, 0), the image a bake packs its AO into with Channel R and Into it."""
+    image = bpy.data.images.new(image_name, size, size, alpha=False)
+    image.generated_color = (1.0, 0.6, 0.0, 1.0)
+    image.colorspace_settings.name = "Non-Color"
+    mat = bpy.data.materials.new(obj.name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    bsdf = nodes["Principled BSDF"]
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.location = (-600, 0)
+    split = nodes.new("ShaderNodeSeparateColor")
+    split.location = (-300, 0)
+    links.new(tex.outputs["Color"], split.inputs["Color"])
+    links.new(split.outputs["Green"], bsdf.inputs["Roughness"])
+    links.new(split.outputs["Blue"], bsdf.inputs["Metallic"])
+    obj.data.materials.append(mat)
+
+
+def props():
+    """Props as an asset library has them, without a floor: a crate and a barrel in collection Props,
+    bottles beside the crate in Clutter (inside Props), a wall behind them in Backdrop; the crate's
+    material reads a generated occlusion-roughness-metallic image, Crate_ORM. For the ground
+    (--ground: the props' contact shadow without a floor mesh), occluder collections (--occluder-
+    collections Props --exclude-collections Clutter) and channel packing (--channel r --into Crate_ORM)."""
+    reset()
+    props_coll = collection("Props")
+    clutter = collection("Clutter", props_coll)
+    backdrop = collection("Backdrop")
+    crate = cube("Crate", (0.0, 0.0, 0.4), (0.8, 0.8, 0.8))
+    bpy.ops.object.transform_apply(scale=True)
+    smart_uv(crate)
+    orm_material(crate, "Crate_ORM")
+    barrel = cylinder("Barrel", (0.95, 0.05, 0.45), 0.3, 0.9)
+    shade(barrel, True)
+    for obj in (crate, barrel):
+        move_to(obj, props_coll)
+    for i, (x, y) in enumerate([(-0.55, -0.15), (-0.6, 0.12)]):
+        move_to(cylinder(f"Bottle{i}", (x, y, 0.15), 0.06, 0.3, vertices=12), clutter)
+    wall = cube("Wall", (0.3, 0.75, 0.75), (3.0, 0.1, 1.5))
+    bpy.ops.object.transform_apply(scale=True)
+    smart_uv(wall)
+    move_to(wall, backdrop)
+    save("props.blend")
+
+
+def into_quarter(obj, corner, inset):
+    """Move ``obj``'s UVs (inside [0, 1]) into the quarter of the UV square whose lower-left corner is
+    ``corner``, inset by ``inset`` of its side on every border: the objects of an atlas share one UV
+    square without sharing a texel."""
+    scale = 0.5 * (1.0 - 2.0 * inset)
+    for loop in obj.data.uv_layers.active.data:
+        u, v = loop.uv
+        loop.uv = (corner[0] + 0.5 * inset + scale * u, corner[1] + 0.5 * inset + scale * v)
+
+
+def atlas():
+    """A kit of four objects baked into one image (a texture atlas): Base, a slab; Column standing on
+    it; Ball (an icosphere) resting on the column; Block leaning against the column on the base. They share one
+    material, Kit, whose active Image Texture node reads the image Atlas (generated, 8-bit,
+    Non-Color, black), as Cycles' bake finds its target; each object's UVs fill its quarter of the
+    UV square (ATLAS), so no texel belongs to two objects."""
+    reset()
+    a = ATLAS
+    base = cube("Base", (0.0, 0.0, 0.1), (1.6, 1.2, 0.2))
+    bpy.ops.mesh.primitive_cylinder_add(vertices=24, radius=0.18, depth=1.0, location=(0.0, 0.0, 0.7))
+    column = bpy.context.active_object
+    column.name = column.data.name = "Column"
+    shade(column, True)
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=0.3, location=(0.0, 0.0, 1.47))
+    ball = bpy.context.active_object
+    ball.name = ball.data.name = "Ball"
+    shade(ball, True)
+    block = cube("Block", (0.45, 0.1, 0.4), (0.4, 0.4, 0.4))
+    block.rotation_euler = (0.0, 0.0, math.radians(20))
+    objects = {"Base": base, "Column": column, "Ball": ball, "Block": block}
+    image = bpy.data.images.new(a["image"], a["image_size"], a["image_size"], alpha=True)
+    image.colorspace_settings.name = "Non-Color"
+    mat = bpy.data.materials.new("Kit")
+    mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.location = (-400, 0)
+    nodes.active = tex
+    for name, obj in objects.items():
+        active(obj)
+        bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)
+        smart_uv(obj, margin=0.03)
+        into_quarter(obj, a["quarters"][name], a["inset"])
+        obj.data.materials.append(mat)
+    for obj in objects.values():  # nothing selected: the script bakes every mesh of the file
+        obj.select_set(False)
+    save("atlas.blend")
+
+
+SCENES = {"suzanne": suzanne, "room": room, "analytic": analytic, "dense": dense, "rock": rock, "udim": udim,
+          "props": props, "atlas": atlas}
 
 
 #: Where save() writes; main() sets it.

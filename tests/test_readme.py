@@ -24,7 +24,8 @@ MOST_LINES = 300
 FEATURES = "Every feature, one command each"
 #: Features that must each have a section with a command there (a word of its title, lower case).
 FEATURE_WORDS = ("blender", "error map", "denois", "udim", "bent normals", "colour attributes",
-                 "selected to active", "thickness", "python", "library")
+                 "selected to active", "thickness", "ground", "occluder collections", "channel packing", "python",
+                 "library")
 #: What a command line may need that this checkout does not bring (its "# needs ..." comment says
 #: which), and how a line shows it needs it.
 NEEDS = {
@@ -353,7 +354,8 @@ def test_sample_manifest_plans_every_sample_scene(tmp_path):
 
     path = ROOT / "sample_scenes" / "library.toml"
     tasks = manifest.plan(path, tmp_path / "out")
-    assert {Path(t.blend).name for t in tasks} == {"suzanne.blend", "room.blend", "analytic.blend", "rock.blend", "udim.blend"}
+    assert {Path(t.blend).name for t in tasks} == {"suzanne.blend", "room.blend", "analytic.blend", "rock.blend", "udim.blend",
+                                                   "props.blend"}
     assert all(Path(t.blend).is_file() for t in tasks)
     assert "scripts/bake_batch.py sample_scenes/library.toml --output" in path.read_text()
 

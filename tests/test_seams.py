@@ -73,6 +73,38 @@ def test_a_constant_map_has_no_mismatch_and_a_map_of_the_surface_none_inside_an_
     assert S.seam_mismatch(target, np.zeros((W, W))) == 0
 
 
+def folded_plane(smooth):
+    """split_plane with its right half folded up by 90 degrees about the seam (x = 0.5): a crease,
+    unless ``smooth`` gives both halves the same corner normals (the fold's bisector) along it."""
+    m = split_plane()
+    P = m.positions.copy()
+    P[[2, 5]] = [[0.5, 0, 0.5], [0.5, 1, 0.5]]
+    N = None
+    if smooth:
+        fold = np.array([-1.0, 0.0, 1.0]) / np.sqrt(2)
+        N = np.where(np.isin(m.triangles, [1, 4])[..., None], fold, 0.0)
+        N[:2] = np.where(N[:2].any(-1, keepdims=True), N[:2], [0, 0, 1.0])
+        N[2:] = np.where(N[2:].any(-1, keepdims=True), N[2:], [-1.0, 0, 0])
+    return Mesh(P, m.triangles, m.uvs, N, name="folded")
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_a_seam_on_a_crease_is_measured_but_left_alone(smooth):
+    # A 90-degree fold along the seam: with each face's own normal the AO may differ across it (the
+    # seam is what lets the map show that), so the fix takes no part there; with one shading normal
+    # on both sides (smooth shading) it makes them agree.
+    m = folded_plane(smooth)
+    L = S.seam_lookups(m, 16)
+    assert L.edges == 1 and L.points == 64 and L.crease.all() != smooth
+    image = np.random.default_rng(4).random((16, 16)).astype(np.float32)
+    stderr = np.full((16, 16), 0.01, np.float32)
+    out, se, info = S.fix_seams(image, stderr, np.ones((16, 16), bool), L)
+    if smooth:
+        assert info.after < 0.1 * info.before == pytest.approx(0.1 * L.mismatch(image))
+    else:
+        assert np.array_equal(out, image) and np.array_equal(se, stderr) and info.unknowns == 0
+
+
 def test_udim_tiles_meet_at_a_seam_even_where_the_uvs_run_on():
     # A 2 x 1 plane whose UVs run on from tile 1001 into 1002: in a UDIM image the edge at u = 1 is
     # looked up in tile 1001 from the left (columns 7 and, wrapped, 0 of that tile) and in tile 1002

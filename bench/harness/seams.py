@@ -33,6 +33,11 @@ POINTS_PER_TEXEL = 4
 WRAPS = ("repeat", "extend")
 #: Seam points made at a time (their temporaries are a few hundred bytes each).
 CHUNK = 1 << 15
+#: A seam edge is a crease where the two sides' shading normals at one of its ends differ by more
+#: than this (degrees): a sharp edge, split normals, flat faces meeting at an angle. Blender's smooth
+#: shading gives both sides one normal (to the last bits); AO is a function of the point and the
+#: normal, so only there must both sides agree.
+SMOOTH_ANGLE = 1.0
 FIRST_TILE = 1001
 
 
@@ -51,6 +56,9 @@ class SeamLookups:
     target : (K,) int32, the mesh (of those given) the point belongs to.
     triangle : (K, 2) int64, the point's triangle on side A and on side B (of its mesh).
     uv : (K, 2, 2) float64, the point's UV coordinates on side A and on side B.
+    crease : (K,) bool, the point lies on a crease: the shading normals of the two sides differ
+        there (by more than SMOOTH_ANGLE degrees at an end of its edge), so the AO may differ too
+        and the fix leaves the point alone (the seam is what lets the map show the crease).
     tiles : None (one image) or the UDIM tile numbers of the planes.
     wrap : how lookups wrap at the image's (each tile's) border.
     """
@@ -64,12 +72,19 @@ class SeamLookups:
     edges: int
     triangle: np.ndarray = None
     uv: np.ndarray = None
+    crease: np.ndarray = None
     tiles: tuple = None
     wrap: str = "repeat"
 
     @property
     def points(self):
         return len(self.index)
+
+    def subset(self, which):
+        """The lookups of the points ``which`` (a boolean mask or indices) alone."""
+        fields = ("index", "weight", "length", "edge", "target", "triangle", "uv", "crease")
+        return SeamLookups(shape=self.shape, edges=self.edges, tiles=self.tiles, wrap=self.wrap,
+                           **{f: getattr(self, f)[which] for f in fields})
 
     def difference(self, planes):
         """Lookup A - lookup B at every point (K,) float64, of ``planes`` ((N, H, W), or (H, W) for
@@ -80,11 +95,13 @@ class SeamLookups:
         vals = flat[self.index].astype(np.float64)
         return np.einsum("kj,kj->k", vals, self.weight)
 
-    def mismatch(self, planes):
-        """The mean |lookup A - lookup B| over every seam point: what a user sees as the seam."""
-        if not self.points:
-            return 0.0
-        return float(np.mean(np.abs(self.difference(planes))))
+    def mismatch(self, planes, creases=True):
+        """The mean |lookup A - lookup B| over every seam point (``creases`` False: over the smooth
+        ones, those the fix makes agree): what a user sees as the seam."""
+        d = self.difference(planes)
+        if not creases:
+            d = d[~self.crease]
+        return float(np.mean(np.abs(d))) if len(d) else 0.0
 
 
 def _weld(positions):
@@ -187,6 +204,12 @@ def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel
     for mesh in meshes:
         uv = np.asarray(mesh.uvs, np.float64)
         tA, kA, tB, kB, same = seam_edges(mesh)
+        nrm = mesh.corner_normals()
+        kB0 = np.where(same, kB, (kB + 1) % 3)  # B's corner at A's corner kA
+        kB1 = np.where(same, (kB + 1) % 3, kB)
+        cos = math.cos(math.radians(SMOOTH_ANGLE))
+        crease = ((np.einsum("ij,ij->i", nrm[tA, kA], nrm[tB, kB0]) < cos)
+                  | (np.einsum("ij,ij->i", nrm[tA, (kA + 1) % 3], nrm[tB, kB1]) < cos))
         a0, a1 = uv[tA, kA], uv[tA, (kA + 1) % 3]
         b0 = np.where(same[:, None], uv[tB, kB], uv[tB, (kB + 1) % 3])
         b1 = np.where(same[:, None], uv[tB, (kB + 1) % 3], uv[tB, kB])
@@ -198,13 +221,13 @@ def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel
         length = np.maximum(np.hypot(*((a1 - a0)[sel] * scale).T), np.hypot(*((b1 - b0)[sel] * scale).T))
         n = np.maximum(1, np.ceil(points_per_texel * length)).astype(np.int64)
         per_mesh.append((a0[sel], a1[sel], b0[sel], b1[sel], cA[sel], cB[sel], np.stack([tA[sel], tB[sel]], 1),
-                         length, n))
+                         crease[sel], length, n))
     total = sum(int(m[-1].sum()) for m in per_mesh)
     out = dict(index=np.empty((total, 8), itype), weight=np.empty((total, 8)), length=np.empty(total),
                edge=np.empty(total, np.int64), target=np.empty(total, np.int32),
-               triangle=np.empty((total, 2), np.int64), uv=np.empty((total, 2, 2)))
+               triangle=np.empty((total, 2), np.int64), uv=np.empty((total, 2, 2)), crease=np.empty(total, bool))
     at = edges = 0
-    for m_i, (a0, a1, b0, b1, cA, cB, tris, length, n) in enumerate(per_mesh):
+    for m_i, (a0, a1, b0, b1, cA, cB, tris, crease, length, n) in enumerate(per_mesh):
         # Edges in slices of about CHUNK points: the temporaries stay small whatever the image.
         ends = np.searchsorted(np.cumsum(n), np.arange(CHUNK, int(n.sum()) + CHUNK, CHUNK), side="right")
         lo = 0
@@ -237,6 +260,7 @@ def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel
             out["edge"][dst] = (e + edges)[keep]
             out["target"][dst] = m_i
             out["triangle"][dst] = tris[e][keep]
+            out["crease"][dst] = crease[e][keep]
             at += k
             lo = hi
         edges += len(n)
@@ -265,6 +289,8 @@ MARGIN_WEIGHT = 1e-2
 #: MAX_ITERATIONS.
 TOLERANCE = 1e-6
 MAX_ITERATIONS = 2000
+#: Solves at most, each holding the texels the last one took past the value range at its bound.
+BOUND_ROUNDS = 4
 
 
 def _dot(a, b):
@@ -276,7 +302,8 @@ def _dot(a, b):
 class SeamFix:
     """What :func:`fix_seams` did: texels (flat indices it changed the values of), iterations,
     residual (the preconditioned residual's norm over the initial one), before and after (the
-    mismatch of the lookups), unknowns (texels it solved for)."""
+    mismatch of the lookups at smooth seams, those it makes agree), unknowns (texels it solved
+    for)."""
 
     texels: np.ndarray
     iterations: int
@@ -284,6 +311,7 @@ class SeamFix:
     before: float
     after: float
     unknowns: int
+    rounds: int = 1
 
 
 class _System:
@@ -292,7 +320,7 @@ class _System:
     (K,) weights and unknown indices (contiguous; each product a sum of eight gathers, each
     transpose eight bincounts added in order), so no (K, 8) temporary is made per iteration."""
 
-    def __init__(self, flat_v, flat_s, flat_m, lookups, owner, seam_weight, margin_weight):
+    def __init__(self, flat_v, flat_s, flat_m, lookups, owner, seam_weight, margin_weight, pinned=None):
         touched, pos = np.unique(lookups.index.T, return_inverse=True)  # pos: (8, K), column by column
         it = np.int32 if len(touched) < 2 ** 31 else np.int64
         pos = pos.reshape(8, -1).astype(it)
@@ -305,6 +333,10 @@ class _System:
             for j in range(8):
                 other = (own[pos[j]] >= 0) & (own[pos[j]] != lookups.target)
                 free[pos[j][other]] = False
+        self.solvable = free.copy()  # before any texel is pinned at a bound
+        if pinned is not None:  # (positions among the touched texels, the values they are held at)
+            free[pinned[0]] = False
+            y[pinned[0]] = pinned[1]
         self.touched, self.free = touched, free
         self.n = n = int(free.sum())
         fi = (np.cumsum(free) - 1).astype(it)  # index among the unknowns
@@ -345,12 +377,15 @@ class _System:
     def apply(self, x):
         return self.d * x + self.ctr(self.lam * self.cx(x))
 
-    def solve(self, b, x, tolerance, max_iterations):
-        """Preconditioned conjugate gradients from ``x`` (changed in place): (x, iterations, residual)."""
+    def solve(self, b, x, tolerance, max_iterations, start=None):
+        """Preconditioned conjugate gradients from ``x`` (changed in place), until the preconditioned
+        residual r' M^-1 r is ``tolerance``^2 of ``start`` (None: of its own at ``x``):
+        (x, iterations, residual / start, start)."""
         r = b - self.apply(x)
         z = r / self.diag
         p = z.copy()
-        rz = rz0 = _dot(r, z)
+        rz = _dot(r, z)
+        rz0 = rz if start is None else start
         it = 0
         while it < max_iterations and rz > (tolerance ** 2) * rz0 and rz > 0:
             q = self.apply(p)
@@ -363,7 +398,7 @@ class _System:
             p += z
             rz = rz_new
             it += 1
-        return x, it, math.sqrt(rz / rz0) if rz0 > 0 else 0.0
+        return x, it, math.sqrt(rz / rz0) if rz0 > 0 else 0.0, rz0
 
 
 def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.0), seam_weight=SEAM_WEIGHT,
@@ -377,7 +412,8 @@ def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.
         + sum_covered (x_i - y_i)^2 / s_i^2 + sum_margin margin_weight * (x_i - y_i)^2 / s_ref^2
 
     with y the baked values, s_i each covered texel's standard error and s_ref their median: a
-    texel moves in proportion to its error, a margin texel freely. Covered texels with no error
+    texel moves in proportion to its error, a margin texel freely. Points on creases (see
+    :class:`SeamLookups`) take no part: the AO may differ across them. Covered texels with no error
     (exactly open or occluded) are held, as are texels ``owner`` gives to another target than the
     lookup's. Solved by conjugate gradients with a Jacobi preconditioner, in float64, in a fixed
     order (the same bits for any threads); the result is clipped to ``value_range``. The error of a
@@ -406,26 +442,48 @@ def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.
     se_out = stderr.copy() if stderr_out is None else stderr_out
     if se_out is not stderr:
         np.copyto(se_out, stderr)
+    if lookups.crease is not None and lookups.crease.any():
+        lookups = lookups.subset(~lookups.crease)
     before = lookups.mismatch(values)
     none = SeamFix(np.zeros(0, np.int64), 0, 0.0, before, before, 0)
     if not lookups.points:
         return out, se_out, none
-    sys_ = _System(values.reshape(-1), stderr.reshape(-1), np.asarray(mask).reshape(-1), lookups, owner,
-                   seam_weight, margin_weight)
-    if sys_.n == 0:
-        return out, se_out, none
-    x, it, res = sys_.solve(sys_.b, sys_.y.copy(), tolerance, max_iterations)
+    flat = values.reshape(-1), stderr.reshape(-1), np.asarray(mask).reshape(-1)
     lo, hi = value_range
-    x = np.clip(x, lo, hi)
-    texels = sys_.touched[sys_.free]
-    new = x.astype(out.dtype)
+    # Bounds by an active set: texels the solution takes past a bound are held there and the rest
+    # solved again (from where they were), until none crosses or BOUND_ROUNDS have been solved.
+    pinned, total, start = None, 0, None
+    sys_ = None
+    for round_ in range(BOUND_ROUNDS):
+        sys_ = None  # the last round's system goes before the next is built
+        sys_ = _System(*flat, lookups, owner, seam_weight, margin_weight, pinned)
+        if round_ == 0:
+            if sys_.n == 0:
+                return out, se_out, none
+            y0, solvable = flat[0][sys_.touched].astype(np.float64), sys_.solvable
+            current = y0.copy()
+        # From where the texels are, to the first solve's residual times the tolerance.
+        x, it, res, start = sys_.solve(sys_.b, current[sys_.free], tolerance, max_iterations, start)
+        total += it
+        current[sys_.free] = x
+        cross = np.flatnonzero(sys_.free)[(x < lo) | (x > hi)]
+        if not len(cross):
+            break
+        held = np.clip(current[cross], lo, hi)
+        current[cross] = held
+        pinned = (cross, held) if pinned is None else (np.concatenate([pinned[0], cross]),
+                                                      np.concatenate([pinned[1], held]))
+    current = np.clip(current, lo, hi)
+    texels = sys_.touched[solvable]
+    new = current[solvable].astype(out.dtype)
     out.reshape(-1)[texels] = new
     # The error of a changed covered texel: its noise is at most the estimate's (A >= D, so the
     # fixed value's variance diag(A^-1 D A^-1) <= diag(A^-1) <= s_i^2), and the change d = x - y is
     # an unbiased estimate of the bias the fix adds (E[x] - t = E[x - y]), so
     # E[s_i^2 + d_i^2] = s_i^2 + bias^2 + var(d_i) >= the fixed value's mean squared error.
-    cov = sys_.covered
-    d = new[cov].astype(np.float64) - sys_.y[cov]
-    se_out.reshape(-1)[texels[cov]] = np.sqrt(sys_.s[cov] ** 2 + d * d).astype(se_out.dtype)
+    cov = flat[2][texels]
+    s0 = flat[1][texels[cov]].astype(np.float64)
+    d = new[cov].astype(np.float64) - y0[solvable][cov]
+    se_out.reshape(-1)[texels[cov]] = np.sqrt(s0 ** 2 + d * d).astype(se_out.dtype)
     after = lookups.mismatch(out)
-    return out, se_out, SeamFix(texels, it, res, before, after, sys_.n)
+    return out, se_out, SeamFix(texels, total, res, before, after, int(solvable.sum()), round_ + 1)

@@ -55,8 +55,7 @@ class ScriptRun:
             print(f"bake_ao: {name}: from {', '.join(escape(h.name) for h in job.highpoly)}"
                   f"{baking.miss_summary(result)}", file=sys.stderr)
         if not outcome.baked or outcome.file_error:
-            error = outcome.error if not outcome.baked else (
-                f"none of its files was written (any file already there is unchanged): {outcome.file_error}")
+            error = outcome.error if not outcome.baked else service.not_written(outcome.file_error)
             if outcome.trace:
                 error += "; the traceback is above"
             print(f"bake_ao: {name}: {escape(error)}", file=sys.stderr)

@@ -161,8 +161,3 @@ def save_files(writes):
         raise
     return [w.path for w in writes]
 
-
-def not_saved_message(object_name, where, error):
-    """The report of an object whose files were not written: which failed, and that none was written."""
-    return (f"{object_name}: the bake is in {where}, but none of its files was written (the files already "
-            f"there are unchanged): {error}")

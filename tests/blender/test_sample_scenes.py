@@ -81,7 +81,7 @@ def bake(blend, out, *args):
 
 
 def test_there_are_scenes():
-    assert SCENES == ["analytic", "dense", "rock", "room", "suzanne", "udim"]
+    assert SCENES == ["analytic", "atlas", "dense", "props", "rock", "room", "suzanne", "udim"]
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -227,3 +227,41 @@ def test_suzanne_islands_do_not_overlap_at_1024(fresh):
     problems = {key: count for key, count in report.items()
                 if key not in ("covered_texels", "worker_memory") and count}
     assert problems == {}
+
+
+def test_props_scene_has_its_collections_and_orm_image(fresh):
+    """props.blend as the README's ground, collection and channel-packing lines use it: no floor mesh;
+    Crate and Barrel in Props, the bottles in Clutter inside Props, the wall in Backdrop; the crate's
+    material reads Crate_ORM (red 1, green 0.6, blue 0) for its roughness and metallic."""
+    bpy = fresh
+    open_scene(bpy, SAMPLES / "props.blend")
+    members = {c.name: sorted(o.name for o in c.objects) for c in bpy.data.collections}
+    assert members == {"Props": ["Barrel", "Crate"], "Clutter": ["Bottle0", "Bottle1"], "Backdrop": ["Wall"]}
+    assert [c.name for c in bpy.data.collections["Props"].children] == ["Clutter"]
+    assert min(min((o.matrix_world @ v.co).z for v in o.data.vertices) for o in bpy.data.objects) > -1e-6
+    image = bpy.data.images["Crate_ORM"]
+    assert tuple(image.size) == (512, 512) and image.source == "GENERATED"
+    np.testing.assert_allclose(image.generated_color[:3], (1.0, 0.6, 0.0))
+    nodes = bpy.data.objects["Crate"].active_material.node_tree
+    fed = {link.to_socket.name: link.from_socket.name for link in nodes.links}
+    assert fed["Roughness"] == "Green" and fed["Metallic"] == "Blue"
+    assert any(n.type == "TEX_IMAGE" and n.image == image for n in nodes.nodes)
+
+
+def test_atlas_scene_shares_one_image_over_one_uv_square(fresh):
+    """atlas.blend: four objects, one material (Kit) whose active Image Texture node reads Atlas (1024,
+    8-bit, Non-Color), each object's UVs inside its own quarter of the UV square, so that no texel's
+    centre lies under two objects' islands."""
+    bpy = fresh
+    data = mesh_data(bpy, SAMPLES / "atlas.blend")
+    assert sorted(data) == ["Ball", "Base", "Block", "Column"]
+    quarters = {"Base": (0, 0), "Column": (1, 0), "Ball": (0, 1), "Block": (1, 1)}
+    for name, (_, _, uvs) in data.items():
+        q = np.floor(uvs.reshape(-1, 2) * 2).astype(int)
+        assert {tuple(c) for c in q.tolist()} == {quarters[name]}, name
+    image = bpy.data.images["Atlas"]
+    assert tuple(image.size) == (1024, 1024) and not image.is_float
+    assert image.colorspace_settings.name == "Non-Color"
+    for name in data:
+        mat = bpy.data.objects[name].active_material
+        assert mat.name == "Kit" and mat.node_tree.nodes.active.image == image, name
