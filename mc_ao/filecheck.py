@@ -151,13 +151,16 @@ def folder_problem(folder):
 
     A folder that does not exist yet is fine where it can be created (it is created before the
     first file is written): what counts is its nearest existing ancestor, which must be a folder
-    that this process may write. Checked before a bake, so that a typo in the folder does not
+    that this process may write; a link on the way that leads nowhere (a dangling symlink) is refused. Checked before a bake, so that a typo in the folder does not
     cost the bake; a write can still fail later (a full disk), and then the existing file is
     left as it was.
     """
     path = os.path.abspath(folder)
     existing = path
     while not os.path.exists(existing):
+        if os.path.islink(existing):  # a link to nothing: no folder can be made there
+            what = "it is" if existing == path else f"{existing!r} is"
+            return f"{what} a link to {os.readlink(existing)!r}, which does not exist"
         parent = os.path.dirname(existing)
         if parent == existing:
             break

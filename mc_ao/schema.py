@@ -373,6 +373,9 @@ def problems(settings):
     if settings.target == "VERTEX_COLORS" and not str(settings.attribute_name).strip():
         out.append(("attribute_name", "must name the color attribute to bake into, not be empty"))
     out += _occlusion_problems(settings)
+    if settings.denoise and settings.samples < 2:
+        out.append(("samples", "must be at least 2 with Denoise: the filter weighs each texel by its error, "
+                               "which takes two sets of samples; raise Samples or turn Denoise off"))
     if settings.target == "VERTEX_COLORS" and settings.error_map:
         out.append(("error_map", "is for image textures: a color-attribute bake has no image to hold the "
                                  "standard error; turn it off (adaptive sampling still uses the error)"))

@@ -1,7 +1,7 @@
 """``scripts/bake_batch.py``: bake every .blend file of a manifest, one process per file.
 
 Exit status: 0 when every task succeeded (or was already done), 1 when any task failed, 2 for a bad
-manifest or bad arguments (nothing baked), 130 when interrupted.
+manifest or bad arguments (nothing baked), 130 when interrupted (Ctrl-C), 143 when terminated (SIGTERM).
 """
 
 import argparse
@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from core._version import __version__
+from mc_ao.interrupts import Terminated, sigterm_interrupts
 
 from .manifest import BATCH_SUMMARY, ManifestError, plan
 from .report import Progress, counts, older_text, output_problem, table, write_json_atomic
@@ -179,22 +180,14 @@ def main(argv=None):
     start = time.monotonic()
     records, code = [], 0
     try:
-        if args.runner == "local":
-            from .runners import run_local
-
-            records = run_local(tasks, workers=workers, progress=progress, force=args.force, blender=blender)
-        else:
-            from .runners import run_dask
-
-            try:
-                records = run_dask(tasks, workers=workers, progress=progress, scheduler=args.scheduler,
-                                   force=args.force, blender=blender)
-            except (RuntimeError, OSError) as exc:
-                progress.close()
-                return _fail(str(exc))
+        with sigterm_interrupts():  # SIGTERM stops the batch as Ctrl-C does: the summary says what finished
+            records = _run(args, tasks, workers, progress, blender)
+    except _Failed as exc:
+        progress.close()
+        return _fail(str(exc))
     except KeyboardInterrupt as exc:
         records = getattr(exc, "records", records)  # mc_ao_batch.runners.Interrupted: the finished tasks
-        code = 130
+        code = 143 if isinstance(exc, Terminated) or isinstance(exc.__context__, Terminated) else 130
     finally:
         progress.close()
     if code == 0:
@@ -220,12 +213,31 @@ def main(argv=None):
     if c["older"]:
         line += f"{older_text(c['older'])}, "
     line += f"{c['failed']} failed of {len(tasks)} in {seconds:.1f} s"
-    if code == 130:
-        line += "; interrupted"
+    if code in (130, 143):
+        line += "; interrupted" if code == 130 else "; terminated (SIGTERM)"
     if summary_path is not None:
         line += f"; summary: {summary_path}"
     print(line, flush=True)
     return code
+
+
+class _Failed(Exception):
+    """The runner could not run (Dask not installed, no scheduler there): exit status 2, no summary."""
+
+
+def _run(args, tasks, workers, progress, blender):
+    """The tasks' records from the chosen runner."""
+    if args.runner == "local":
+        from .runners import run_local
+
+        return run_local(tasks, workers=workers, progress=progress, force=args.force, blender=blender)
+    from .runners import run_dask
+
+    try:
+        return run_dask(tasks, workers=workers, progress=progress, scheduler=args.scheduler, force=args.force,
+                        blender=blender)
+    except (RuntimeError, OSError) as exc:
+        raise _Failed(str(exc)) from None
 
 
 def _write_json(path, data, inputs, what):

@@ -69,7 +69,7 @@ import os
 import sys
 import traceback
 
-from .. import baking, corelink, filecheck, filewriter, service
+from .. import baking, corelink, filecheck, filewriter, interrupts, service
 from ..choose import Pick, choose
 from ..extract import ExtractError
 from ..terminal import EscapingStream, escape
@@ -115,7 +115,8 @@ def _main(argv=None):
     summary = Summary(*early_summary_args(argv, in_blender))
     code = 1
     try:
-        code = run(argv, in_blender, summary)
+        with interrupts.sigterm_interrupts():
+            code = run(argv, in_blender, summary)
     except UsageError as exc:
         for line in str(exc).splitlines():
             print(f"bake_ao: error: {line}", file=sys.stderr)
@@ -123,10 +124,12 @@ def _main(argv=None):
         summary.error = str(exc)
         summary.settings, summary.objects = {}, []
         code = 2
-    except KeyboardInterrupt:
-        print(f"\nbake_ao: {cancel_note(summary)}", file=sys.stderr)
-        summary.error = "cancelled (Ctrl-C)"
-        code = 130
+    except KeyboardInterrupt as exc:
+        terminated = isinstance(exc, interrupts.Terminated)
+        print(f"\nbake_ao: {cancel_note(summary, 'terminated (SIGTERM)' if terminated else 'cancelled')}",
+              file=sys.stderr)
+        summary.error = "terminated (SIGTERM)" if terminated else "cancelled (Ctrl-C)"
+        code = 143 if terminated else 130
     except Exception as exc:
         # Under Blender an escaping exception would end the script with exit status 0.
         traceback.print_exc()

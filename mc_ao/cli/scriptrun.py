@@ -4,7 +4,7 @@ summary, the --save file at the end, and the result table; the exit status."""
 import sys
 import time
 
-from .. import baking, service
+from .. import baking, interrupts, service
 from ..outputs.store import Store
 from ..terminal import escape
 from . import table
@@ -79,15 +79,16 @@ def bake(plan, args, summary):
     """Bake the plan's jobs on a worker thread, each finished one's files written here; the exit status."""
     handler = ScriptRun(plan, args, summary)
     run, settings = handler.run, plan.settings
-    handler.begin(0)
-    run.start()
     try:
+        handler.begin(0)
+        run.start()
         while not run.handle(run.next_message(), handler):
             pass
     except BaseException as exc:
         run.stop()  # a "cancelled" message comes only from here: the cancel is this Ctrl-C's
         handler.progress.end()
-        why = "cancelled (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else "the run stopped"
+        why = ("terminated (SIGTERM)" if isinstance(exc, interrupts.Terminated) else
+               "cancelled (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else "the run stopped")
         for outcome in run.cancel_rest():
             summary.add(outcome.object_name, "failed", error=f"not baked: {why}")
         raise

@@ -77,7 +77,7 @@ def s2a_record(job, result=None):
             "missed_texels": int(report.get("missed_texels", 0))}
 
 
-def cancel_note(summary):
+def cancel_note(summary, what="cancelled"):
     """What a cancel left: which objects have all their files written, and of which nothing was
     written (an object's files are written with Ctrl-C held off: all of them or none)."""
     done = [escape(o["object"]) for o in summary.objects if o["status"] == "ok"]
@@ -87,4 +87,4 @@ def cancel_note(summary):
         parts.append(f"every file of {', '.join(done)} is written")
     if kept:
         parts.append(f"nothing of {', '.join(kept)} was written (any file there is as it was)")
-    return "cancelled; " + ("; ".join(parts) or "nothing was written")
+    return f"{what}; " + ("; ".join(parts) or "nothing was written")
