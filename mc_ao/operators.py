@@ -34,7 +34,7 @@ import traceback
 
 import bpy
 
-from . import bakerun, baking, corelink, filecheck, filewriter, images, schema, service, vertex_colors
+from . import bakerun, baking, corelink, filecheck, filewriter, images, schema, service, undo_images, vertex_colors
 from .choose import ChoiceError, Pick, choose
 from .extract import ExtractError
 from .outputs.store import Store
@@ -133,6 +133,7 @@ def forget_outcome(*_args):
     occluders were about the one before."""
     set_outcome(None)
     baking.forget_occluder_counts()
+    undo_images.forget()
 
 
 @bpy.app.handlers.persistent
@@ -159,6 +160,7 @@ def end_bakes_after_undo(*_args):
     for session in list(_SESSIONS):
         if session.interrupted:
             session.finish(bpy.context, cancelled=True, why="by Undo")
+    undo_images.after_undo()  # baked images show the pixels of the step undo or redo came to
 
 
 # bpy.app.handlers list name -> handler; register() appends them, unregister() removes them.

@@ -20,7 +20,7 @@ LAYERS = [
     {"choose", "selected_to_active", "baking", "occluders"},
     {"udim", "vertex_colors", "bent"},
     {"bakerun", "filewriter", "filecheck"},
-    {"images"},
+    {"images", "undo_images"},
     {"schema", "settings"},
     {"extract", "corelink", "terminal", "interrupts"},
 ]

@@ -208,11 +208,12 @@ class ChannelOutput(OutputKind):
         image = self.blender_image()
         if image is None:
             return
-        from .. import images
+        from .. import images, undo_images
 
         if image.source == "GENERATED" or image.packed_file is not None:
             try:
                 images.pack(image)  # a generated image's pixels live only in the .blend file
+                undo_images.record(image)  # undo and redo show this bake's pixels or the last's
             except images.ImageError as exc:
                 run.warn(str(exc))
         else:

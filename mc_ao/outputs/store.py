@@ -75,12 +75,13 @@ def keep_image(run, job, name, plane, float_buffer, saved):
     pixels packed. ``plane()`` gives its pixels again where loading the file failed."""
     import bpy
 
-    from .. import images
+    from .. import images, undo_images
 
     link = saved is not None and run.settings.link_to_file
     if link:
         try:
             images.use_file(bpy.data.images[name], saved, relative=run.link_relative)
+            undo_images.record(bpy.data.images[name])  # undo and redo show this bake's pixels or the last's
             return
         except (images.ImageError, RuntimeError) as exc:
             run.warn(f"{exc}; its pixels are packed into the .blend file instead")
@@ -88,5 +89,6 @@ def keep_image(run, job, name, plane, float_buffer, saved):
         if link:  # the pixels, after use_file failed
             images.finish_image(name, plane(), float_buffer)
         images.pack(bpy.data.images[name])
+        undo_images.record(bpy.data.images[name])
     except images.ImageError as exc:
         run.warn(f"{exc}; save the image (Image > Save As) before closing the .blend file")
