@@ -218,6 +218,10 @@ def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
         return [np.exp(-(d2 * inv + base)) for inv in inv2h2]
 
     Wk, Yk, Vk, Fk, Sk = D._candidates_and_bias(F, halo, candidates, K, yp, vp, y, var)
+    Gin = G[r:r + h, r:r + w]
+    _, YG, _, _, _ = D._candidates_and_bias(F, halo, candidates, K, G, vp, Gin, var, bias=False)
+    fine_all.SG = [np.where(Wk[k] > 0, YG[k] / np.where(Wk[k] > 0, Wk[k], 1), Gin).astype(np.float64)
+                   for k in range(K)]
     out = []
     with np.errstate(invalid="ignore", divide="ignore"):
         for k in range(K):
