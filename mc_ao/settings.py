@@ -23,12 +23,12 @@ DOMAINS = _identifiers("attribute_domain")
 BENT_SPACES = _identifiers("bent_space")
 GROUNDS = _identifiers("ground")
 QUANTITIES = {i: i.lower() for i in _identifiers("quantity")}  # identifier -> core.bake_ao's quantity
-# file format -> (extension, bits for an 8-bit image, bits for a float image), as core.imageio takes them
+# file format -> (extension, bits for an 8-bit image, bits for a float image), as core.files.imageio takes them
 FILE_FORMATS = {
     "PNG": (".png", 8, 16),
     "OPEN_EXR": (".exr", "half", "float"),
     "TIFF": (".tif", 8, "float"),
-    "PLY": (".ply", None, None),  # per-vertex AO of a colour-attribute bake (core.plyio), no bit depth
+    "PLY": (".ply", None, None),  # per-vertex AO of a colour-attribute bake (core.files.plyio), no bit depth
 }
 
 
@@ -130,7 +130,7 @@ class _BakeSettingsMethods:
 
     @property
     def file_bits(self):
-        """The bit depth core.imageio writes the chosen file format with, following the image's depth."""
+        """The bit depth core.files.imageio writes the chosen file format with, following the image's depth."""
         _, bits8, bits_float = FILE_FORMATS[self.file_format]
         return bits_float if self.float_buffer else bits8
 
@@ -155,7 +155,7 @@ class _BakeSettingsMethods:
             ignore_backfaces=self.ignore_backfaces,
             **({"bent_normals": True} if self.bent_normals and not self.vertex_colors else {}),
             replicates=self.replicates,
-            # 0: from the cores and the memory (core.workers.auto_workers); the same bits for any count
+            # 0: from the cores and the memory (core.execution.workers.auto_workers); the same bits for any count
             workers="auto" if self.processes == 0 else self.processes,
             **({"denoise": True} if self.denoise else {}),
             # the ground only when on: a bake without one passes what it passed before

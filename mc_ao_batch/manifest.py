@@ -20,7 +20,7 @@ entry; what only the bake can tell (an object missing from its file, a broken fi
 alone.
 
 Each task writes into ``OUTPUT/<folder>/``, ``<folder>`` being the .blend file's stem made safe by
-:func:`core.filenames.safe_file_stem`. Files whose stems clash (``a/chair.blend`` and
+:func:`core.files.filenames.safe_file_stem`. Files whose stems clash (``a/chair.blend`` and
 ``b/chair.blend``, or ``Chair`` and ``chair`` on a case-insensitive disk) all get a hash of their path
 relative to the manifest appended, so no task writes into another's folder and the folder a file gets
 does not depend on the order of the entries.
@@ -35,7 +35,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from core._version import OUTPUT_VERSION
-from core.filenames import safe_file_stem
+from core.files.filenames import safe_file_stem
 from mc_ao.filecheck import file_key
 
 

@@ -199,7 +199,7 @@ def boxfit_denoise(ao, se, mask, guide, radii=(2, 4, 8, 16), order=1, fine=True,
     """The box fits (bias by double smoothing: the fit of the fit) with today's candidates and the raw
     value, chosen per texel by the least V + B^2."""
     from bench.prototypes.multiscale import fine_candidates
-    from core import denoise as D
+    from core.post import denoise as D
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
@@ -256,7 +256,7 @@ def lepski(cands, kappa=2.0, exact=None, report="diff"):
 
 def boxfit_lepski(ao, se, mask, guide, radii=(2, 4, 8, 16), kappa=2.0, fine=True, report="diff", verbose=False):
     from bench.prototypes.multiscale import fine_candidates
-    from core import denoise as D
+    from core.post import denoise as D
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)

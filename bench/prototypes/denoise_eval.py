@@ -84,7 +84,7 @@ def metrics(ao, se, ref, guide, mask=None):
 
 
 def today(ao, se, mask, guide):
-    from core import denoise as D
+    from core.post import denoise as D
 
     out, err, _ = D.denoise(ao, se, mask, guide)
     return out, err
@@ -142,7 +142,7 @@ FILTERS.update({"ms4": _ms(levels=4), "ms3": _ms(levels=3), "ms5": _ms(levels=5)
 def _oidn(kind):
     def f(ao, se, mask, guide):
         from bench.sections.denoise import oidn_filters
-        from core.margin import dilate
+        from core.geometry.margin import dilate
 
         padded = np.asarray(ao, np.float32).copy()
         dilate(padded, mask, 16, out=padded)

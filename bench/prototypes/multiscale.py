@@ -117,7 +117,7 @@ def resmooth(cells, weights, den, F, member):
 
 def fine_candidates(ao, se, mask, guide, bandwidths=(1.25, 2.5)):
     """Today's filter's candidates one by one: (F, V, B) per bandwidth."""
-    from core import denoise as D
+    from core.post import denoise as D
 
     out = []
     for b in bandwidths:
@@ -127,7 +127,7 @@ def fine_candidates(ao, se, mask, guide, bandwidths=(1.25, 2.5)):
 
 
 def multiscale(ao, se, mask, guide, levels=4, bias_scale=1.0, use_fine=True, verbose=False):
-    from core import denoise as D
+    from core.post import denoise as D
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
@@ -171,10 +171,10 @@ def multiscale(ao, se, mask, guide, levels=4, bias_scale=1.0, use_fine=True, ver
 def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
     """Today's filter's candidates with everything the selection may need: per bandwidth (F, V, B,
     Lii) with Lii = 1 / W the weight of the texel's own value (weights held fixed), plus the trusted
-    variance and the exact texels. A copy of core.denoise.denoise's steps."""
+    variance and the exact texels. A copy of core.post.denoise.denoise's steps."""
     import math
 
-    from core import denoise as D
+    from core.post import denoise as D
 
     h, w = ao.shape
     r = radius

@@ -2,7 +2,7 @@
 
 On the bench's Suzanne scene (bench/data/scene_suzanne.npz: Suzanne with smart-project UVs over a
 plane and two blocks, as the add-on extracts it), one noisy bake at --samples is denoised by
-core.denoise and by Open Image Denoise (pyoidn: RT, RT with the surface normals as an auxiliary
+core.post.denoise and by Open Image Denoise (pyoidn: RT, RT with the surface normals as an auxiliary
 image, RTLightmap; each on the bake's image with its 16-texel margin) and compared with a converged
 reference of its own seed that no filter touched: RMSE over the covered texels, over island-border
 texels (covered texels with an uncovered 8-neighbour), and across UV seams (mean |difference| of the
@@ -41,7 +41,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from core import Mesh, bake_ao  # noqa: E402
-from core import denoise as D  # noqa: E402
+from core.post import denoise as D  # noqa: E402
 
 SCENE = ROOT / "bench" / "data" / "scene_suzanne.npz"
 
@@ -107,8 +107,8 @@ class _Ref:
 
 def picture(path, maps, ref, mask, crop=None):
     """A PNG: the maps side by side (top), their |error| against the reference x 5 (bottom), on the
-    covered texels (grey elsewhere); row 0 of the maps is v = 0, as core.imageio writes it."""
-    from core.imageio import write_image
+    covered texels (grey elsewhere); row 0 of the maps is v = 0, as core.files.imageio writes it."""
+    from core.files.imageio import write_image
 
     h, w = ref.shape
     rows, cols = crop or (slice(0, h), slice(0, w))
@@ -191,7 +191,7 @@ import json, sys, time
 sys.path.insert(0, sys.argv[1])
 import numpy as np
 from core import Mesh, bake_ao
-from core import denoise as D
+from core.post import denoise as D
 z = np.load(sys.argv[2])
 target = Mesh(z["P"], z["F"], z["UV"], z["N"], name="Suzanne")
 occ = [Mesh(z[f"O{i}P"], z[f"O{i}F"], name=f"occluder{i}") for i in range(int(z["occluders"]))]
@@ -368,7 +368,7 @@ def cycles_equal_error(res=512, ref_samples=2048, threads=2, cache=None, scenes=
 
     from bench.comparators import cycles
     from bench.harness.common import erode
-    from core.margin import dilate
+    from core.geometry.margin import dilate
 
     filters, version = oidn_filters()
     filters = {k: v for k, v in filters.items() if k in ("OIDN RT", "OIDN RTLightmap")}
@@ -519,7 +519,7 @@ def done_when(res=512, scenes=CYCLES_SCENES, threads=2, ref_samples=2048, cycles
     from bench.comparators import cycles
     from bench.harness import mcao
     from bench.harness.common import erode, interp_time_at
-    from core.margin import dilate
+    from core.geometry.margin import dilate
 
     filters, version = oidn_filters()
     rtl = filters.get("OIDN RTLightmap")

@@ -8,7 +8,7 @@ from .options import BITS, UsageError, default_formats
 
 def settings_from(args):
     """The BakeSettings of the arguments, after checking every value (UsageError lists what is wrong)."""
-    imageio = corelink.load("imageio")
+    imageio = corelink.load("files.imageio")
     width, height = args.resolution
     values, problems = schema.from_options(args)
     values.update(
@@ -20,7 +20,7 @@ def settings_from(args):
     problems += selected_to_active_problems(args)
     for field, message in schema.problems(settings):
         if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
-            message = f"--resolution must be at most {corelink.load('settings').MAX_RESOLUTION} a side, not {width}x{height}"
+            message = f"--resolution must be at most {corelink.load('engine.settings').MAX_RESOLUTION} a side, not {width}x{height}"
             if message not in problems:
                 problems.append(message)
             continue

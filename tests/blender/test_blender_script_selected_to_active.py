@@ -68,7 +68,7 @@ def run_script(*args):
 
 
 def read(path):
-    from core import imageio
+    from core.files import imageio
 
     ao, metadata = imageio.read_image(path)
     return np.squeeze(ao), metadata
