@@ -200,13 +200,14 @@ def boxfit_denoise(ao, se, mask, guide, radii=(2, 4, 8, 16), order=1, fine=True,
     value, chosen per texel by the least V + B^2."""
     from bench.prototypes.multiscale import fine_candidates
     from core.post import denoise as D
+    from core.post.denoise import filter as DF
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
     y = np.where(mask, ao, 0).astype(np.float64)
     var = np.where(mask, se.astype(np.float64) ** 2, 0)
-    F0 = D._Features(guide, mask, D.RADIUS)
-    var = D._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
+    F0 = DF._Features(guide, mask, D.RADIUS)
+    var = DF._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
     exact = var == 0
     cands = [(y, var, np.zeros_like(y), "raw")]
     if fine:
@@ -257,13 +258,14 @@ def lepski(cands, kappa=2.0, exact=None, report="diff"):
 def boxfit_lepski(ao, se, mask, guide, radii=(2, 4, 8, 16), kappa=2.0, fine=True, report="diff", verbose=False):
     from bench.prototypes.multiscale import fine_candidates
     from core.post import denoise as D
+    from core.post.denoise import filter as DF
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
     y = np.where(mask, ao, 0).astype(np.float64)
     var = np.where(mask, se.astype(np.float64) ** 2, 0)
-    F0 = D._Features(guide, mask, D.RADIUS)
-    var = D._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
+    F0 = DF._Features(guide, mask, D.RADIUS)
+    var = DF._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
     exact = var == 0
     cands = [(y, var, np.zeros_like(y), "raw")]
     if fine:

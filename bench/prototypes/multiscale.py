@@ -128,14 +128,15 @@ def fine_candidates(ao, se, mask, guide, bandwidths=(1.25, 2.5)):
 
 def multiscale(ao, se, mask, guide, levels=4, bias_scale=1.0, use_fine=True, verbose=False):
     from core.post import denoise as D
+    from core.post.denoise import filter as DF
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
     y = np.where(mask, ao, 0).astype(np.float64)
     var = np.where(mask, se.astype(np.float64) ** 2, 0)
     # trusted zeros as today
-    F0 = D._Features(guide, mask, D.RADIUS)
-    var = D._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
+    F0 = DF._Features(guide, mask, D.RADIUS)
+    var = DF._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
     exact = var == 0
     normal = guide.normal.astype(np.float64)
     fine = fine_candidates(ao, se, mask, guide)
@@ -175,16 +176,17 @@ def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
     import math
 
     from core.post import denoise as D
+    from core.post.denoise import filter as DF
 
     h, w = ao.shape
     r = radius
     mask = np.asarray(mask, bool) & guide.covered
-    F = D._Features(guide, mask, r)
-    halo = D._halo_pairs(guide, mask, r, F)
+    F = DF._Features(guide, mask, r)
+    halo = DF._halo_pairs(guide, mask, r, F)
     y = np.where(mask, ao, 0).astype(np.float32)
     var = np.where(mask, np.asarray(se, np.float32) ** 2, 0).astype(np.float32)
     exact = var == 0
-    var = D._trusted_zeros(F, var)
+    var = DF._trusted_zeros(F, var)
     exact &= var == 0
     bws = [float(b) for b in bandwidths]
     K = len(bws)
@@ -199,7 +201,7 @@ def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
         g = np.exp(-(d2 * pilot + beta * (1.0 - dot)))
         return [g if valid is None else np.where(valid, g, zero)]
 
-    Wg, Yg, Vg = D._filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=1)
+    Wg, Yg, Vg = DF._filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         G = P(np.where(Wg > 0, Yg / Wg, 0).astype(np.float32))
         vG = P(np.where(Wg > 0, Vg / (Wg * Wg), 0).astype(np.float32))
@@ -217,9 +219,9 @@ def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
             base = np.where(valid, base, np.float32(np.inf))
         return [np.exp(-(d2 * inv + base)) for inv in inv2h2]
 
-    Wk, Yk, Vk, Fk, Sk = D._candidates_and_bias(F, halo, candidates, K, yp, vp, y, var)
+    Wk, Yk, Vk, Fk, Sk = DF._candidates_and_bias(F, halo, candidates, K, yp, vp, y, var)
     Gin = G[r:r + h, r:r + w]
-    _, YG, _, _, _ = D._candidates_and_bias(F, halo, candidates, K, G, vp, Gin, var, bias=False)
+    _, YG, _, _, _ = DF._candidates_and_bias(F, halo, candidates, K, G, vp, Gin, var, bias=False)
     fine_all.SG = [np.where(Wk[k] > 0, YG[k] / np.where(Wk[k] > 0, Wk[k], 1), Gin).astype(np.float64)
                    for k in range(K)]
     out = []
