@@ -50,18 +50,6 @@ def cage_of(settings):
     return cage
 
 
-def unsupported(settings):
-    """Why Selected to Active cannot bake with ``settings`` (scene.mc_ao or a BakeSettings): it bakes
-    AO into one image texture of the active object. None when it can."""
-    if settings.target == "VERTEX_COLORS":
-        return "Selected to Active bakes into an image texture: set Target to Image Textures"
-    if settings.use_udim:
-        return "Selected to Active bakes one image, not UDIM tiles: turn off UDIM Tiles"
-    if settings.bent_normals:
-        return "Selected to Active bakes AO only: turn off Bent Normals"
-    return None
-
-
 def why_not(selected, active, cage=None):
     """None when Selected to Active can bake the selection, else why not (for the poll, panel, report)."""
     if active is None:

@@ -1,10 +1,15 @@
 """Bake settings as plain values (no bpy), shared by the operator (from scene.mc_ao), the script and
-the batch. The fields, their types and defaults are mc_ao.schema's settings, in its order."""
+the batch. The fields, their types and defaults are mc_ao.schema's settings, in its order;
+:func:`from_options` makes them from the script's options (or a manifest's), every value and rule
+checked."""
 
 import dataclasses
 import hashlib
+import os
+from types import SimpleNamespace
 
-from .schema import BY_NAME, SETTINGS, unlimited
+from . import corelink, schema
+from .schema import BY_NAME, OPTIONS, SETTINGS, unlimited
 
 _TYPES = {"int": int, "float": float, "distance": float, "bool": bool, "enum": str, "str": str, "object": str,
           "image": str, "collections": tuple, "flags": tuple}
@@ -177,3 +182,32 @@ BakeSettings.__doc__ = ("Everything one bake needs besides the objects; one fiel
 def _clip_utf8(text, limit):
     """The longest start of ``text`` that is at most ``limit`` bytes of UTF-8 (whole characters)."""
     return text.encode("utf-8", "surrogatepass")[:max(limit, 0)].decode("utf-8", "ignore")
+
+
+def from_options(args):
+    """The BakeSettings of the script's options (an argparse namespace of mc_ao.cli.options's parser;
+    the batch's manifest too, as the command line of its task), and what is wrong with them: every
+    value and every rule (mc_ao.schema.problems with mc_ao.rules' rules of the options), each a
+    sentence naming the options. ``args.format`` is the formats chosen (their default filled in)."""
+    width, height = args.resolution
+    values, problems = schema.from_options(args)
+    values.update(
+        resolution=width, height=height, float_buffer=args.attribute_type == "float",
+        use_selected_to_active=bool(args.selected_to_active or args.match_suffix),
+        use_cage=args.cage is not None, cage_object=args.cage or "",
+    )
+    settings = BakeSettings(**values)
+    # The rules of the options read them beside the settings (paths as text).
+    options = {o.key: getattr(args, o.key, None) for o in OPTIONS}
+    options.update((key, None if value is None else os.fspath(value)) for key, value in options.items()
+                   if value is not None and isinstance(value, os.PathLike))
+    both = SimpleNamespace(**{**options, **dataclasses.asdict(settings)})
+    for field, message in schema.problems(both, schema.option_of, script=True):
+        if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
+            message = (f"--resolution must be at most {corelink.load('engine.settings').MAX_RESOLUTION} a side, not "
+                       f"{width}x{height}")
+            if message not in problems:
+                problems.append(message)
+            continue
+        problems.append(f"{schema.option_of(field)} {message}")
+    return settings, problems

@@ -74,9 +74,9 @@ from ..choose import Pick, choose
 from ..extract import ExtractError
 from ..terminal import EscapingStream, escape
 from .blendsave import check_save
-from .options import (BITS, FORMATS, UsageError, default_formats, early_summary_args, make_parser,
-                      run_by_blender, script_argv)
-from .rules import settings_from
+from ..schema import BITS, FORMATS
+from .options import (UsageError, default_formats, early_summary_args, make_parser, run_by_blender, script_argv,
+                      settings_from)
 from .scriptrun import bake
 from .summary import Summary, cancel_note
 
