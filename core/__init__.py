@@ -1,7 +1,7 @@
 """mc_ao core: Monte Carlo hemisphere sampling and a per-texel ambient occlusion baker (no Blender)."""
 
 from ._version import __version__
-from .errors import (
+from .base.errors import (
     BakeCancelled,
     BakeMemoryError,
     ImageWriteError,
@@ -10,14 +10,15 @@ from .errors import (
     MeshTypeError,
     SettingsError,
 )
-from . import cost, stats, warps
-from .integrate import Estimate, estimate, integrate
-from .stats import RunningStats
-from .mesh import Mesh
-from .bake import BakeResult, bake_ao, bake_maps
-from .imageio import ImageReadError
-from .udim import UdimResult, bake_udim, bake_udim_maps
-from .vertices import VertexBakeResult, bake_vertex_ao, bake_vertex_maps
+from .execution import cost
+from .montecarlo import stats, warps
+from .montecarlo.integrate import Estimate, estimate, integrate
+from .montecarlo.stats import RunningStats
+from .geometry.mesh import Mesh
+from .pipeline.bake import BakeResult, bake_ao, bake_maps
+from .files.imageio import ImageReadError
+from .targets.udim import UdimResult, bake_udim, bake_udim_maps
+from .targets.corners import VertexBakeResult, bake_vertex_ao, bake_vertex_maps
 
 __all__ = [
     "__version__", "Mesh", "bake_ao", "BakeResult", "integrate", "estimate", "Estimate", "RunningStats",

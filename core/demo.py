@@ -2,7 +2,7 @@
 
 import argparse
 
-from .integrate import LECTURE_TRUE_VALUE, worked_example_table
+from .montecarlo.integrate import LECTURE_TRUE_VALUE, worked_example_table
 
 
 def format_table(truth, rows):

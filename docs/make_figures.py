@@ -37,8 +37,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from core import Mesh, bake_ao  # noqa: E402
-from core.analytic import plane_under_polygon_ao, regular_polygon  # noqa: E402
-from core.imageio import read_image  # noqa: E402
+from core.montecarlo.analytic import plane_under_polygon_ao, regular_polygon  # noqa: E402
+from core.files.imageio import read_image  # noqa: E402
 
 # The analytic sample scene's numbers (sample_scenes/make_scenes.py: ANALYTIC).
 HALF, RADIUS, HEIGHT, VERTS = 1.0, 0.5, 0.4, 64

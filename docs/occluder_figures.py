@@ -3,7 +3,7 @@
     .venv/bin/python docs/occluder_figures.py            # writes docs/occluder_sets.png, docs/thickness_map.png
     .venv/bin/python docs/occluder_figures.py --memory   # prints what 100 instances of a 5120-triangle sphere cost
 
-Bakes with the add-on in the bpy module (no GUI) and writes the pictures with core.imageio (OpenImageIO).
+Bakes with the add-on in the bpy module (no GUI) and writes the pictures with core.files.imageio (OpenImageIO).
 """
 
 import argparse
@@ -54,9 +54,9 @@ def side_by_side(panels):
 
 
 def write(path, grey):
-    from core import imageio
+    from core.files import imageio
 
-    # row 0 is the bottom (Blender's order), as core.imageio takes it
+    # row 0 is the bottom (Blender's order), as core.files.imageio takes it
     rgb = np.repeat(grey[..., None], 3, axis=2).astype(np.float32)
     imageio.write_image(str(path), rgb, bits=8)
     print("wrote", path)
@@ -151,7 +151,7 @@ def render_with(bpy, obj, image, res, samples=8):
     path = str(ROOT / "docs" / ".render.png")
     scene.render.filepath = path
     bpy.ops.render.render(write_still=True)
-    from core import imageio
+    from core.files import imageio
 
     pixels, _ = imageio.read_image(path)
     Path(path).unlink()
@@ -189,12 +189,12 @@ def instance_memory(bpy, count=100):
     triangles = sum(len(o.triangles) for o in job.occluders)
     held = sum(o.positions.nbytes + o.triangles.nbytes + (o.normals.nbytes if o.normals is not None else 0)
                for o in job.occluders)
-    cost = corelink.load("cost")
+    cost = corelink.load("execution.cost")
     per_triangle = getattr(cost, "BYTES_PER_OCCLUDER_TRIANGLE", None) or cost.BYTES_PER_TRIANGLE
     print(f"{count} instances of a {len(ball.data.polygons)}-triangle sphere: {len(job.occluders)} occluder "
           f"meshes, {triangles} triangles, gathered in {gathered:.2f} s")
     print(f"  arrays the plan holds: {held / 2 ** 20:.1f} MiB ({held / triangles:.0f} B a triangle)")
-    print(f"  core.cost per process holding the scene: {per_triangle * triangles / 2 ** 20:.0f} MiB "
+    print(f"  core.execution.cost per process holding the scene: {per_triangle * triangles / 2 ** 20:.0f} MiB "
           f"({per_triangle} B a triangle): x N for N worker processes")
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     job.run(settings, threads=1)

@@ -162,7 +162,7 @@ class Job:
             if kw.get("bent_normals"):
                 kw["bent_space"] = (self.target.extra or {}).get("bent_space")
             if self.highpoly and not (settings.use_udim or settings.bent_normals):
-                # Extrusion 0 (the default) is measured from the meshes (core.highpoly's automatic
+                # Extrusion 0 (the default) is measured from the meshes (core.highpoly.match's automatic
                 # extrusion: how far the high-poly lies outside the low-poly), never Cycles' trap of none.
                 extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
                 kw.update(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
@@ -263,7 +263,7 @@ _COVERAGE = {}
 
 
 def uv_coverage(obj, uv_map=""):
-    """About the share of the UV square that ``obj``'s faces cover (core.cost.covered_fraction of its
+    """About the share of the UV square that ``obj``'s faces cover (core.execution.cost.covered_fraction of its
     UV map's triangles), cached per mesh; 0.5 where it cannot be read."""
     import numpy as np
 
@@ -281,7 +281,7 @@ def uv_coverage(obj, uv_map=""):
         mesh.loop_triangles.foreach_get("loops", tris)
         if len(_COVERAGE) > 64:
             _COVERAGE.clear()
-        _COVERAGE[key] = corelink.load("cost").covered_fraction(uv[tris.reshape(-1, 3)])
+        _COVERAGE[key] = corelink.load("execution.cost").covered_fraction(uv[tris.reshape(-1, 3)])
     return _COVERAGE[key]
 
 
@@ -316,17 +316,17 @@ def occluder_counts(depsgraph, settings, selected=(), view_layer=None):
 
 def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None, threads=None, highpoly=(),
               cage=None):
-    """What baking ``targets`` with ``settings`` will cost, before it runs (core.cost): a
-    core.cost.Cost for them all, one after another.
+    """What baking ``targets`` with ``settings`` will cost, before it runs (core.execution.cost): a
+    core.execution.cost.Cost for them all, one after another.
 
-    core.cost prices a target's triangles, its occluders' and a high-poly's apart; each is counted
+    core.execution.cost prices a target's triangles, its occluders' and a high-poly's apart; each is counted
     here as the bake will hold it, from the evaluated meshes (``depsgraph``: the context's by default)
     without reading their geometry: the occluders :func:`plan` gives each target (mc_ao.occluders:
     the Occluders choice, Include and Exclude, instances, Only Local, Occludes Other Objects;
     ``selected`` and ``view_layer`` as :func:`plan` takes them), and for Selected to Active
     (``highpoly``: the high-poly objects, ``cage``: the cage object or None) the high-poly objects'
     and the cage's, with the occluders mc_ao.selected_to_active.plan takes. The processes and threads
-    are those the bake takes (core.workers.processes_of; Processes 0 picks them from the cores, the
+    are those the bake takes (core.execution.workers.processes_of; Processes 0 picks them from the cores, the
     memory and these counts); ``threads``: the bake's (properties.resolve_threads), else the
     settings' (0: every core).
     """
@@ -338,11 +338,11 @@ def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None
         import bpy
 
         depsgraph = bpy.context.evaluated_depsgraph_get()
-    cost = corelink.load("cost")
-    workers = corelink.load("workers")
+    cost = corelink.load("execution.cost")
+    workers = corelink.load("execution.workers")
     w, h = settings.size
     threads = threads or settings.threads or None
-    # core.workers.processes_of reads the bake's thread count from its settings
+    # core.execution.workers.processes_of reads the bake's thread count from its settings
     core_settings = SimpleNamespace(threads=threads or workers.cpu_count())
     skip, high = set(), 0
     if highpoly:
@@ -499,9 +499,9 @@ def channel_problem(settings, images=None):
 
         if os.path.splitext(settings.into)[1].lower() not in (".png", ".exr", ".tif", ".tiff"):
             return f"Into: there is no image named {settings.into!r} to write the AO into"
-        # a file (the script's --into PATH): core.imageio checks it, naming it and what it has
+        # a file (the script's --into PATH): core.files.imageio checks it, naming it and what it has
         try:
-            corelink.load("imageio").check_channel(settings.into, settings.channel, settings.size)
+            corelink.load("files.imageio").check_channel(settings.into, settings.channel, settings.size)
         except corelink.load().SettingsError as exc:
             return str(exc)
         return None
@@ -551,7 +551,7 @@ def miss_summary(result):
 
 
 def miss_notes(result):
-    """Warnings of a Selected to Active bake (core.highpoly's report), as sentences; [] for another bake."""
+    """Warnings of a Selected to Active bake (core.highpoly.match's report), as sentences; [] for another bake."""
     report = getattr(result, "report", None) or {}
     n = report.get("missed_texels", 0)
     if not n:

@@ -1,7 +1,7 @@
 """Bent normals on the Blender side (scene.mc_ao.bent_normals): the frames, the image, its files.
 
 The core estimates each texel's bent normal from the AO bake's own rays and expresses it in the
-space asked for (:mod:`core.bent`). Here:
+space asked for (:mod:`core.post.bent`). Here:
 
 - tangent space: the frames Blender's normal bake and the Normal Map node use: MikkTSpace tangents
   and bitangent signs per face corner from ``Mesh.calc_tangents`` on the evaluated mesh, for the
@@ -23,7 +23,7 @@ from . import corelink
 from .extract import ExtractError, default_uv_map
 
 
-#: The first Blender whose Normal Map node normalises the interpolated normal (core.bent.TangentFrames).
+#: The first Blender whose Normal Map node normalises the interpolated normal (core.post.bent.TangentFrames).
 UNIT_NORMAL_SINCE = (5, 1, 0)
 
 
@@ -40,9 +40,9 @@ def normal_map_unit_normal(version=None):
 
 def frames_data(settings):
     """An ``extra`` callable for extract.object_arrays: the bent-normal space of the object, as the
-    dict {"bent_space": ...} (core.bent's argument)."""
+    dict {"bent_space": ...} (core.post.bent's argument)."""
     def extra(mesh, arrays):
-        bent = corelink.load("bent")
+        bent = corelink.load("post.bent")
         matrix = np.asarray(arrays.matrix, dtype=np.float64)[:3, :3]
         if settings.bent_space == "OBJECT":
             try:
@@ -84,6 +84,6 @@ def frames_data(settings):
 
 def encoded(result, settings):
     """The (H, W, 3) RGB of a bake result's bent normals (the margin filled, the rest Blender's fill)."""
-    bent = corelink.load("bent")
+    bent = corelink.load("post.bent")
     filled = np.any(result.bent != 0, axis=-1)
     return bent.encode(result.bent, filled, tangent=settings.bent_space == "TANGENT")

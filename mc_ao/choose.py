@@ -128,9 +128,6 @@ def _named(view_layer, names, what, listing="objects"):
 
 def _selected_to_active(settings, pick, view_layer):
     """The Choice of a Selected to Active bake: each low-poly with its high-poly objects."""
-    reason = selected_to_active.unsupported(settings)
-    if reason is not None:
-        raise ChoiceError(reason)
     if pick.script and settings.use_cage and settings.cage_object:
         _named(view_layer, [settings.cage_object], "cage object")
     cage = selected_to_active.cage_of(settings)

@@ -3,13 +3,13 @@ batch: needs no bpy to import.
 
 - :func:`output_files`: where each job's files go. File names come from the jobs' image names (which
   come from object names, chosen by whoever made the .blend file) through
-  :func:`core.filenames.unique_file_stems` (one safe, distinct stem per image, also where names
-  differ only in case) and :func:`core.filenames.path_inside` (the final path lies in the output
+  :func:`core.files.filenames.unique_file_stems` (one safe, distinct stem per image, also where names
+  differ only in case) and :func:`core.files.filenames.path_inside` (the final path lies in the output
   folder). Nothing else turns a name into a path.
-- :func:`writer_name`: the one image writer: OpenImageIO through core.imageio where its Python
+- :func:`writer_name`: the one image writer: OpenImageIO through core.files.imageio where its Python
   module exists (Blender's official builds), else Blender's own image writer (Debian's Blender has
   no OpenImageIO module). Both write a temporary file, check it and only then replace the target
-  (:mod:`core.atomicfile`); an object's files are written together, all or none
+  (:mod:`core.files.atomicfile`); an object's files are written together, all or none
   (mc_ao.outputs.save_files); the only folder ever created is the chosen output folder itself
   (:func:`make_output_folder`); a file of another kind at a path is never replaced (:func:`kind_problem`).
 - :func:`settings_record` and :func:`file_metadata`: the bake's settings as written into every
@@ -96,7 +96,7 @@ class OutputFile:
 
     path: str
     file_format: str  # "PNG", "OPEN_EXR" or "TIFF" (mc_ao.settings.FILE_FORMATS)
-    bits: object  # 8, 16, "half" or "float", as core.imageio takes them
+    bits: object  # 8, 16, "half" or "float", as core.files.imageio takes them
     stderr_path: str = None
 
 
@@ -122,9 +122,9 @@ def output_files(folder, image_names, formats, stderr=False):
     ------
     core.SettingsError
         Two files would be one (also on a filesystem that ignores case), or a path would leave
-        ``folder`` (core.filenames.UnsafePathError, a subclass).
+        ``folder`` (core.files.filenames.UnsafePathError, a subclass).
     """
-    filenames = corelink.load("filenames")
+    filenames = corelink.load("files.filenames")
     core = corelink.load()
     stems = filenames.unique_file_stems(image_names)
     taken = {}  # path, case-folded -> the image whose file it is
@@ -153,7 +153,7 @@ def output_files(folder, image_names, formats, stderr=False):
 
 
 def oiio_available():
-    """Whether core.imageio can write files here (it needs the OpenImageIO Python module)."""
+    """Whether core.files.imageio can write files here (it needs the OpenImageIO Python module)."""
     return importlib.util.find_spec("OpenImageIO") is not None
 
 

@@ -263,13 +263,13 @@ def save_pixels_with_blender(pixels, path, file_format, bits):
     RGBA, no metadata.
 
     The pixels go into a temporary image (saving an image to a path turns that image into a file
-    image) and from it into a temporary file beside ``path`` (core.atomicfile). Blender's PNG writer
+    image) and from it into a temporary file beside ``path`` (core.files.atomicfile). Blender's PNG writer
     reports a file cut short by a full disk as saved, so the file is loaded back and compared with
     the pixels before it replaces anything at ``path``; a failure raises core.ImageWriteError and
     leaves ``path`` as it was.
     """
     core = corelink.load()
-    atomicfile = corelink.load("atomicfile")
+    atomicfile = corelink.load("files.atomicfile")
     pixels = np.ascontiguousarray(pixels, dtype=np.float32)
     h, w = pixels.shape[:2]
 

@@ -11,7 +11,7 @@ renders, whatever the viewport shows.
   (the view layer's checkbox) do not count.
 - Instances (collection instances, geometry-nodes instances, vertex and face instancing) count as
   their instancer does, and belong to the instancer's collections for Include and Exclude; each is
-  flattened into its own triangles (memory: core.cost's bytes per triangle, in every worker process).
+  flattened into its own triangles (memory: core.execution.cost's bytes per triangle, in every worker process).
   An instancer that is hidden or disabled in the viewport has its collection instances counted;
   geometry-nodes instances exist only where the viewport evaluates the object.
 - ``object.mc_ao.occlude_others`` off: the object occludes only itself (when it is baked).

@@ -34,7 +34,7 @@ import traceback
 
 import bpy
 
-from . import bakerun, baking, corelink, filecheck, filewriter, images, schema, service, undo_images, vertex_colors
+from . import bakerun, baking, corelink, filecheck, filewriter, images, rules, schema, service, undo_images, vertex_colors
 from .choose import ChoiceError, Pick, choose
 from .extract import ExtractError
 from .outputs.store import Store
@@ -95,6 +95,8 @@ def choice_of(context):
     read), or ``(None, why not)``."""
     props = getattr(context.scene, "mc_ao", None)
     settings = BakeSettings() if props is None else BakeSettings.from_properties(props)
+    for field, message in rules.broken(settings, schema.label_of, poll=True):
+        return None, f"{schema.label_of(field)} {message}"
     try:
         choice = choose(settings, Pick(list(context.selected_objects), context.active_object), context.view_layer)
     except ChoiceError as exc:

@@ -140,7 +140,7 @@ def draw_targets(layout, context):
 
 
 def draw_cost(layout, context, settings, targets, highpoly=(), cage=None):
-    """The bake's estimated time and memory (core.cost, calibrated by the bench; the occluders and
+    """The bake's estimated time and memory (core.execution.cost, calibrated by the bench; the occluders and
     high-poly objects it will use counted apart), and a warning before a bake that will not fit in
     memory."""
     if not targets:
@@ -149,7 +149,7 @@ def draw_cost(layout, context, settings, targets, highpoly=(), cage=None):
         cost = baking.bake_cost(settings, targets, context.evaluated_depsgraph_get(),
                                 selected=context.selected_objects, view_layer=context.view_layer,
                                 threads=resolve_threads(context, settings), highpoly=highpoly, cage=cage)
-        available = baking.corelink.load("workers").memory_limit()
+        available = baking.corelink.load("execution.workers").memory_limit()
     except Exception:  # the core cannot load (no numpy, no embreex): the bake will say why
         return
     wrapped_label(layout, context, f"Estimate: {cost.describe()}", icon="TIME")

@@ -1,11 +1,13 @@
 """Every bake setting once: name, type, default, limits, help, the script option and manifest key that
-set it, and the targets it applies to. No bpy.
+set it, and the targets it applies to; the script's own options (what to bake, where files go), with
+their manifest keys; how each front end names a setting. No bpy.
 
-Made from this list: the scene's property group (mc_ao.properties), the fields of
-mc_ao.settings.BakeSettings, scripts/bake_ao.py's options (mc_ao.cli) and with them the batch
-manifest's keys (a manifest key is the option's name with '_' for '-'), and the one check of every
-value before any work (:func:`problems`). Limits that are the core's (``MAX_SAMPLES``,
-``MAX_RESOLUTION``, ``MAX_SEED``) are named here and read from ``core.settings`` where they are used.
+Made from these lists: the scene's property group (mc_ao.properties), the fields of
+mc_ao.settings.BakeSettings, scripts/bake_ao.py's options (mc_ao.cli.options) and with them the batch
+manifest's keys (a manifest key is the option's name with '_' for '-': :func:`manifest_keys`), and
+the one check of every value before any work (:func:`problems`, with the rules between settings of
+mc_ao.rules). Limits that are the core's (``MAX_SAMPLES``, ``MAX_RESOLUTION``, ``MAX_SEED``) are named
+here and read from ``core.engine.settings`` where they are used.
 
 "No distance limit" has one meaning for every distance here: 0 or infinity (:func:`unlimited`).
 """
@@ -13,8 +15,11 @@ value before any work (:func:`problems`). Limits that are the core's (``MAX_SAMP
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["Setting", "SETTINGS", "BY_NAME", "BY_KEY", "problems", "unlimited", "limit", "cli_value",
-           "from_cli", "from_options", "MAX_THREADS"]
+from . import rules
+
+__all__ = ["Setting", "SETTINGS", "BY_NAME", "BY_KEY", "Option", "OPTIONS", "OPTION_BY_KEY", "problems",
+           "unlimited", "limit", "cli_value", "from_cli", "from_options", "manifest_keys", "label_of", "option_of",
+           "FORMATS", "BITS", "MAX_THREADS"]
 
 #: The most threads a bake may ask for: far above any machine's cores, far below what would exhaust
 #: the process starting them.
@@ -33,7 +38,7 @@ class Setting:
         (a set of an enum's identifiers: a tuple here, an enum-flag property on the scene).
     default, label (the UI's name), help (the UI's tooltip and the option's help).
     lo, hi : limits of an int or float (a float with ``lo`` None takes any finite number); ``hi`` may
-        name a core.settings constant ("MAX_SAMPLES").
+        name a core.engine.settings constant ("MAX_SAMPLES").
     zero : what 0 means, said in messages ("every core").
     items : an enum's ``(identifier, UI name, description)``; the script's choice for an identifier is
         it in lower case with '-' for '_' (``VERTEX_COLORS`` -> ``vertex-colors``).
@@ -288,6 +293,124 @@ SETTINGS = (
 BY_NAME = {s.name: s for s in SETTINGS}
 BY_KEY = {s.option_key: s for s in SETTINGS if s.option_key is not None}
 
+# --format choice -> Blender's file format name (mc_ao.settings.FILE_FORMATS)
+FORMATS = {"png": "PNG", "exr": "OPEN_EXR", "tif": "TIFF", "ply": "PLY"}
+# --bits choice -> core.files.imageio's bits
+BITS = {"8": 8, "16": 16, "half": "half", "float": "float"}
+
+
+@dataclass(frozen=True)
+class Option:
+    """One of the script's own options, not a setting of the bake: what to bake, where files go.
+
+    key : the option's dest (``--match-suffix`` is ``match_suffix``) and its manifest key.
+    shape : "value", "value?" (a value, or the option alone: ``--cage``), "list" (one or more),
+        "pair" (two values) or "flag" (given or not).
+    kind : "str", "path" or "size" (N or WxH).
+    section : where the script's help lists it: "files" (before the settings), "selected_to_active"
+        (with those settings) or "run" (after them).
+    batch : True for a manifest key; False for an option the batch sets for each task; text: why a
+        manifest cannot set it.
+    sets : the settings that the option gives (how the script names them in messages).
+    """
+
+    key: str
+    help: str
+    shape: str = "value"
+    kind: str = "str"
+    default: object = None
+    choices: tuple = ()
+    metavar: object = None
+    short: str = ""
+    section: str = "files"
+    batch: object = True
+    sets: tuple = ()
+
+    @property
+    def option(self):
+        return "--" + self.key.replace("_", "-")
+
+
+OPTIONS = (
+    Option("objects", "mesh objects to bake (default: the selected ones with a UV map, else every mesh with a UV "
+           "map in the view layer)", shape="list", metavar="NAME"),
+    Option("output", "output folder, created if missing (default: out)", kind="path", default="out", short="-o",
+           batch=False),
+    Option("format", "file formats to write, one file each (default: png; ply for --target vertex-colors)",
+           shape="list", choices=tuple(sorted(FORMATS))),
+    Option("bits", "sample type of the files: png 8|16, exr half|float, tif 8|16|float (default: 8-bit PNG and "
+           "TIFF, half EXR)", choices=tuple(sorted(BITS))),
+    Option("resolution", "image size, N or WxH (default: 1024)", kind="size", default=(1024, 1024),
+           metavar="N|WxH", sets=("resolution", "height")),
+    Option("attribute_type", "type of a new color attribute: float (linear) or byte (sRGB-encoded, as Blender "
+           "stores byte colors) (default: float)", default="float", choices=("float", "byte"),
+           sets=("float_buffer",)),
+    Option("save", "with --target vertex-colors: save the .blend file with the baked color attributes to PATH "
+           "(atomically; never the input file unless --overwrite-input is given)", kind="path",
+           metavar="PATH.blend", batch="every task would save its .blend file to that one path; a batch of "
+           "--target vertex-colors writes each object's .ply file into its task's folder"),
+    Option("overwrite_input", "allow --save to replace the .blend file the bake read", shape="flag",
+           batch="the batch never saves .blend files"),
+    Option("active", "the low-poly to bake onto (default: the file's active object)", metavar="NAME",
+           section="selected_to_active"),
+    Option("cage", "cast the rays from a cage (Cycles' Cage): alone, the low-poly extruded along its smooth "
+           "vertex normals; with NAME, that object, a copy of the low-poly with its vertices moved outwards (the "
+           "extrusion is then not used)", shape="value?", metavar="NAME", section="selected_to_active",
+           sets=("use_cage", "cage_object")),
+    Option("match_suffix", "bake each object named <base>HIGH onto <base>LOW (e.g. _high _low: Chair_high onto "
+           "Chair_low), one image per low-poly; implies --selected-to-active", shape="pair",
+           metavar=("HIGH", "LOW"), section="selected_to_active"),
+    Option("summary_json", "write a JSON record of the run (settings, each object's status, time, rays and "
+           "files) to PATH at the end, whatever the exit status", kind="path", metavar="PATH", section="run",
+           batch=False),
+    Option("quiet", "no progress", shape="flag", short="-q", section="run", batch=False),
+)
+OPTION_BY_KEY = {o.key: o for o in OPTIONS}
+# A setting without an option of its own: the option that gives it.
+_GIVEN_BY = {name: o for o in OPTIONS for name in o.sets}
+
+
+def manifest_keys():
+    """The keys a batch manifest may set: ``{key: (its option, its shape)}`` ("value", "value?", "list",
+    "pair", "flag"), every setting's with an option and the script's own that a task may take."""
+    keys = {}
+    for setting in SETTINGS:
+        if setting.option_key is None:
+            continue
+        if setting.kind == "bool" or setting.flag is not None:
+            shape = "flag"
+        elif setting.kind in ("flags", "collections"):
+            shape = "list"
+        else:
+            shape = "value"
+        keys[setting.option_key] = (setting.option, shape)
+    for option in OPTIONS:
+        if option.batch is True:
+            keys[option.key] = (option.option, option.shape)
+    return keys
+
+
+def label_of(name, choice=None):
+    """How the panel names a setting (its label), or one of an enum's choices (the item's name)."""
+    setting = BY_NAME.get(name)
+    if setting is None:
+        return option_of(name, choice)
+    if choice is None:
+        return setting.label
+    return next((item[1] for item in setting.items if item[0] == choice), choice)
+
+
+def option_of(name, choice=None):
+    """How the script names a setting or one of its own options (``--udim``, ``--resolution`` for the
+    height too), or one of an enum's choices (``vertex-colors``)."""
+    if choice is not None:
+        return cli_value(choice)
+    setting = BY_NAME.get(name)
+    if setting is not None and setting.option is not None:
+        return setting.option
+    option = _GIVEN_BY.get(name) or OPTION_BY_KEY.get(name)
+    return option.option if option is not None else name
+
 
 def unlimited(distance):
     """True when a distance setting means "no limit": 0 or infinity."""
@@ -295,13 +418,13 @@ def unlimited(distance):
 
 
 def limit(setting):
-    """``setting.hi`` as a number (a core.settings constant read from the core), or None."""
+    """``setting.hi`` as a number (a core.engine.settings constant read from the core), or None."""
     if isinstance(setting.hi, str):
         from . import corelink
 
         if setting.hi == "MAX_SEED":
-            return getattr(corelink.load("settings"), "MAX_SEED", _SEED_FALLBACK)
-        return getattr(corelink.load("settings"), setting.hi)
+            return getattr(corelink.load("engine.settings"), "MAX_SEED", _SEED_FALLBACK)
+        return getattr(corelink.load("engine.settings"), setting.hi)
     return setting.hi
 
 
@@ -362,48 +485,15 @@ def _problem(setting, value):
     raise AssertionError(f"unknown kind {kind!r}")
 
 
-def problems(settings):
+def problems(settings, naming=label_of, *, script=False):
     """Every setting of ``settings`` (a BakeSettings) checked against its schema entry, and the rules
-    between settings: ``[(name, message), ...]``, empty when it can bake."""
+    between settings (mc_ao.rules.RULES): ``[(name, message)]``, empty when it can bake. Each message
+    follows its setting's name as ``naming`` writes it (:func:`label_of`, the panel's; :func:`option_of`,
+    the script's), and writes the other settings it names the same way. ``script``: ``settings`` also
+    holds the script's own options (mc_ao.settings.from_options) and their rules are checked too."""
     out = []
     for setting in SETTINGS:
         problem = _problem(setting, getattr(settings, setting.name))
         if problem is not None:
             out.append((setting.name, problem))
-    if settings.target == "VERTEX_COLORS" and not str(settings.attribute_name).strip():
-        out.append(("attribute_name", "must name the color attribute to bake into, not be empty"))
-    out += _occlusion_problems(settings)
-    if settings.denoise and settings.samples < 2:
-        out.append(("samples", "must be at least 2 with Denoise: the filter weighs each texel by its error, "
-                               "which takes two sets of samples; raise Samples or turn Denoise off"))
-    if settings.target == "VERTEX_COLORS" and settings.error_map:
-        out.append(("error_map", "is for image textures: a color-attribute bake has no image to hold the "
-                                 "standard error; turn it off (adaptive sampling still uses the error)"))
-    return out
-
-
-def _occlusion_problems(settings):
-    """The rules between the occluder, ground, quantity and channel settings."""
-    out = []
-    both = sorted(set(settings.occluder_collections) & set(settings.exclude_collections))
-    if both:
-        out.append(("exclude_collections", f"names {', '.join(repr(n) for n in both)}, which the included "
-                                           "collections name too: a collection either occludes or not; remove "
-                                           "it from one list"))
-    quantity = (settings.quantity,) if isinstance(settings.quantity, str) else tuple(settings.quantity)
-    if "THICKNESS" in quantity and settings.bent_normals:
-        out.append(("bent_normals", "come from the AO's rays: bake Thickness without Bent Normals"))
-    if len(quantity) > 1 and settings.target == "VERTEX_COLORS":
-        out.append(("quantity", "bakes one quantity into a color attribute: choose AO or Thickness"))
-    if len(quantity) > 1 and settings.use_selected_to_active:
-        out.append(("quantity", "bakes one quantity with Selected to Active: choose AO or Thickness"))
-    if settings.channel != "NONE":
-        if not settings.into:
-            out.append(("into", "must name the image whose channel receives the AO"))
-        if settings.target == "VERTEX_COLORS" or settings.use_udim:
-            out.append(("channel", "writes into one image: not with color attributes or UDIM tiles"))
-        if quantity != ("AO",):
-            out.append(("channel", "takes the AO alone: set Quantity to AO"))
-    elif settings.into:
-        out.append(("into", f"names {settings.into!r} but Channel is off: choose the channel to write into"))
-    return out
+    return out + rules.broken(settings, naming, script=script)

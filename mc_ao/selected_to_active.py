@@ -5,7 +5,7 @@ The same settings as Cycles' Bake panel (``scene.mc_ao.use_selected_to_active``,
 low-poly target (a mesh with a UV map), every other selected object with a surface (meshes, curves,
 text, metaballs, evaluated with their modifiers) is a high-poly source. Its image is
 ``<active>_AO`` (the Image setting applies as for any bake). The core's rules are in
-:mod:`core.highpoly`; this module picks the objects, reads their geometry and checks them, and needs
+:mod:`core.highpoly.match`; this module picks the objects, reads their geometry and checks them, and needs
 no bpy at import.
 
 How Blender's objects become the core's input, as Cycles does it (``object_bake_api.cc``):
@@ -48,18 +48,6 @@ def cage_of(settings):
 
         return bpy.data.objects.get(cage)
     return cage
-
-
-def unsupported(settings):
-    """Why Selected to Active cannot bake with ``settings`` (scene.mc_ao or a BakeSettings): it bakes
-    AO into one image texture of the active object. None when it can."""
-    if settings.target == "VERTEX_COLORS":
-        return "Selected to Active bakes into an image texture: set Target to Image Textures"
-    if settings.use_udim:
-        return "Selected to Active bakes one image, not UDIM tiles: turn off UDIM Tiles"
-    if settings.bent_normals:
-        return "Selected to Active bakes AO only: turn off Bent Normals"
-    return None
 
 
 def why_not(selected, active, cage=None):

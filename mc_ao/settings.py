@@ -1,10 +1,15 @@
 """Bake settings as plain values (no bpy), shared by the operator (from scene.mc_ao), the script and
-the batch. The fields, their types and defaults are mc_ao.schema's settings, in its order."""
+the batch. The fields, their types and defaults are mc_ao.schema's settings, in its order;
+:func:`from_options` makes them from the script's options (or a manifest's), every value and rule
+checked."""
 
 import dataclasses
 import hashlib
+import os
+from types import SimpleNamespace
 
-from .schema import BY_NAME, SETTINGS, unlimited
+from . import corelink, schema
+from .schema import BY_NAME, OPTIONS, SETTINGS, unlimited
 
 _TYPES = {"int": int, "float": float, "distance": float, "bool": bool, "enum": str, "str": str, "object": str,
           "image": str, "collections": tuple, "flags": tuple}
@@ -23,12 +28,12 @@ DOMAINS = _identifiers("attribute_domain")
 BENT_SPACES = _identifiers("bent_space")
 GROUNDS = _identifiers("ground")
 QUANTITIES = {i: i.lower() for i in _identifiers("quantity")}  # identifier -> core.bake_ao's quantity
-# file format -> (extension, bits for an 8-bit image, bits for a float image), as core.imageio takes them
+# file format -> (extension, bits for an 8-bit image, bits for a float image), as core.files.imageio takes them
 FILE_FORMATS = {
     "PNG": (".png", 8, 16),
     "OPEN_EXR": (".exr", "half", "float"),
     "TIFF": (".tif", 8, "float"),
-    "PLY": (".ply", None, None),  # per-vertex AO of a colour-attribute bake (core.plyio), no bit depth
+    "PLY": (".ply", None, None),  # per-vertex AO of a colour-attribute bake (core.files.plyio), no bit depth
 }
 
 
@@ -130,7 +135,7 @@ class _BakeSettingsMethods:
 
     @property
     def file_bits(self):
-        """The bit depth core.imageio writes the chosen file format with, following the image's depth."""
+        """The bit depth core.files.imageio writes the chosen file format with, following the image's depth."""
         _, bits8, bits_float = FILE_FORMATS[self.file_format]
         return bits_float if self.float_buffer else bits8
 
@@ -155,7 +160,7 @@ class _BakeSettingsMethods:
             ignore_backfaces=self.ignore_backfaces,
             **({"bent_normals": True} if self.bent_normals and not self.vertex_colors else {}),
             replicates=self.replicates,
-            # 0: from the cores and the memory (core.workers.auto_workers); the same bits for any count
+            # 0: from the cores and the memory (core.execution.workers.auto_workers); the same bits for any count
             workers="auto" if self.processes == 0 else self.processes,
             **({"denoise": True} if self.denoise else {}),
             # the ground only when on: a bake without one passes what it passed before
@@ -177,3 +182,32 @@ BakeSettings.__doc__ = ("Everything one bake needs besides the objects; one fiel
 def _clip_utf8(text, limit):
     """The longest start of ``text`` that is at most ``limit`` bytes of UTF-8 (whole characters)."""
     return text.encode("utf-8", "surrogatepass")[:max(limit, 0)].decode("utf-8", "ignore")
+
+
+def from_options(args):
+    """The BakeSettings of the script's options (an argparse namespace of mc_ao.cli.options's parser;
+    the batch's manifest too, as the command line of its task), and what is wrong with them: every
+    value and every rule (mc_ao.schema.problems with mc_ao.rules' rules of the options), each a
+    sentence naming the options. ``args.format`` is the formats chosen (their default filled in)."""
+    width, height = args.resolution
+    values, problems = schema.from_options(args)
+    values.update(
+        resolution=width, height=height, float_buffer=args.attribute_type == "float",
+        use_selected_to_active=bool(args.selected_to_active or args.match_suffix),
+        use_cage=args.cage is not None, cage_object=args.cage or "",
+    )
+    settings = BakeSettings(**values)
+    # The rules of the options read them beside the settings (paths as text).
+    options = {o.key: getattr(args, o.key, None) for o in OPTIONS}
+    options.update((key, None if value is None else os.fspath(value)) for key, value in options.items()
+                   if value is not None and isinstance(value, os.PathLike))
+    both = SimpleNamespace(**{**options, **dataclasses.asdict(settings)})
+    for field, message in schema.problems(both, schema.option_of, script=True):
+        if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
+            message = (f"--resolution must be at most {corelink.load('engine.settings').MAX_RESOLUTION} a side, not "
+                       f"{width}x{height}")
+            if message not in problems:
+                problems.append(message)
+            continue
+        problems.append(f"{schema.option_of(field)} {message}")
+    return settings, problems

@@ -144,7 +144,7 @@ def _write_tile(path, pixels, float_buffer):
     from . import filewriter
 
     if filewriter.oiio_available():
-        corelink.load("imageio").write_image(path, pixels, bits="float" if float_buffer else 8)
+        corelink.load("files.imageio").write_image(path, pixels, bits="float" if float_buffer else 8)
     else:
         from . import images
 
@@ -225,7 +225,7 @@ def _load(image, tiles, float_buffer):
 
 
 def _safe(name):
-    return corelink.load("filenames").safe_file_stem(name)
+    return corelink.load("files.filenames").safe_file_stem(name)
 
 
 def link_files(name, path, relative):

@@ -43,10 +43,10 @@ def batch_share(asked, cores=None, memory=None):
     """(tasks at a time, worker processes of each task's bake, why fewer than asked or None) on this
     machine: at most a task a core, each bake's processes sharing the cores its task has (tasks x
     processes x threads never above the cores: each process bakes on one thread), and every task's
-    Blender and its bake's worker processes within 80% of the memory (core.cost's process model; what
+    Blender and its bake's worker processes within 80% of the memory (core.execution.cost's process model; what
     a scene adds on top is each bake's own to check, as it does for its processes)."""
     from core import cost
-    from core.workers import cpu_count, memory_limit
+    from core.execution.workers import cpu_count, memory_limit
 
     cores = cpu_count() if cores is None else cores
     memory = memory_limit() if memory is None else memory

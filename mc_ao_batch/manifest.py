@@ -14,13 +14,15 @@ A manifest::
     rebake_older = true           # optional (also in [defaults]): bake it again when its files were
                                   # made by an older output version (default: report them and keep them)
 
-Every setting is checked against the bake script's own argument parser (mc_ao.cli) before anything runs,
-so an unknown name or a bad value stops the whole batch with exit status 2 and a message naming the
-entry; what only the bake can tell (an object missing from its file, a broken file) fails that task
-alone.
+The keys, and the shape of each value, are mc_ao.schema's (its settings and the script's own options);
+each entry becomes its task's command line, which is read by the bake script's own parser and checked
+as the script checks it (mc_ao.settings.from_options: every value, every rule of mc_ao.rules) before
+anything runs, so an unknown name or a bad value stops the whole batch with exit status 2 and a message
+naming the entry; what only the bake can tell (an object missing from its file, a broken file) fails
+that task alone.
 
 Each task writes into ``OUTPUT/<folder>/``, ``<folder>`` being the .blend file's stem made safe by
-:func:`core.filenames.safe_file_stem`. Files whose stems clash (``a/chair.blend`` and
+:func:`core.files.filenames.safe_file_stem`. Files whose stems clash (``a/chair.blend`` and
 ``b/chair.blend``, or ``Chair`` and ``chair`` on a case-insensitive disk) all get a hash of their path
 relative to the manifest appended, so no task writes into another's folder and the folder a file gets
 does not depend on the order of the entries.
@@ -35,14 +37,17 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from core._version import OUTPUT_VERSION
-from core.filenames import safe_file_stem
+from core.files.filenames import safe_file_stem
+from mc_ao import schema
+from mc_ao import settings as mc_ao_settings
 from mc_ao.filecheck import file_key
+from mc_ao.terminal import escape
 
 
 #: The batch summary's file name in the output folder; no task folder may take it.
 BATCH_SUMMARY = "mc_ao_batch.json"
 # bake_ao.py options the batch sets itself, per task; a manifest may not.
-_RUNNER_OPTIONS = {"output", "summary_json", "quiet", "blend"}
+_RUNNER_OPTIONS = {o.key for o in schema.OPTIONS if o.batch is False} | {"blend"}
 # bake_ao.py options that do not change a single output byte (the bake is bit-identical for any
 # thread count): left out of a task's fingerprint.
 _NO_EFFECT = {"threads", "processes", "quiet", "output", "summary_json", "blend"}
@@ -56,13 +61,9 @@ _ENTRY_KEYS = {"blend"}
 _BATCH_KEYS = {"rebake_older"}
 #: The mc_ao version whose fingerprints had no output version in them: output version 1's.
 _LEGACY_MC_AO = "0.1.0"
-# bake_ao.py options a batch task cannot take, and why (one --save path for every task
-# would have each task replace the last one's file).
-_NOT_IN_BATCH = {
-    "save": "every task would save its .blend file to that one path; a batch of --target vertex-colors "
-            "writes each object's .ply file into its task's folder",
-    "overwrite_input": "the batch never saves .blend files",
-}
+# bake_ao.py options a batch task cannot take, and why (mc_ao.schema.OPTIONS: one --save path for
+# every task would have each task replace the last one's file).
+_NOT_IN_BATCH = {o.key: o.batch for o in schema.OPTIONS if isinstance(o.batch, str)}
 
 
 class ManifestError(Exception):
@@ -130,46 +131,38 @@ def bake_parser():
 
 
 def check_settings(namespace):
-    """The bake's own check of every setting's value (mc_ao.cli.settings_from: the schema's limits,
-    formats and bit depths, the options together)."""
-    from mc_ao import cli
-
-    try:
-        cli.settings_from(namespace)
-    except cli.UsageError as exc:
-        raise ManifestError(str(exc).replace("\n", "; ")) from None
+    """The bake's own check of every setting's value and every rule between them (mc_ao.settings.
+    from_options: the schema's limits, mc_ao.rules' rules, formats and bit depths), as the script checks
+    its command line; fills in the formats' default as the script does."""
+    bake_script_module().default_formats(namespace)
+    _, problems = mc_ao_settings.from_options(namespace)
+    if problems:
+        raise ManifestError("; ".join(escape(p) for p in problems))
 
 
 def settings_spec():
-    """bake_ao.py's settings a manifest may set: ``name -> argparse action``."""
-    spec = {}
-    for action in bake_parser()._actions:
-        if not action.option_strings or action.dest in _RUNNER_OPTIONS or action.dest == "help":
-            continue
-        spec[action.dest] = action
-    return spec
+    """bake_ao.py's settings a manifest may set, from mc_ao.schema: ``key -> (option, shape)``, the
+    shape one of "value", "value?", "list", "pair", "flag" (mc_ao.schema.manifest_keys)."""
+    return schema.manifest_keys()
 
 
-def _option(action):
-    return next(s for s in action.option_strings if s.startswith("--"))
-
-
-def _value_args(where, key, value, action):
-    """The command-line words for one manifest setting."""
-    flag = _option(action)
-    if isinstance(action, argparse._StoreTrueAction):
+def _value_args(where, key, value, spec):
+    """The command-line words for one manifest setting (``spec``: its option and shape)."""
+    flag, shape = spec
+    nargs = {"list": "+", "pair": 2, "value?": "?"}.get(shape)
+    if shape == "flag":
         if not isinstance(value, bool):
             raise ManifestError(f"{where}: {key} must be true or false, not {value!r}")
         return [flag] if value else []
     if isinstance(value, dict):
         raise ManifestError(f"{where}: {key} must be a value or a list, not a table")
-    if action.nargs in ("+", "*"):
+    if nargs == "+":
         values = value if isinstance(value, list) else [value]
-        if not values and action.nargs == "+":
+        if not values:
             raise ManifestError(f"{where}: {key} must not be empty")
-    elif isinstance(action.nargs, int) and action.nargs > 1:  # match_suffix = ["_high", "_low"]
-        if not isinstance(value, list) or len(value) != action.nargs:
-            raise ManifestError(f"{where}: {key} takes a list of {action.nargs} values, not {value!r}")
+    elif isinstance(nargs, int):  # match_suffix = ["_high", "_low"]
+        if not isinstance(value, list) or len(value) != nargs:
+            raise ManifestError(f"{where}: {key} takes a list of {nargs} values, not {value!r}")
         values = value
     else:
         if isinstance(value, list):
@@ -184,7 +177,7 @@ def _value_args(where, key, value, action):
         if isinstance(v, (dict, list)) or isinstance(v, bool):
             raise ManifestError(f"{where}: {key}: {v!r} is not a plain value")
     words = [_word(v) for v in values]
-    if len(words) == 1 and action.nargs is None:
+    if len(words) == 1 and nargs is None:
         # "--uv-map=-x": a value that starts with '-' stays this option's value
         return [f"{flag}={words[0]}"] if words[0].startswith("-") else [flag, words[0]]
     for word in words:

@@ -133,7 +133,7 @@ def counts(records):
 
 
 def write_json_atomic(path, data, inputs=(), replaces=None):
-    """Write JSON to ``path`` through core.atomicfile (a temporary file read back, then a rename): a new
+    """Write JSON to ``path`` through core.files.atomicfile (a temporary file read back, then a rename): a new
     file gets the umask's permissions, a replaced one keeps its own.
 
     ``inputs``: ``(path, what)`` pairs the file may never be; ``replaces``: the mc_ao.filecheck kinds of
@@ -141,8 +141,8 @@ def write_json_atomic(path, data, inputs=(), replaces=None):
     core.FileWriteError naming the path) when it may not or cannot be written; the old file is then as
     it was.
     """
-    from core import atomicfile
-    from core.errors import FileWriteError
+    from core.files import atomicfile
+    from core.base.errors import FileWriteError
 
     problem = output_problem(path, inputs, replaces)
     if problem is not None:
@@ -154,7 +154,7 @@ def write_json_atomic(path, data, inputs=(), replaces=None):
 def output_problem(path, inputs=(), replaces=None):
     """Why a JSON file of the batch may not be written at ``path`` (None when it may): a folder, an input,
     an unwritable folder, a read-only file, or an existing file of another kind."""
-    from core import atomicfile
+    from core.files import atomicfile
     from mc_ao import filecheck
 
     path = os.path.abspath(path)

@@ -148,7 +148,7 @@ def _why_not_complete(task, summary_path, version):
     if output_version_of(summary) != version:
         return f"made by output version {summary.get('output_version', 1)}, this is {version}"
     settings = summary.get("settings") or {}
-    from core.imageio import ImageReadError, read_image
+    from core.files.imageio import ImageReadError, read_image
 
     for obj in objects:
         files = obj.get("files") or []
@@ -162,7 +162,7 @@ def _why_not_complete(task, summary_path, version):
                 return f"{path} is missing"
             try:
                 if path.lower().endswith(".ply"):  # --target vertex-colors
-                    from core.plyio import read_ply
+                    from core.files.plyio import read_ply
 
                     metadata = read_ply(path)[4]
                 else:

@@ -142,26 +142,16 @@ def tangent_frames(mesh):
 
 
 def core_bent():
-    """The core's bent-normal module, wherever the core's layout keeps it."""
-    import importlib
+    """The core's bent-normal module."""
+    from core.post import bent
 
-    for name in ("core.post.bent", "core.bent"):
-        try:
-            return importlib.import_module(name)
-        except ImportError:
-            continue
-    raise ImportError("no bent-normal module in core")
+    return bent
 
 
 def core_imageio():
-    import importlib
+    from core.files import imageio
 
-    for name in ("core.io.imageio", "core.imageio"):
-        try:
-            return importlib.import_module(name)
-        except ImportError:
-            continue
-    raise ImportError("no image module in core")
+    return imageio
 
 
 # -- the cases ----------------------------------------------------------------------------------------

@@ -3,7 +3,7 @@
 import numpy as np
 
 from core import Mesh
-from core.analytic import polygon_form_factor, texel_mean  # noqa: F401  (the tests import them from here)
+from core.montecarlo.analytic import polygon_form_factor, texel_mean  # noqa: F401  (the tests import them from here)
 
 QUAD = np.array([[0, 1, 2], [0, 2, 3]])
 

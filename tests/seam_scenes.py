@@ -1,5 +1,5 @@
 """Exact scenes with UV seams, for Fix Seams: the unit plane cut into charts laid out apart (or side
-by side) in the image, turned and mirrored, with the exact AO of every texel (core.analytic); and a
+by side) in the image, turned and mirrored, with the exact AO of every texel (core.montecarlo.analytic); and a
 slow, obvious bilinear lookup (Blender's Linear interpolation written out texel by texel) to check
 the seam lookups against."""
 
@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from core import Mesh
-from core.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
+from core.montecarlo.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
 from scenes import box
 
 #: Chart placements: the map from the chart's own square (u, v) in [0, 1]^2 to its square in the

@@ -20,8 +20,8 @@ import pytest
 from scipy import stats
 
 from core import Mesh, bake_ao
-from core.adaptive import SamplingPlan
-from core.estimators import ErrorModel, TexelEstimates
+from core.engine.adaptive import SamplingPlan
+from core.engine.estimators import ErrorModel, TexelEstimates
 
 Z95 = stats.norm.ppf(0.975)
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
@@ -42,7 +42,7 @@ def agresti_coull(k, n, z):
 
 
 def open_texel_count(first, cap, target, z, rate=0.75):
-    """The documented rule (core.adaptive.SamplingPlan) for a texel whose every sample is open:
+    """The documented rule (core.engine.adaptive.SamplingPlan) for a texel whose every sample is open:
     Agresti-Coull at ``z``; the next count n (half / target)^(1 / rate) rounded up to a power of two,
     at least 2n and at most 64n, at most the cap."""
     n = first
@@ -107,7 +107,7 @@ def test_with_replicates_the_interval_is_students_t_at_97_5_percent_of_the_poole
     var, dof = model.variance(est, x, y)
     assert np.all(dof >= 1) and np.all(var > 0)
     half = model.half_width(est, x, y)
-    # core.estimators.t_quantile is a series good to about 1e-5 of scipy's; another level is 10-30% off
+    # core.engine.estimators.t_quantile is a series good to about 1e-5 of scipy's; another level is 10-30% off
     np.testing.assert_allclose(half, stats.t.ppf(0.975, dof) * np.sqrt(var), rtol=1e-4)
 
     # The plan the tile baker makes (its default level) stops exactly the texels within the target.

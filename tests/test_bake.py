@@ -10,8 +10,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from core import BakeCancelled, Mesh, bake_ao
-from core.raster import prepare, rasterize_tile
-from core.stats import normal_quantile
+from core.geometry.raster import prepare, rasterize_tile
+from core.montecarlo.stats import normal_quantile
 from scenes import box, plane, polygon_form_factor, texel_mean
 
 LID = np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]])
@@ -152,7 +152,7 @@ def test_threads_with_no_tile_left_trace_another_tile_chunks_bit_for_bit():
 
 
 def test_chunks_traced_by_another_thread_are_committed_in_their_order():
-    from core.scheduler import Scheduler as _Shared, run_all as _run_all
+    from core.engine.scheduler import Scheduler as _Shared, run_all as _run_all
 
     chunks = list(range(12))
     shared = _Shared(1, None, None)
@@ -205,7 +205,7 @@ def test_auto_tiles_cover_the_image_with_a_tile_per_thread(width, height, thread
     """The automatic tile shape: sides multiples of TILE_MULTIPLE, at most TILE_SIDE, or
     LARGE_TILE_SIDE only for few samples on an image with LARGE_TILES_PER_THREAD such tiles per
     thread; at least one tile per thread whenever the image has room for that many."""
-    from core.settings import (LARGE_TILE_SAMPLES, LARGE_TILE_SIDE, LARGE_TILES_PER_THREAD, TILE_MULTIPLE,
+    from core.engine.settings import (LARGE_TILE_SAMPLES, LARGE_TILE_SIDE, LARGE_TILES_PER_THREAD, TILE_MULTIPLE,
                                TILE_SIDE, auto_tile_shape)
 
     def side(v):
@@ -239,7 +239,7 @@ def test_automatic_tiles_of_a_dense_mesh_hold_at_most_tile_triangles():
     """72200 triangles over a 64^2 image, one thread: the automatic tile (the whole image) would hold
     them all; it is halved until each holds at most TILE_TRIANGLES (by UV centre), here 64 x 32. A
     tile the caller chose is kept, and the result is the same bits either way."""
-    from core.settings import TILE_TRIANGLES
+    from core.engine.settings import TILE_TRIANGLES
 
     grid = _grid(190)
     assert grid.triangle_count > TILE_TRIANGLES >= grid.triangle_count // 2
@@ -253,7 +253,7 @@ def test_automatic_tiles_of_a_dense_mesh_hold_at_most_tile_triangles():
 
 
 def test_fit_tiles_halves_the_longer_side_until_no_tile_holds_too_many_triangles():
-    from core.settings import TILE_MULTIPLE, TILE_TRIANGLES, BakeSettings
+    from core.engine.settings import TILE_MULTIPLE, TILE_TRIANGLES, BakeSettings
 
     def settings(tile_size=None, threads=1):
         return BakeSettings.from_arguments(512, 16, 16, 0.0, math.inf, "cosine", "sobol", 0, 0, threads, False,
@@ -453,7 +453,7 @@ def test_report_counts_degenerate_outside_and_overlapping_uvs():
 
 
 def test_written_file_has_the_right_orientation_and_metadata(tmp_path):
-    from core.imageio import read_image, write_ao
+    from core.files.imageio import read_image, write_ao
 
     half = Mesh(np.array([[0, 0, 0], [1, 0, 0], [1, 0.5, 0], [0, 0.5, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]),
                 uvs=np.array([[[0, 0], [1, 0], [1, 0.5]], [[0, 0], [1, 0.5], [0, 0.5]]]), name="bottom")
@@ -512,7 +512,7 @@ def _rotated_box(centre, half, height, angle):
 
 @pytest.mark.parametrize("resolution", [32, 96])
 def test_every_texel_in_contact_is_found_split_texels_too(resolution):
-    # Contact probes (core.surface.contact_texels) go to the corners and centre of texels inside
+    # Contact probes (core.geometry.surface.contact_texels) go to the corners and centre of texels inside
     # one triangle and to the corners and centroid of every sub-triangle of split texels. The
     # plane's two triangles are separate UV islands, so split texels run along their diagonal,
     # under a turned box. Every texel under a resting box (or one hovering within the probes'
@@ -600,7 +600,7 @@ def _dilate_by_hand(values, mask, margin):
 def test_margin_is_the_ring_by_ring_mean_of_filled_neighbours(margin):
     """dilate against a texel-by-texel reference, on islands touching the image's edges, holes and
     single texels; texels beyond the margin keep their values."""
-    from core.margin import dilate
+    from core.geometry.margin import dilate
 
     rng = np.random.default_rng(7 + margin)
     mask = np.zeros((37, 29), bool)
@@ -627,7 +627,7 @@ def test_margin_does_not_depend_on_the_number_of_threads(margin):
     # The margin is computed in bands of rows (each with `margin` rows of its neighbours) when
     # threads allow: any number of bands gives the same texels as one, and the first ring is the
     # mean of its covered 8-neighbours.
-    from core.margin import dilate
+    from core.geometry.margin import dilate
 
     rng = np.random.default_rng(margin)
     mask = np.zeros((400, 300), bool)
@@ -659,7 +659,7 @@ def test_margin_bands_of_any_height_give_the_same_texels(monkeypatch, margin):
     """An image cut into many bands of rows (BAND_TEXELS small, one thread or three) gives the bits
     of one band, with values under the empty texels beyond the margin kept; the result written into
     the values themselves (``out=values``, as the bake does) or into another array is the same."""
-    from core import margin as M
+    from core.geometry import margin as M
 
     rng = np.random.default_rng(40 + margin)
     h, w = 1300, 90
@@ -689,7 +689,7 @@ def test_margin_bands_of_any_height_give_the_same_texels(monkeypatch, margin):
 def test_channels_share_the_margin_rings_and_get_each_the_one_channel_bits(monkeypatch):
     """dilate of (H, W, C) values equals dilate of each channel alone, bit for bit, in any bands and
     threads; margin_texels lists exactly the texels dilate fills, with their values."""
-    from core import margin as M
+    from core.geometry import margin as M
 
     rng = np.random.default_rng(11)
     h, w = 700, 60

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao, bake_udim
-from core import denoise as D
+from core.post import denoise as D
 from scenes import QUAD, plane
 
 LID = np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]])

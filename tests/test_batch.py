@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core import imageio
+from core.files import imageio
 from core._version import OUTPUT_VERSION
 from mc_ao_batch import cli
 from mc_ao_batch.manifest import plan

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from core import Mesh, bake_ao
-from core.bent import TangentFrames, barycentric, encode, texel_directions
+from core.post.bent import TangentFrames, barycentric, encode, texel_directions
 from chi2 import sidak
-from core.stats import normal_quantile
+from core.montecarlo.stats import normal_quantile
 from scenes import box, plane
 
 WALL_HEIGHT = 1000.0
@@ -218,8 +218,8 @@ def test_dilated_directions_are_the_componentwise_margin_normalised(threads):
     """dilate_directions against its definition: each component through the margin's dilate alone,
     then every vector normalised where it is not zero (covered texels too); texels beyond the
     margin hold 0 and are not filled."""
-    from core.bent import dilate_directions
-    from core.margin import dilate
+    from core.post.bent import dilate_directions
+    from core.geometry.margin import dilate
 
     rng = np.random.default_rng(5)
     h, w, margin = 300, 80, 4

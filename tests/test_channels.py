@@ -1,4 +1,4 @@
-"""Channel packing (core.imageio): a map written into one channel of an existing image leaves every other
+"""Channel packing (core.files.imageio): a map written into one channel of an existing image leaves every other
 channel's samples exactly as they were, in 8- and 16-bit PNG, half and float EXR and TIFF; the file keeps
 its format, sample types and attributes; a failed write leaves the old file; bad input is refused by
 name before anything is written; and Blender's in-memory pixels are packed the same way."""
@@ -9,9 +9,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from core import imageio
-from core.errors import ChannelError, ImageWriteError
-from core.imageio import check_channel, pack_channel, write_channel
+from core.files import imageio
+from core.base.errors import ChannelError, ImageWriteError
+from core.files.imageio import check_channel, pack_channel, write_channel
 from tests.fullfs import fill, listing, small_filesystem
 
 oiio = pytest.importorskip("OpenImageIO")
@@ -20,7 +20,7 @@ W, H = 37, 23  # odd sizes: rows and columns cannot be swapped unnoticed
 
 
 def user_image(path, fmt, channels=4, channelformats=None, rng=None):
-    """An image as another tool writes it (OpenImageIO directly, not core.imageio): random samples of
+    """An image as another tool writes it (OpenImageIO directly, not core.files.imageio): random samples of
     every code (integers) or value (floats), a custom attribute. Returns its samples as stored."""
     rng = rng or np.random.default_rng(7)
     names = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}[channels]
@@ -242,7 +242,7 @@ def test_the_add_on_writes_the_map_into_a_copy_of_the_into_file(tmp_path):
     assert np.array_equal(after[:, :, 1], np.rint(ao[::-1].astype(np.float64) * 65535).astype(np.uint16))
     assert spec.get_string_attribute("Artist") == "someone else"
     # UDIM tiles: refused before any work.
-    from core.errors import FileWriteError
+    from core.base.errors import FileWriteError
 
     with pytest.raises(FileWriteError, match="takes a plain image, not UDIM tiles"):
         service.plan(replace(settings, use_udim=True), jobs, str(out), [("PNG", 16)])

@@ -1,4 +1,4 @@
-"""core.cost: the estimate shown before a bake, against the bench's recorded bakes (no timing here:
+"""core.execution.cost: the estimate shown before a bake, against the bench's recorded bakes (no timing here:
 the figures are the bench's, bench/results/latest.json)."""
 
 import json

@@ -1,7 +1,7 @@
-"""The surface-space denoiser (core.denoise): its guide, and its properties on exact scenes.
+"""The surface-space denoiser (core.post.denoise): its guide, and its properties on exact scenes.
 
 Every scene is baked at 16 samples with core.bake_ao and denoised; the exact texel AO comes from
-core.analytic. Sizes are 64^2, seeds fixed, nothing timed. Each statistical bound says what it
+core.montecarlo.analytic. Sizes are 64^2, seeds fixed, nothing timed. Each statistical bound says what it
 allows for noise, so that it holds for any seed.
 """
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from core import Mesh, MeshError, bake_ao
-from core import denoise as D
-from core.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
+from core.post import denoise as D
+from core.montecarlo.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
 from scenes import box, plane
 
 W = 64
@@ -255,7 +255,7 @@ def test_udim_tiles_are_denoised_across_the_seam_between_them():
     # left tile's u = 0.5 and the right tile's far border. Denoised together, the texels either side
     # agree as within one image; denoised tile by tile, they do not (each side sees half a window).
     from core import bake_udim
-    from core.udim import shifted
+    from core.targets.udim import shifted
 
     n = 32
     target = split_plane()
@@ -298,8 +298,8 @@ def test_vertex_ao_is_denoised_over_the_mesh_with_an_honest_error(name):
     # AO at each vertex (the corner's sample point is nudged by 1e-4 of the mesh's size: an AO
     # change of ~1e-4); vertices under the box are exactly 0 and must stay so with zero error.
     from core import bake_vertex_ao
-    from core.analytic import box_on_plane_point_ao
-    from core.vertices import all_corners
+    from core.montecarlo.analytic import box_on_plane_point_ao
+    from core.targets.corners import all_corners
 
     target = grid(33)
     c = all_corners(target)

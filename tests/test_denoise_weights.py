@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from core import Mesh, bake_ao
-from core import denoise as D
+from core.post import denoise as D
 from test_denoise import SIDE_LID, lid
 
 W = 16

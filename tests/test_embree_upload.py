@@ -1,4 +1,4 @@
-"""The C-API upload of triangle meshes into Embree (core.embree_upload) against embreex's own
+"""The C-API upload of triangle meshes into Embree (core.tracing.embree_upload) against embreex's own
 TriangleMesh: the same scene for Embree, so the same answer to every ray, and the bake is the same
 either way."""
 
@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core import Mesh, bake_ao, embree_upload
-from core.tracing import OCCLUSION_ROBUST, embree_scene
+from core import Mesh, bake_ao
+from core.tracing import embree_upload
+from core.tracing.tracer import OCCLUSION_ROBUST, embree_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -121,8 +122,8 @@ def test_which_scenes_are_robust():
     """The bake's occlusion rays go to a scene without robust mode; its contact probes and the
     high-poly matching rays, which start on surfaces, to robust scenes (without robust mode a
     low-poly plane lying on the high-poly one finds nothing: tests/test_highpoly.py)."""
-    from core.highpoly import HighPolyScene, SelectedToActive
-    from core.tracing import Tracer
+    from core.highpoly.match import HighPolyScene, SelectedToActive
+    from core.tracing.tracer import Tracer
 
     positions, tris, uvs = _grid(4)
     low, occ = Mesh(positions, tris, uvs, name="low"), Mesh(positions + [0, 0, 0.5], tris, None, name="occ")
@@ -186,7 +187,7 @@ def test_layout_check_refuses_other_objects():
 
 def test_environment_turns_it_off():
     """MC_AO_EMBREE_UPLOAD=0: embreex's own path, said why, and the bake still runs."""
-    code = ("import numpy as np; from core import embree_upload as u; from core.tracing import embree_scene; "
+    code = ("import numpy as np; from core.tracing import embree_upload as u; from core.tracing.tracer import embree_scene; "
             "from core import Mesh; print(u.available(), u.reason()); "
             "s = embree_scene([Mesh(np.eye(3), np.array([[0, 1, 2]]), None, name='t')])[0]; "
             "print(s.run(np.array([[0.2, 0.2, 1.0]], np.float32), np.array([[0, 0, -1]], np.float32))[0])")
@@ -213,7 +214,7 @@ def test_blenders_own_embree_is_not_taken():
     upload must call the library embreex's scenes come from, not the first Embree in the process."""
     pytest.importorskip("bpy")
     marker = "MC_AO: "
-    code = ("import bpy, sys; from core import embree_upload as u; "
+    code = ("import bpy, sys; from core.tracing import embree_upload as u; "
             f"print({marker!r} + str(u.available()), u._library_path()); "
             f"print({marker!r} + str(len({{p for _, _, p in (u._mapped_files() or []) if 'embree4' in p}})))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)

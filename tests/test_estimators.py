@@ -14,9 +14,9 @@ import pytest
 from scipy import stats as sps
 
 from core import Mesh, bake_ao
-from core.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
-from core.estimators import POOL_BLOCK, POOL_RADIUS, TexelEstimates, TexelWindows, t_quantile, window_sums
-from core.patterns import TexelPattern
+from core.montecarlo.analytic import plane_beside_box_ao, polygon_form_factor, regular_polygon, texel_mean
+from core.engine.estimators import POOL_BLOCK, POOL_RADIUS, TexelEstimates, TexelWindows, t_quantile, window_sums
+from core.engine.patterns import TexelPattern
 from scenes import box, plane
 
 SOURCES = ["sobol", "halton", "stratified", "independent"]

@@ -1,6 +1,6 @@
 """Writes that fail change nothing, on a real full filesystem; file names, permissions, read-only files.
 
-Every image file goes through core.atomicfile: a temporary file, checked (read back), fsynced, then
+Every image file goes through core.files.atomicfile: a temporary file, checked (read back), fsynced, then
 renamed over the target. OpenImageIO's PNG and 8-bit TIFF writers report a file cut short by a
 full disk as written; these tests fill a real tmpfs to show that such a write now fails, names the
 file and the reason, and leaves the previous file byte for byte.
@@ -15,8 +15,8 @@ import pytest
 
 pytest.importorskip("OpenImageIO")
 
-from core import imageio  # noqa: E402
-from core.errors import ImageWriteError  # noqa: E402
+from core.files import imageio  # noqa: E402
+from core.base.errors import ImageWriteError  # noqa: E402
 from tests.fullfs import PAGE, fill, listing, small_filesystem  # noqa: E402
 
 CASES = [(".png", 8), (".png", 16), (".tif", 8), (".tif", 16), (".tif", "float"), (".exr", "half"), (".exr", "float")]
@@ -163,9 +163,9 @@ def test_a_new_file_gets_the_umask_permissions(tmp_path):
 
 
 def test_a_failure_before_the_rename_leaves_no_temporary_file_for_any_writer(tmp_path):
-    """core.atomicfile.write_file, the path of the script's JSON summary and Blender's writer."""
-    from core import atomicfile
-    from core.errors import FileWriteError
+    """core.files.atomicfile.write_file, the path of the script's JSON summary and Blender's writer."""
+    from core.files import atomicfile
+    from core.base.errors import FileWriteError
 
     target = tmp_path / "summary.json"
     target.write_text("old")
@@ -186,7 +186,7 @@ def test_a_failure_before_the_rename_leaves_no_temporary_file_for_any_writer(tmp
 
 def test_temporary_names_are_short(tmp_path):
     """The temporary and backup names do not grow with the target's name."""
-    from core import atomicfile
+    from core.files import atomicfile
 
     seen = []
     atomicfile.write_file(tmp_path / ("x" * 250), lambda temp: (seen.append(temp.name), temp.write_bytes(b"1")))
@@ -200,7 +200,7 @@ def test_the_next_write_into_a_folder_removes_what_killed_writers_left(tmp_path)
     import sys
     import time
 
-    from core import atomicfile
+    from core.files import atomicfile
 
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()

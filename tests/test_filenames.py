@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core.filenames import MAX_STEM_BYTES, UnsafePathError, path_inside, safe_file_stem, unique_file_stems
+from core.files.filenames import MAX_STEM_BYTES, UnsafePathError, path_inside, safe_file_stem, unique_file_stems
 
 HOSTILE = [
     "../x", "../../x", "/some/abs/path/x", "a/b", "..\\x", "C:x", "C:\\x", "..", ".", "...", "",

@@ -1,4 +1,4 @@
-"""The analytic ground plane (core.ground): a vertical wall's exact AO over it, against a huge plane mesh,
+"""The analytic ground plane (core.tracing.ground): a vertical wall's exact AO over it, against a huge plane mesh,
 'auto' height, contact, falloff, the worker processes, and bad values refused by name."""
 
 import math
@@ -9,8 +9,8 @@ from scipy import integrate
 from scipy import stats as sps
 
 from core import Mesh, SettingsError, bake_ao
-from core.stats import normal_quantile
-from core.vertices import bake_vertex_ao
+from core.montecarlo.stats import normal_quantile
+from core.targets.corners import bake_vertex_ao
 from chi2 import SUITE_ALPHA, sidak
 from scenes import QUAD, box, plane
 
@@ -209,7 +209,7 @@ def test_udim_tiles_bake_with_the_ground_of_the_whole_object():
     """The wall's UVs over two UDIM tiles (its lower half in 1001, its upper half in 1002): 'auto' is
     the whole object's lowest point in both, each tile the bits of bake_ao on its own shifted UVs."""
     from core import bake_udim
-    from core.udim import shifted, tile_seed
+    from core.targets.udim import shifted, tile_seed
 
     t = wall(0.3, 1.3)
     P, F = t.positions, t.triangles

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from core import bake_ao
-from core.stats import normal_quantile
+from core.montecarlo.stats import normal_quantile
 from chi2 import SUITE_ALPHA
 from scenes import plane
 from test_ground import D, H, N, W, check_binomial, row_means, wall, wall_ao

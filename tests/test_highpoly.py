@@ -1,4 +1,4 @@
-"""Selected to active (core.highpoly): the AO of high-poly meshes baked into a low-poly's UVs.
+"""Selected to active (core.highpoly.match): the AO of high-poly meshes baked into a low-poly's UVs.
 
 Against analytic truth (a high plane under a hovering polygon, AO = 1 - F at the projected points),
 Cycles' rules for the matching rays (extrusion, cage, max ray distance, nearest hit, back faces,
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from core import BakeCancelled, Mesh, MeshError, SettingsError, bake_ao, warps
-from core.bake import interval_half_width
-from core.highpoly import DIRECTIONS_PER_POINT, PRECHECK_POINTS, directions_per_point
-from core.stats import normal_quantile
+from core.pipeline.bake import interval_half_width
+from core.highpoly.match import DIRECTIONS_PER_POINT, PRECHECK_POINTS, directions_per_point
+from core.montecarlo.stats import normal_quantile
 from chi2 import SUITE_ALPHA, chi2_test, sidak
-from core.analytic import regular_polygon
+from core.montecarlo.analytic import regular_polygon
 from scenes import QUAD, plane, polygon_form_factor, texel_mean
 
 LID = np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]])
@@ -55,8 +55,8 @@ def check_z(r, truth, what=""):
     A texel's estimate has two parts of variance: its n cosine-weighted directions (terms 0 or 1: the
     mean over its points of AO (1 - AO), over n) and the positions of its P sample points (the
     variance of AO over the texel's square, over P), both exact from the analytic field. The baker's
-    ``stderr`` estimates the first from the samples (core.highpoly: it does not see the second).
-    The far-off check uses each texel's Agresti-Coull interval (core.estimators) widened by the
+    ``stderr`` estimates the first from the samples (core.highpoly.match: it does not see the second).
+    The far-off check uses each texel's Agresti-Coull interval (core.engine.estimators) widened by the
     positions' part, at the Sidak level over all texels. The bakes it checks take one replicate: with
     two or more, ``stderr`` is the replicates' spread and holds both parts
     (test_the_error_map_holds_both_parts_with_replicates).
@@ -275,7 +275,7 @@ def test_the_error_map_holds_both_parts_with_replicates(near_truth, source, samp
                     seed=seed, highpoly=[high_plane()], extrusion=0.1, replicates=2, threads=2)
         assert r.mask.all() and r.metadata["error_estimate"] == "replicates"
         points = samples / r.report["directions_per_point"]
-        # Texels whose whole window saw only open samples have no error estimate (core.estimators):
+        # Texels whose whole window saw only open samples have no error estimate (core.engine.estimators):
         # nearly open ones only.
         assert np.all(mean[r.stderr == 0] > 0.98)
         some = r.stderr > 0
@@ -327,7 +327,7 @@ def test_a_texel_with_a_replicate_that_missed_borrows_its_error_and_lends_none()
     # a degree of freedom, its neighbours' error would shrink).
     from types import SimpleNamespace
 
-    from core.estimators import ErrorModel, TexelEstimates
+    from core.engine.estimators import ErrorModel, TexelEstimates
 
     side = 16
     x, y = np.meshgrid(np.arange(side), np.arange(side))
@@ -557,7 +557,7 @@ def test_bakes_are_bit_identical_for_any_threads_tiles_and_chunks(kw):
 
 
 def test_a_block_resting_on_the_high_poly_occludes_it_completely():
-    # Contact (as core.tracing.Tracer for the target): a block standing on the high plane, taller
+    # Contact (as core.tracing.tracer.Tracer for the target): a block standing on the high plane, taller
     # than the AO distance, darkens the points under it completely, in Cycles as here.
     block = Mesh(np.array([[x, y, z] for z in (GAP, GAP + 0.6) for y in (0.3, 0.7) for x in (0.3, 0.7)], float),
                  np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
@@ -609,7 +609,7 @@ def test_the_result_records_the_settings():
 def test_the_high_poly_bake_goes_through_the_scheduler_and_the_one_kernel(monkeypatch):
     """Every chunk of a selected-to-active tile is handed to the scheduler (so idle threads take
     chunks of the last tiles) and every AO ray is traced by the one kernel."""
-    from core import kernel, scheduler
+    from core.engine import kernel, scheduler
 
     shared_out, kernel_rays = [], []
     run_chunks, run = scheduler.Scheduler.run_chunks, kernel.Kernel.run

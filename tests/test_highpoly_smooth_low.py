@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from core import Mesh, bake_ao
-from core.stats import normal_quantile
+from core.montecarlo.stats import normal_quantile
 from chi2 import SUITE_ALPHA, sidak
 from scenes import QUAD
 from test_ground import D, wall_ao

@@ -1,4 +1,4 @@
-"""Tests of core.imageio: round trips, orientation, linear values, metadata, atomic writes."""
+"""Tests of core.files.imageio: round trips, orientation, linear values, metadata, atomic writes."""
 
 import os
 import struct
@@ -11,9 +11,9 @@ import pytest
 
 OpenImageIO = pytest.importorskip("OpenImageIO")
 
-from core import imageio  # noqa: E402
+from core.files import imageio  # noqa: E402
 from core._version import OUTPUT_VERSION, __version__  # noqa: E402
-from core.errors import ImageWriteError, McAoError, SettingsError  # noqa: E402
+from core.base.errors import ImageWriteError, McAoError, SettingsError  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -533,7 +533,7 @@ def test_missing_openimageio_module(tmp_path, monkeypatch):
 def test_importing_the_module_needs_neither_oiio_nor_bpy():
     code = (
         "import sys; sys.modules['OpenImageIO'] = None\n"
-        "import core.imageio\n"
+        "import core.files.imageio\n"
         "assert 'bpy' not in sys.modules\n"
     )
     subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy import integrate as spi
 
-from core import integrate, estimate, warps
-from core.integrate import LECTURE_TRUE_VALUE, gauss_legendre, lecture_integrand, worked_example_table
-from core.stats import normal_quantile
+from core import estimate, integrate, warps
+from core.montecarlo.integrate import LECTURE_TRUE_VALUE, gauss_legendre, lecture_integrand, worked_example_table
+from core.montecarlo.stats import normal_quantile
 from chi2 import SUITE_ALPHA, sidak
 
 TRUTH = spi.quad(lecture_integrand, 0.0, 1.0, epsabs=1e-13, epsrel=1e-13, limit=200)[0]
@@ -174,7 +174,7 @@ def test_estimator_refuses_a_sampler_that_contradicts_its_pdf():
 
 
 def test_core_never_imports_bpy():
-    code = "import sys, core, core.warps, core.integrate, core.stats, core.demo; " \
+    code = "import sys, core, core.montecarlo.warps, core.montecarlo.integrate, core.montecarlo.stats, core.demo; " \
            "import pkgutil; [__import__('core.' + m.name) for m in pkgutil.iter_modules(core.__path__)]; " \
            "assert 'bpy' not in sys.modules, 'bpy imported'; print('ok')"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

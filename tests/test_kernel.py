@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from core import Mesh, bake_ao, warps
-from core.patterns import TexelPattern
-from core.adaptive import replicate_samples
-from core.settings import BakeSettings, pattern_span
+from core.engine.patterns import TexelPattern
+from core.engine.adaptive import replicate_samples
+from core.engine.settings import BakeSettings, pattern_span
 from chi2 import SUITE_ALPHA, chi2_test, sidak
 from scenes import plane
 
@@ -218,7 +218,7 @@ def test_split_texels_share_samples_by_area_on_average_over_seeds():
     # A texel split into pieces of area fractions w gets count * w samples in each on average over
     # the per-texel random numbers (to within one in every bake): the allocation is unbiased. A
     # resolution of 16 x 13 makes the seamed plane's diagonal cut texels unevenly.
-    from core.raster import prepare, rasterize_tile
+    from core.geometry.raster import prepare, rasterize_tile
 
     w_, h_, samples, bakes = 16, 13, 4, 48
     frag = rasterize_tile(prepare(seamed_plane(), w_, h_), np.array([0, 1]), w_, h_, 0, 0, w_, h_)
@@ -297,8 +297,8 @@ def test_an_adaptive_rounds_per_texel_counts_allocate_as_each_texel_alone(locate
     """One pass per adaptive round: allocating every texel's own [start, start + count) at once gives
     each texel exactly the pieces it gets alone: split texels (clipped: their units share by hash)
     and texels of one unit (a whole aligned power-of-two block or not)."""
-    from core.raster import prepare, rasterize_tile
-    from core.surface import SurfaceTable, allocate, build_units
+    from core.geometry.raster import prepare, rasterize_tile
+    from core.geometry.surface import SurfaceTable, allocate, build_units
 
     mesh = plane()
     uvtris = prepare(mesh, 16, 16)
@@ -335,8 +335,8 @@ def test_every_units_map_takes_the_unit_square_onto_its_piece(locate):
     located texel's the same, less its translation, which each candidate has of its own), a
     sub-triangle's to its corners 2, 0 and 1 (Heitz's weights of corners 0 and 1), whichever
     consumer specialises a kind (the kernel reads a square's translation alone)."""
-    from core.raster import prepare, rasterize_tile
-    from core.surface import SQUARE, TRIANGLE, SurfaceTable, build_units
+    from core.geometry.raster import prepare, rasterize_tile
+    from core.geometry.surface import SQUARE, TRIANGLE, SurfaceTable, build_units
 
     mesh = plane()
     w, h = 16, 13

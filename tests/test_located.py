@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from core import Mesh, bake_ao
-from core.raster import LOCATED, bin_triangles, prepare, rasterize_tile
-from core.stats import normal_quantile
+from core.geometry.raster import LOCATED, bin_triangles, prepare, rasterize_tile
+from core.montecarlo.stats import normal_quantile
 from chi2 import SUITE_ALPHA, sidak
 from scenes import polygon_form_factor, texel_mean
 
@@ -187,7 +187,7 @@ def test_located_samples_lie_on_their_own_triangle(smooth):
 def test_located_sample_positions_are_uniform_over_the_texel():
     # Independent points, pooled over the located texels of a fine grid: texel-local positions are
     # uniform on the square (chi-square on 8 x 8 cells), whatever triangles they land on.
-    from core.raster import prepare as _prepare
+    from core.geometry.raster import prepare as _prepare
 
     mesh = grid(60, seed=7)
     W = 16

@@ -1,4 +1,4 @@
-"""Several quantities from one bake (core.maps): AO and the thickness map of bake_maps, bake_udim_maps and
+"""Several quantities from one bake (core.targets.maps): AO and the thickness map of bake_maps, bake_udim_maps and
 bake_vertex_maps are bit for bit the separate bakes of each quantity with the same settings (images, UDIM
 tiles, mesh corners, threads, worker processes, a Dask cluster, selected to active), the set-up is taken
 once, the AO-only settings reach the AO map alone, and bad quantities are refused by name."""
@@ -8,7 +8,9 @@ import pytest
 
 from core import (Mesh, SettingsError, bake_ao, bake_maps, bake_udim, bake_udim_maps, bake_vertex_ao,
                   bake_vertex_maps)
-from core import bake as bake_module, tilebaker, tracing
+from core.pipeline import bake as bake_module
+from core.engine import tilebaker
+from core.tracing import tracer as tracing
 from scenes import QUAD, box, plane
 from test_mc_ao_outputs import run as service_run  # the service run to its end, its outcomes
 from test_workers import dask_client  # noqa: F401  (the module's Dask cluster fixture)
@@ -173,7 +175,7 @@ def test_udim_maps_are_the_bits_of_their_udim_bakes():
 
 @pytest.mark.parametrize("kw", [dict(threads=1, bent_normals=True, ground="auto"), dict(workers=2, denoise=True)])
 def test_corner_maps_are_the_bits_of_their_corner_bakes(kw, monkeypatch):
-    from core import vertices
+    from core.targets import corners as vertices
 
     monkeypatch.setattr(vertices, "BLOCK", 16)  # several blocks
     target = unwrapped_box()
@@ -239,7 +241,7 @@ def test_the_add_on_bakes_an_objects_ao_and_thickness_in_one_bake(monkeypatch, e
     from mc_ao.settings import BakeSettings
 
     if extra.get("target"):
-        from core.vertices import all_corners
+        from core.targets.corners import all_corners
 
         target = arrays(unwrapped_box(), "crate")
         target.extra = {"corners": all_corners(unwrapped_box())}

@@ -21,7 +21,7 @@ LAYERS = [
     {"udim", "vertex_colors", "bent"},
     {"bakerun", "filewriter", "filecheck"},
     {"images", "undo_images"},
-    {"schema", "settings"},
+    {"schema", "settings", "rules"},
     {"extract", "corelink", "terminal", "interrupts"},
 ]
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao
-from core.settings import MAX_RESOLUTION, MAX_SAMPLES
+from core.engine.settings import MAX_RESOLUTION, MAX_SAMPLES
 from mc_ao import bakerun, filewriter, schema
 from mc_ao.settings import BakeSettings
 
@@ -161,7 +161,7 @@ def test_a_file_of_another_kind_is_not_written_over_at_write_time(tmp_path):
     """Files found only after the bake (UDIM tiles) get the planning's check where they are written;
     the object's other files are then not written either (all or none)."""
     pytest.importorskip("OpenImageIO")
-    from core.imageio import write_image
+    from core.files.imageio import write_image
     from mc_ao import outputs
 
     pixels = np.full((2, 2), 0.5, np.float32)

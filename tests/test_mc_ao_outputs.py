@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from core import Mesh, bake_ao
-from core.imageio import read_image
+from core.files.imageio import read_image
 from mc_ao import filewriter, outputs, service
 from mc_ao.outputs import base, maps
 from mc_ao.settings import BakeSettings
@@ -134,14 +134,14 @@ def test_a_kind_of_another_quantity_gets_that_quantitys_bake(tmp_path, monkeypat
 # -- all or none -------------------------------------------------------------------------------------
 
 def writer(pixels, bits):
-    from core.imageio import write_image
+    from core.files.imageio import write_image
 
     return lambda target: write_image(target, pixels, bits=bits)
 
 
 def old_files(tmp_path):
     """A.png and B.png, images of an earlier bake; returns their paths and bytes."""
-    from core.imageio import write_image
+    from core.files.imageio import write_image
 
     a, b = tmp_path / "A.png", tmp_path / "B.png"
     write_image(a, np.full((4, 4), 0.25, np.float32), bits=8)

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from core import Mesh, bake_ao, bake_udim, cost
-from core import mesh as mesh_mod
-from core import raster, surface
-from core import workers as W
-from core.mesh import corner_positions, face_geometry
-from core.vertices import bake_vertex_ao
+from core.geometry import mesh as mesh_mod
+from core.geometry import raster, surface
+from core.execution import workers as W
+from core.geometry.mesh import corner_positions, face_geometry
+from core.targets.corners import bake_vertex_ao
 
 
 def wavy(n=12, normals=True, seed=0):
@@ -240,7 +240,7 @@ def test_the_memory_estimate_prices_the_parent_and_each_worker():
 
 
 def test_a_large_high_poly_alone_is_one_embree_scene_that_matches_and_occludes(monkeypatch):
-    from core import highpoly
+    from core.highpoly import match as highpoly
 
     P, F, UV, N = wavy(16)
     lowp = np.array([[10, 10, 9.8], [12, 10, 9.8], [12, 12, 9.8], [10, 12, 9.8]], float)

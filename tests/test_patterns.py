@@ -1,4 +1,4 @@
-"""The per-texel sample points every bake draws (core.patterns.TexelPattern), tested like a sampler.
+"""The per-texel sample points every bake draws (core.engine.patterns.TexelPattern), tested like a sampler.
 
 In the style of pbrt-v4's sampler tests and scipy's QMCEngine test mixin: one contract class that
 every sample source's test class reuses. A texel's points are addressed by (texel, sample index)
@@ -23,9 +23,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from core import patterns as P
-from core.patterns import DIMS, SOURCE_NAMES, TexelPattern, hash64, hash_more
-from core.sources import SOURCES, Sobol, Stratified, owen_scramble_uint32, sobol_uint32
+from core.engine import patterns as P
+from core.engine.patterns import DIMS, SOURCE_NAMES, TexelPattern, hash64, hash_more
+from core.montecarlo.sources import SOURCES, Sobol, Stratified, owen_scramble_uint32, sobol_uint32
 
 ALPHA = 1e-3
 #: The texels the statistical tests look at: a 64 x 64 block of a 64-texel-wide image, so that
@@ -268,7 +268,7 @@ def set_size(p):
 @pytest.mark.parametrize("source", SOURCE_NAMES)
 @pytest.mark.parametrize("max_samples", [N, 5])
 def test_pool_patterns_are_the_library_sets(source, max_samples):
-    # Pattern e of the pool is, bit for bit, the public class of core.sources under pattern e's
+    # Pattern e of the pool is, bit for bit, the public class of core.montecarlo.sources under pattern e's
     # randomisation (drawn from (seed, e) alone); a set stored twice is two equal copies.
     p, q = pool_patterns(source, max_samples)
     cls = SOURCES[source]

@@ -127,7 +127,7 @@ def test_rebake_older_bakes_an_older_library_again_and_the_next_run_finds_it_don
 
     pytest.importorskip("bpy")
     from core._version import OUTPUT_VERSION
-    from core.imageio import read_image
+    from core.files.imageio import read_image
 
     for how in ("option", "manifest"):
         library = _previous_library(tmp_path / how)
@@ -183,7 +183,7 @@ def test_every_file_records_the_output_version(tmp_path):
     """Images and PLY files (colour attributes) carry output_version: what the batch compares."""
     import numpy as np
 
-    from core import imageio, plyio
+    from core.files import imageio, plyio
     from core._version import OUTPUT_VERSION
 
     image = imageio.write_image(tmp_path / "a.png", np.zeros((2, 2), np.float32), metadata={"object": "A"})

@@ -1,4 +1,4 @@
-"""Tests of core.sources: the shared contract of every source, then Sobol', Owen, stratified, Halton."""
+"""Tests of core.montecarlo.sources: the shared contract of every source, then Sobol', Owen, stratified, Halton."""
 
 import subprocess
 import sys
@@ -9,8 +9,8 @@ import pytest
 from scipy import stats
 from scipy.stats import qmc
 
-from core.errors import SettingsError
-from core.sources import (
+from core.base.errors import SettingsError
+from core.montecarlo.sources import (
     SOBOL_MAX_DIM,
     SOURCES,
     GeneratorBits,
@@ -404,7 +404,7 @@ def test_registry_names():
 
 
 def test_core_sources_needs_neither_scipy_nor_bpy():
-    code = "import sys, core.sources; print('scipy' in sys.modules, 'bpy' in sys.modules)"
+    code = "import sys, core.montecarlo.sources; print('scipy' in sys.modules, 'bpy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]
 

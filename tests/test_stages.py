@@ -8,10 +8,10 @@ from bench.sections.stages import FIXED_STEPS, TILE_STAGES, bake, floors, scenes
 
 
 def test_every_named_stage_is_in_the_core_and_the_table_adds_up():
-    import core.kernel
-    import core.raster
+    import core.engine.kernel
+    import core.geometry.raster
 
-    before = (core.kernel.Kernel.__dict__["run"], core.raster.rasterize_tile)
+    before = (core.engine.kernel.Kernel.__dict__["run"], core.geometry.raster.rasterize_tile)
     scene = scenes(["suzanne"])["suzanne"]
     timer = StageTimer(TILE_STAGES + FIXED_STEPS)
     with timer.run():
@@ -24,11 +24,11 @@ def test_every_named_stage_is_in_the_core_and_the_table_adds_up():
         assert calls[label] > 0, label
     assert r.rays > 0 and r.mask.any()
     # Unwrapped afterwards: the same function objects as before.
-    assert (core.kernel.Kernel.__dict__["run"], core.raster.rasterize_tile) == before
+    assert (core.engine.kernel.Kernel.__dict__["run"], core.geometry.raster.rasterize_tile) == before
 
 
 def test_a_function_imported_by_name_is_timed_where_it_is_called():
-    import core.bake  # noqa: F401  (every module of a bake loaded)
+    import core.pipeline.bake  # noqa: F401  (every module of a bake loaded)
 
     hits = resolve("rasterize_tile")
     assert hits and len({id(f) for _, _, f in hits}) == 1

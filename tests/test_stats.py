@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from core.stats import RunningStats, normal_quantile, z_for_confidence
+from core.montecarlo.stats import RunningStats, normal_quantile, z_for_confidence
 
 
 @pytest.mark.parametrize("p", [1e-12, 1e-6, 0.001, 0.02425, 0.1, 0.5, 0.8, 0.975, 0.99999, 1 - 1e-10])

@@ -1,4 +1,4 @@
-"""The thickness map (core.thickness): a slab's and a sphere's closed forms, the open-mesh and terminator
+"""The thickness map (core.engine.thickness): a slab's and a sphere's closed forms, the open-mesh and terminator
 rules on a plane, the rays' directions about the inverted normal (chi-square), selected to active, the
 worker processes, and bad values refused by name."""
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao, warps
-from core.stats import normal_quantile
-from core.vertices import bake_vertex_ao
+from core.montecarlo.stats import normal_quantile
+from core.targets.corners import bake_vertex_ao
 from chi2 import SUITE_ALPHA, chi2_test, sidak
 from scenes import box, plane
 

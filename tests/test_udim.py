@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao
-from core.udim import bake_udim, covered_tiles, tile_origin
-from core.stats import normal_quantile
+from core.targets.udim import bake_udim, covered_tiles, tile_origin
+from core.montecarlo.stats import normal_quantile
 from scenes import polygon_form_factor, texel_mean
 
 QUAD = np.array([[0, 1, 2], [0, 2, 3]])

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from core import BakeCancelled, Mesh, MeshError
-from core.analytic import polygon_form_factor
-from core.vertices import all_corners, bake_vertex_ao, sample_points, vertex_means
+from core.montecarlo.analytic import polygon_form_factor
+from core.targets.corners import all_corners, bake_vertex_ao, sample_points, vertex_means
 
 LID = np.array([[-0.3, -0.3, 0.4], [0.3, -0.3, 0.4], [0.3, 0.3, 0.4], [-0.3, 0.3, 0.4]])
 

@@ -1,4 +1,4 @@
-"""Every sampler of core.warps.REGISTRY against its pdf: chi-square fit, normalisation, inversion,
+"""Every sampler of core.montecarlo.warps.REGISTRY against its pdf: chi-square fit, normalisation, inversion,
 acceptance rates of the rejection samplers, and the frames that orient hemispheres."""
 
 import math
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from core import warps
-from core.stats import normal_quantile
+from core.montecarlo.stats import normal_quantile
 from chi2 import SUITE_ALPHA, chi2_test, expected_fractions, sidak
 
 NAMES = sorted(warps.REGISTRY)

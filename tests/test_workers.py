@@ -1,4 +1,4 @@
-"""Tiles baked in worker processes (core.workers): the same bits as in this process for any workers x
+"""Tiles baked in worker processes (core.execution.workers): the same bits as in this process for any workers x
 threads x tiling, errors by the core's own classes, cancel, a worker that dies, and no worker that
 outlives its parent. Driven by the bake's own events (progress), never by the clock."""
 
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from core import BakeCancelled, Mesh, MeshError, bake_ao, bake_udim
-from core import workers as W
-from core.bent import TangentFrames  # noqa: F401  (bent_space stays in the parent)
+from core.execution import workers as W
+from core.post.bent import TangentFrames  # noqa: F401  (bent_space stays in the parent)
 from scenes import QUAD, box, plane
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -142,7 +142,8 @@ def test_no_worker_outlives_its_parent_killed():
     code = textwrap.dedent(f"""
         import sys; sys.path[:0] = [{ROOT!r}, {os.path.join(ROOT, 'tests')!r}]
         from test_workers import scene
-        from core import bake_ao, workers
+        from core import bake_ao
+        from core.execution import workers
         t, o = scene()
         bake_ao(t, o, resolution=16, samples=4, workers=2)
         print(" ".join(str(w.process.pid) for w in workers._POOL.workers), flush=True)
@@ -243,7 +244,8 @@ def test_on_rays_needs_this_process():
 
 
 def test_vertex_bakes_in_workers_are_the_bits_of_one_process(monkeypatch):
-    from core import bake_vertex_ao, vertices
+    from core import bake_vertex_ao
+    from core.targets import corners as vertices
 
     monkeypatch.setattr(vertices, "BLOCK", 40)  # several blocks for the workers to share
     target, occ = scene()
@@ -327,7 +329,7 @@ def test_a_pool_whose_self_test_fails_falls_back_to_threads_and_says_why(monkeyp
 
 
 def test_auto_workers_with_threads_given_keep_within_the_cores():
-    from core.settings import BakeSettings
+    from core.engine.settings import BakeSettings
 
     s = BakeSettings.from_arguments(8, 4, 4, 0.0, 1.0, "cosine", "sobol", 0, 0, 2, False, 0.0, None, 1 << 16)
     processes, threads = W.processes_of("auto", 2, s, 1000)

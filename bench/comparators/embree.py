@@ -23,9 +23,9 @@ def record_rays(target, occluders, **kw):
 
 
 def occlusion_scene(meshes):
-    """The committed Embree scene the bake itself traces its occlusion rays in (core.tracing.Tracer:
+    """The committed Embree scene the bake itself traces its occlusion rays in (core.tracing.tracer.Tracer:
     the same robust mode)."""
-    from core.tracing import OCCLUSION_ROBUST, embree_scene as build
+    from core.tracing.tracer import OCCLUSION_ROBUST, embree_scene as build
 
     return build(meshes, robust=OCCLUSION_ROBUST)[0]
 
@@ -74,8 +74,8 @@ def synthetic_rays(target, n, chunk, distance=DISTANCE):
 
 
 def normalized(target, occluders):
-    """The bake's own frame (core.bake._normalized_scene), so that replayed rays hit the same scene."""
-    from core.bake import _normalized_scene
+    """The bake's own frame (core.pipeline.bake._normalized_scene), so that replayed rays hit the same scene."""
+    from core.pipeline.bake import _normalized_scene
 
     t, occ, _ = _normalized_scene(target, list(occluders))
     return [t] + occ

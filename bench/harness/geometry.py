@@ -1,4 +1,4 @@
-"""Texel-centre geometry of a UV-mapped mesh, computed independently of core.raster.
+"""Texel-centre geometry of a UV-mapped mesh, computed independently of core.geometry.raster.
 
 Cycles bakes a texel only where a UV triangle covers the texel's centre (and jitters its samples
 around that point inside that triangle); this module finds that triangle, the surface point, the

@@ -48,7 +48,7 @@ def register(bpy):
 
 
 def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=16, seed=0, source="SOBOL",
-                  target_error=0.0, min_samples=16):
+                  target_error=0.0, min_samples=16, denoise=False):
     """bpy.ops.object.mc_ao_bake() of ``obj`` alone (every visible object occludes it), on ``threads``
     cores as the operator's defaults use them: ``threads`` worker processes of one thread each (Threads
     is each process's threads; Threads 2 with Processes automatic would bake in Blender's process).
@@ -72,6 +72,7 @@ def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=1
     s.float_buffer = True
     s.save_to_file = False
     s.seed = seed
+    s.denoise = bool(denoise)
     s.processes = threads
     s.threads = 1
     s.image_name = ""
@@ -86,7 +87,7 @@ def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=1
 
 
 #: With ``python -m bench --workers``: core bakes on that many worker processes of one thread each
-#: instead of ``threads`` threads of this process (the same bits; see core.workers).
+#: instead of ``threads`` threads of this process (the same bits; see core.execution.workers).
 WORKERS = 1
 
 

@@ -179,7 +179,7 @@ def lid_scene():
     return pv, QUAD, pv[QUAD[0]][:, :2], lid, QUAD
 
 
-from core.analytic import polygon_form_factor  # noqa: E402  (Lambert's form factor, one copy)
+from core.montecarlo.analytic import polygon_form_factor  # noqa: E402  (Lambert's form factor, one copy)
 
 
 def lid_truth(width, height, order=6, footprint=1.0):

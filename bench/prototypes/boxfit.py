@@ -31,35 +31,47 @@ def smooth(a, mask, R):
 
 
 def box(S, R):
-    """Sums over the (2R + 1)^2 windows (clipped to the image) from a summed-area table."""
+    """Sums over the (2R + 1)^2 windows (clipped to the image) from a summed-area table; R may be a
+    pair (Rx, Ry): (2 Rx + 1) columns by (2 Ry + 1) rows."""
     h, w = S.shape[0] - 1, S.shape[1] - 1
-    y0 = np.clip(np.arange(h) - R, 0, h)
-    y1 = np.clip(np.arange(h) + R + 1, 0, h)
-    x0 = np.clip(np.arange(w) - R, 0, w)
-    x1 = np.clip(np.arange(w) + R + 1, 0, w)
+    Rx, Ry = (R, R) if np.isscalar(R) else R
+    y0 = np.clip(np.arange(h) - Ry, 0, h)
+    y1 = np.clip(np.arange(h) + Ry + 1, 0, h)
+    x0 = np.clip(np.arange(w) - Rx, 0, w)
+    x1 = np.clip(np.arange(w) + Rx + 1, 0, w)
     return S[y1][:, x1] - S[y0][:, x1] - S[y1][:, x0] + S[y0][:, x0]
+
+
+def wbox(a, R, passes=1):
+    """Window sums of ``a``: a box of radius R (passes 1) or a box of a box (passes 2: tent weights
+    (R + 1 - |dx|)(R + 1 - |dy|) over radius 2R)."""
+    out = box(sat(a), R)
+    for _ in range(passes - 1):
+        out = box(sat(out), R)
+    return out
 
 
 class BoxFit:
     """The fits of one map's mask and islands at radii ``radii`` (their kernels are fixed: they depend
     on the mask and islands alone, so the same fit applies to any map)."""
 
-    def __init__(self, mask, island, radii=(2, 4, 8, 16), order=1, ridge=1e-3):
+    def __init__(self, mask, island, radii=(2, 4, 8, 16), order=1, ridge=1e-3, passes=1):
         self.mask, self.island, self.radii, self.order, self.ridge = mask, island, radii, order, ridge
+        self.passes = passes
         h, w = mask.shape
         Y, X = np.mgrid[0:h, 0:w].astype(np.float64)
         self.X, self.Y = X, Y
         m = mask.astype(np.float64)
         isl = np.where(mask, island, 0).astype(np.float64)
-        self.S = {k: sat(v) for k, v in dict(n=m, x=m * X, y=m * Y, xx=m * X * X, xy=m * X * Y, yy=m * Y * Y,
-                                              i=m * isl, ii=m * isl * isl).items()}
+        self.A = dict(n=m, x=m * X, y=m * Y, xx=m * X * X, xy=m * X * Y, yy=m * Y * Y, i=m * isl, ii=m * isl * isl)
 
     def _moments(self, R):
         """Per texel: centred moments (n, su, sv, suu, suv, svv) and whether the window is pure."""
-        S, X, Y = self.S, self.X, self.Y
-        n, sx, sy = box(S["n"], R), box(S["x"], R), box(S["y"], R)
-        sxx, sxy, syy = box(S["xx"], R), box(S["xy"], R), box(S["yy"], R)
-        si, sii = box(S["i"], R), box(S["ii"], R)
+        A, X, Y = self.A, self.X, self.Y
+        b = lambda k: wbox(A[k], R, self.passes)  # noqa: E731
+        n, sx, sy = b("n"), b("x"), b("y")
+        sxx, sxy, syy = b("xx"), b("xy"), b("yy")
+        si, sii = b("i"), b("ii")
         k = np.where(self.mask, self.island, 0).astype(np.float64)
         pure = self.mask & (np.abs(sii - 2 * k * si + k * k * n) < 0.5)
         su, sv = sx - n * X, sy - n * Y
@@ -77,7 +89,7 @@ class BoxFit:
                 c0 = np.where(n > 0, 1 / np.maximum(n, 1), 0)
                 out.append((c0, np.zeros_like(c0), np.zeros_like(c0), pure & (n > 0)))
                 continue
-            lam = self.ridge * np.maximum(n, 1) * R * R
+            lam = self.ridge * np.maximum(n, 1) * (R * R if np.isscalar(R) else R[0] * R[1])
             # c = M^-1 e1 for M = [[n, su, sv], [su, suu + lam, suv], [sv, suv, svv + lam]]
             a, b, c = suu + lam, suv, svv + lam
             det2 = a * c - b * b
@@ -97,19 +109,24 @@ class BoxFit:
         m = self.mask.astype(np.float64)
         X, Y = self.X, self.Y
         fm = np.where(self.mask, f, 0) * m
-        Sf = {"f": sat(fm), "xf": sat(fm * X), "yf": sat(fm * Y)}
+        p = self.passes
+        Sf = {"f": fm, "xf": fm * X, "yf": fm * Y}
         if var is not None:
             vm = np.where(self.mask, var, 0)
-            Sv = {k: sat(vm * w) for k, w in dict(v=1, xv=X, yv=Y, xxv=X * X, xyv=X * Y, yyv=Y * Y).items()}
+            Sv = {k: vm * w for k, w in dict(v=1, xv=X, yv=Y, xxv=X * X, xyv=X * Y, yyv=Y * Y).items()}
         out = []
         for R, (c0, c1, c2, ok) in zip(radii, kernels):
-            sf, sxf, syf = box(Sf["f"], R), box(Sf["xf"], R), box(Sf["yf"], R)
+            sf, sxf, syf = wbox(Sf["f"], R, p), wbox(Sf["xf"], R, p), wbox(Sf["yf"], R, p)
             suf, svf = sxf - X * sf, syf - Y * sf
             F = np.where(ok, c0 * sf + c1 * suf + c2 * svf, np.nan)
             V = None
             if var is not None:
-                sv_, sxv, syv = box(Sv["v"], R), box(Sv["xv"], R), box(Sv["yv"], R)
-                sxxv, sxyv, syyv = box(Sv["xxv"], R), box(Sv["xyv"], R), box(Sv["yyv"], R)
+                # the variance needs the squared weights: for a tent (passes 2) their sums are no box of
+                # a box; only the box's variance is written here
+                if p != 1:
+                    raise NotImplementedError("the variance of tent-weighted fits")
+                sv_, sxv, syv = (wbox(Sv[k], R, 1) for k in ("v", "xv", "yv"))
+                sxxv, sxyv, syyv = (wbox(Sv[k], R, 1) for k in ("xxv", "xyv", "yyv"))
                 su_, svv_ = sxv - X * sv_, syv - Y * sv_
                 suu = sxxv - 2 * X * sxv + X * X * sv_
                 suv = sxyv - X * syv - Y * sxv + X * Y * sv_
@@ -169,7 +186,7 @@ def select(cands, exact=None):
     choice = np.zeros(best.shape, int)
     for k, (F, V, B, _) in enumerate(cands):
         mse = V + B * B
-        take = np.isfinite(mse) & (mse < best)
+        take = np.isfinite(mse) & np.isfinite(F) & (mse < best)
         if exact is not None:
             take &= ~exact
         best = np.where(take, mse, best)
@@ -182,14 +199,15 @@ def boxfit_denoise(ao, se, mask, guide, radii=(2, 4, 8, 16), order=1, fine=True,
     """The box fits (bias by double smoothing: the fit of the fit) with today's candidates and the raw
     value, chosen per texel by the least V + B^2."""
     from bench.prototypes.multiscale import fine_candidates
-    from core import denoise as D
+    from core.post import denoise as D
+    from core.post.denoise import filter as DF
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
     y = np.where(mask, ao, 0).astype(np.float64)
     var = np.where(mask, se.astype(np.float64) ** 2, 0)
-    F0 = D._Features(guide, mask, D.RADIUS)
-    var = D._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
+    F0 = DF._Features(guide, mask, D.RADIUS)
+    var = DF._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
     exact = var == 0
     cands = [(y, var, np.zeros_like(y), "raw")]
     if fine:
@@ -239,14 +257,15 @@ def lepski(cands, kappa=2.0, exact=None, report="diff"):
 
 def boxfit_lepski(ao, se, mask, guide, radii=(2, 4, 8, 16), kappa=2.0, fine=True, report="diff", verbose=False):
     from bench.prototypes.multiscale import fine_candidates
-    from core import denoise as D
+    from core.post import denoise as D
+    from core.post.denoise import filter as DF
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
     y = np.where(mask, ao, 0).astype(np.float64)
     var = np.where(mask, se.astype(np.float64) ** 2, 0)
-    F0 = D._Features(guide, mask, D.RADIUS)
-    var = D._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
+    F0 = DF._Features(guide, mask, D.RADIUS)
+    var = DF._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
     exact = var == 0
     cands = [(y, var, np.zeros_like(y), "raw")]
     if fine:
@@ -264,7 +283,8 @@ def boxfit_lepski(ao, se, mask, guide, radii=(2, 4, 8, 16), kappa=2.0, fine=True
 
 
 def pilot_bias_denoise(ao, se, mask, guide, radii=(3, 6, 12), rho_scale=0.5, debias=True, verbose=False,
-                       min_rho=2, smooth_what="square", report_raw=False, iterations=1, debias_scale=1.0):
+                       min_rho=2, smooth_what="square", report_raw=False, iterations=1, debias_scale=1.0,
+                       pilot="today", with_ds=False, add_pilot_bias=False, spread=None):
     """Box fits whose bias is the fit of today's denoised map (a pilot with its detail) less the pilot,
     its square debiased by the pilot's variance and averaged over a window of radius rho_scale R."""
     from bench.prototypes.multiscale import fine_all
@@ -278,18 +298,32 @@ def pilot_bias_denoise(ao, se, mask, guide, radii=(3, 6, 12), rho_scale=0.5, deb
         cands.append((F, V, B, f"fine {b}"))
     # the pilot: today's choice among these
     P, VP, BP, _ = select(cands, exact)
+    BP = np.where(np.isfinite(BP), BP, 0)
+    if pilot == "fine":
+        P, VP = fc[0][0], fc[0][1]
     fine_cands = list(cands)
     bf = BoxFit(mask, island, radii, 1)
     K = bf.kernels()
     fits = bf.apply(y, K, var)
+    if spread is not None:
+        # the window's normals: 1 - |mean normal| (0 on a plane); a wide fit only where the surface is flat
+        nS = [sat(np.where(mask, guide.normal[..., k], 0).astype(np.float64)) for k in range(3)]
+        nN = sat(mask.astype(np.float64))
+        flat = []
+        for R in radii:
+            n = box(nN, R)
+            res = np.sqrt(sum(box(S_, R) ** 2 for S_ in nS)) / np.maximum(n, 1)
+            flat.append((1 - res) <= spread)
+        fits = [(np.where(fl, F, np.nan), V) for fl, (F, V) in zip(flat, fits)]
     for it in range(iterations):
         pf = bf.apply(P, K)
         cands = list(fine_cands)
         reports = [c[2] for c in cands]
         for R, (F, V), (LP, _) in zip(radii, fits, pf):
-            b = LP - P
+            b = LP - P + (BP if add_pilot_bias else 0)
             ok = np.isfinite(b) & mask
-            rho = max(min_rho, int(round(rho_scale * R)))
+            rho = (max(min_rho, int(round(rho_scale * R))) if np.isscalar(R) else
+                   tuple(max(1, int(round(rho_scale * r))) for r in R))
             if smooth_what == "square":
                 sq = np.where(ok, b * b - (debias_scale * VP if debias else 0), 0)
                 B2 = np.maximum(smooth(sq, ok, rho), 0)
@@ -298,12 +332,15 @@ def pilot_bias_denoise(ao, se, mask, guide, radii=(3, 6, 12), rho_scale=0.5, deb
                 B2 = np.maximum(smooth(np.where(ok, b, 0), ok, rho) ** 2, 0)
                 Braw = np.sqrt(B2)
             B = np.where(ok, np.sqrt(B2), np.inf)
+            if with_ds:
+                SF = bf.apply(np.where(np.isfinite(F), F, y), [K[radii.index(R)]], radii=[R])[0][0]
+                B = np.maximum(B, np.abs(SF - F))
             cands.append((F, V, B, f"box {R}"))
             reports.append(np.where(ok, Braw, np.inf))
         out, vo, bo, choice = select(cands, exact)
         if report_raw:
             bo = np.choose(choice, [np.where(np.isfinite(r), r, 0) for r in reports])
-        P, VP = out, vo
+        P, VP, BP = out, vo, np.where(np.isfinite(bo), bo, 0)
     if verbose:
         print("choice", dict(zip([c[3] for c in cands], np.bincount(choice[mask], minlength=len(cands)))))
     out = np.where(mask, np.clip(out, 0, 1), ao)

@@ -68,10 +68,10 @@ def reference(cache, name, res, samples=2048):
 
 
 def guide(cache, name, res):
-    """core.denoise.surface_guide of the scene's target (pickled in the cache)."""
+    """core.post.denoise.surface_guide of the scene's target (pickled in the cache)."""
     import pickle
 
-    from core import denoise as D
+    from core.post import denoise as D
 
     path = Path(cache) / f"guide_{name}_{res}.pkl"
     if not path.exists():

@@ -84,7 +84,7 @@ def metrics(ao, se, ref, guide, mask=None):
 
 
 def today(ao, se, mask, guide):
-    from core import denoise as D
+    from core.post import denoise as D
 
     out, err, _ = D.denoise(ao, se, mask, guide)
     return out, err
@@ -142,7 +142,7 @@ FILTERS.update({"ms4": _ms(levels=4), "ms3": _ms(levels=3), "ms5": _ms(levels=5)
 def _oidn(kind):
     def f(ao, se, mask, guide):
         from bench.sections.denoise import oidn_filters
-        from core.margin import dilate
+        from core.geometry.margin import dilate
 
         padded = np.asarray(ao, np.float32).copy()
         dilate(padded, mask, 16, out=padded)
@@ -198,7 +198,33 @@ def _pb(**kw):
 
 FILTERS.update({"pb": _pb(), "pb1": _pb(rho_scale=1.0), "pbmean": _pb(smooth_what="mean"),
                 "pbnd": _pb(debias=False), "pbrr": _pb(rho_scale=1.0, report_raw=True),
-                "pbit2": _pb(rho_scale=1.0, iterations=2), "pbd05": _pb(rho_scale=1.0, debias_scale=0.5)})
+                "pbit2": _pb(rho_scale=1.0, iterations=2), "pbd05": _pb(rho_scale=1.0, debias_scale=0.5),
+                "pbfine": _pb(rho_scale=1.0, debias_scale=0.5, pilot="fine"),
+                "pbds": _pb(rho_scale=1.0, debias_scale=0.5, with_ds=True),
+                "pb2": _pb(rho_scale=1.0, debias_scale=0.5, radii=(2, 4, 8, 16)),
+                "pbb": _pb(rho_scale=1.0, debias_scale=0.5, add_pilot_bias=True),
+                "pbb1": _pb(rho_scale=1.0, debias_scale=1.0, add_pilot_bias=True),
+                "pbbrr": _pb(rho_scale=1.0, add_pilot_bias=True, report_raw=True),
+                "rect": _pb(rho_scale=1.0, debias_scale=0.5, radii=(3, 6, 12, (1, 6), (6, 1), (2, 12), (12, 2))),
+                "rect2": _pb(rho_scale=1.0, debias_scale=0.5, radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2),
+                                                                       (3, 12), (12, 3), (4, 24), (24, 4))),
+                "rect2b": _pb(rho_scale=1.0, debias_scale=0.5, add_pilot_bias=True,
+                              radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
+                "rect3": _pb(rho_scale=1.0, debias_scale=0.5, radii=(2, 3, 6, 12, 24, (1, 3), (3, 1), (1, 6), (6, 1), (2, 12),
+                                                                       (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
+                "rect2it": _pb(rho_scale=1.0, debias_scale=0.5, iterations=2, radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12),
+                                                                                   (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
+                "rect2r15": _pb(rho_scale=1.5, debias_scale=0.5, radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2),
+                                                                         (3, 12), (12, 3), (4, 24), (24, 4))),
+                **{f"rect2s{sp}": _pb(rho_scale=1.0, debias_scale=0.5, spread=sp,
+                                      radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24),
+                                             (24, 4))) for sp in (0.001, 0.003, 0.01, 0.03)},
+                "v2": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, iterations=2,
+                          radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
+                "v2one": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, iterations=1,
+                             radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
+                "rectb": _pb(rho_scale=1.0, debias_scale=0.5, add_pilot_bias=True,
+                             radii=(3, 6, 12, (1, 6), (6, 1), (2, 12), (12, 2)))})
 
 
 def _tiled(**kw):

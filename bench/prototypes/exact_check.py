@@ -1,5 +1,5 @@
 """A prototype filter on the exact scenes of tests/test_denoise.py (64^2, 16 samples, 8 seeds):
-RMSE against core.analytic's exact texel AO, mean error, z sd and |z| > 4 (the tests' bounds:
+RMSE against core.montecarlo.analytic's exact texel AO, mean error, z sd and |z| > 4 (the tests' bounds:
 |mean| < 0.002 + noise, z sd in [0.85, 1.15], |z| > 4 under 1%)."""
 
 import sys
@@ -17,7 +17,7 @@ def check(filt, names=("polygon", "box on plane", "seam"), seeds=range(8)):
     import test_denoise as T
 
     from core import bake_ao
-    from core import denoise as D
+    from core.post import denoise as D
 
     out = {}
     for name in names:

@@ -117,7 +117,7 @@ def resmooth(cells, weights, den, F, member):
 
 def fine_candidates(ao, se, mask, guide, bandwidths=(1.25, 2.5)):
     """Today's filter's candidates one by one: (F, V, B) per bandwidth."""
-    from core import denoise as D
+    from core.post import denoise as D
 
     out = []
     for b in bandwidths:
@@ -127,15 +127,16 @@ def fine_candidates(ao, se, mask, guide, bandwidths=(1.25, 2.5)):
 
 
 def multiscale(ao, se, mask, guide, levels=4, bias_scale=1.0, use_fine=True, verbose=False):
-    from core import denoise as D
+    from core.post import denoise as D
+    from core.post.denoise import filter as DF
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
     y = np.where(mask, ao, 0).astype(np.float64)
     var = np.where(mask, se.astype(np.float64) ** 2, 0)
     # trusted zeros as today
-    F0 = D._Features(guide, mask, D.RADIUS)
-    var = D._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
+    F0 = DF._Features(guide, mask, D.RADIUS)
+    var = DF._trusted_zeros(F0, var.astype(np.float32)).astype(np.float64)
     exact = var == 0
     normal = guide.normal.astype(np.float64)
     fine = fine_candidates(ao, se, mask, guide)
@@ -171,20 +172,21 @@ def multiscale(ao, se, mask, guide, levels=4, bias_scale=1.0, use_fine=True, ver
 def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
     """Today's filter's candidates with everything the selection may need: per bandwidth (F, V, B,
     Lii) with Lii = 1 / W the weight of the texel's own value (weights held fixed), plus the trusted
-    variance and the exact texels. A copy of core.denoise.denoise's steps."""
+    variance and the exact texels. A copy of core.post.denoise.denoise's steps."""
     import math
 
-    from core import denoise as D
+    from core.post import denoise as D
+    from core.post.denoise import filter as DF
 
     h, w = ao.shape
     r = radius
     mask = np.asarray(mask, bool) & guide.covered
-    F = D._Features(guide, mask, r)
-    halo = D._halo_pairs(guide, mask, r, F)
+    F = DF._Features(guide, mask, r)
+    halo = DF._halo_pairs(guide, mask, r, F)
     y = np.where(mask, ao, 0).astype(np.float32)
     var = np.where(mask, np.asarray(se, np.float32) ** 2, 0).astype(np.float32)
     exact = var == 0
-    var = D._trusted_zeros(F, var)
+    var = DF._trusted_zeros(F, var)
     exact &= var == 0
     bws = [float(b) for b in bandwidths]
     K = len(bws)
@@ -199,7 +201,7 @@ def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
         g = np.exp(-(d2 * pilot + beta * (1.0 - dot)))
         return [g if valid is None else np.where(valid, g, zero)]
 
-    Wg, Yg, Vg = D._filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=1)
+    Wg, Yg, Vg = DF._filter(F, halo, geometric, [(0, None, 1), (0, yp, 1), (0, vp, 2)], radius=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         G = P(np.where(Wg > 0, Yg / Wg, 0).astype(np.float32))
         vG = P(np.where(Wg > 0, Vg / (Wg * Wg), 0).astype(np.float32))
@@ -217,7 +219,11 @@ def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
             base = np.where(valid, base, np.float32(np.inf))
         return [np.exp(-(d2 * inv + base)) for inv in inv2h2]
 
-    Wk, Yk, Vk, Fk, Sk = D._candidates_and_bias(F, halo, candidates, K, yp, vp, y, var)
+    Wk, Yk, Vk, Fk, Sk = DF._candidates_and_bias(F, halo, candidates, K, yp, vp, y, var)
+    Gin = G[r:r + h, r:r + w]
+    _, YG, _, _, _ = DF._candidates_and_bias(F, halo, candidates, K, G, vp, Gin, var, bias=False)
+    fine_all.SG = [np.where(Wk[k] > 0, YG[k] / np.where(Wk[k] > 0, Wk[k], 1), Gin).astype(np.float64)
+                   for k in range(K)]
     out = []
     with np.errstate(invalid="ignore", divide="ignore"):
         for k in range(K):

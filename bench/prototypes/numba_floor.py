@@ -9,7 +9,7 @@ mc_ao. Run it in an environment of its own:
 For the interior texels of :mod:`bench.sections.floor` (a whole texel inside one triangle, its samples one
 piece), the same data and the same arithmetic as the floor's numpy stages (gather of the pool's
 features, the texel's shift, offset and turn, the map; for smooth triangles the finish of
-:func:`core.kernel.smooth_cosine_rays`), fused into one loop per ray with numba, compiled
+:func:`core.engine.kernel.smooth_cosine_rays`), fused into one loop per ray with numba, compiled
 ``nogil``. It checks its rays against the numpy stages' and prints nanoseconds a ray, to set beside
 bench.sections.floor's numpy floor and Embree's time per ray.
 """
@@ -27,7 +27,7 @@ import numba as nb  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench.sections.floor import N_RAYS, SPAN, Chunk, prepare  # noqa: E402
-from core.kernel import FAR  # noqa: E402
+from core.engine.kernel import FAR  # noqa: E402
 
 
 @nb.njit(nogil=True)

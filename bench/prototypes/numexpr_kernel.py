@@ -2,13 +2,13 @@
 
 The one experiment issue 42 allows: numexpr (fused elementwise expressions, no temporaries) in the
 kernel's arithmetic, adopted only if a whole one-thread bake of the bench's Suzanne scene and of the
-terrain gets at least 1.25x faster. This prototype replaces, in a subclass of :class:`core.kernel.Kernel`
+terrain gets at least 1.25x faster. This prototype replaces, in a subclass of :class:`core.engine.kernel.Kernel`
 built from the kernel's own source with three blocks swapped:
 
 - the texel's turn of the direction features (4 numpy passes) by two numexpr expressions;
 - the long pieces' batched product ``np.matmul((g, cols, 6), (g, 6, k))`` by one expression per
   output column over the feature planes, the matrix entries broadcast per piece;
-- the smooth-shaded finish (:func:`core.kernel.smooth_cosine_rays`, about 20 passes) by five
+- the smooth-shaded finish (:func:`core.engine.kernel.smooth_cosine_rays`, about 20 passes) by five
   expressions;
 
 and times whole bakes, the kernel of this tree against the numexpr one, interleaved (one thread,
@@ -63,7 +63,7 @@ def _ne_product(mt, x, y):
     the constant, a and b; direction: the three direction features), one expression per column."""
     import numexpr as ne
 
-    from core.kernel import CURVED_ENTRIES, FLAT_ENTRIES
+    from core.engine.kernel import CURVED_ENTRIES, FLAT_ENTRIES
 
     entries = CURVED_ENTRIES if mt.shape[1] == len(CURVED_ENTRIES) else FLAT_ENTRIES
     a, b, f0, f1, f2 = x[0], x[1], x[3], x[4], x[5]
@@ -77,10 +77,10 @@ def _ne_product(mt, x, y):
 
 
 def _ne_smooth_cosine_rays(y, reach, dirs, tfar, below, length, tmp, size2):
-    """:func:`core.kernel.smooth_cosine_rays` in five numexpr expressions (float32 throughout)."""
+    """:func:`core.engine.kernel.smooth_cosine_rays` in five numexpr expressions (float32 throughout)."""
     import numexpr as ne
 
-    from core.tracing import FAR
+    from core.tracing.tracer import FAR
 
     ne.evaluate("sqrt(n0 * n0 + n1 * n1 + n2 * n2)", local_dict=dict(n0=y[3], n1=y[4], n2=y[5]), out=length)
     for c in range(3):
@@ -101,17 +101,17 @@ BLOCKS = {"turn": (TURN_NUMPY, TURN_NUMEXPR), "product": (PRODUCT_NUMPY, PRODUCT
 
 
 def numexpr_kernel_class(blocks=tuple(BLOCKS)):
-    """A subclass of core.kernel.Kernel whose ``run`` is the kernel's own source with ``blocks`` (of
+    """A subclass of core.engine.kernel.Kernel whose ``run`` is the kernel's own source with ``blocks`` (of
     :data:`BLOCKS`) swapped for numexpr (fails loudly where the source no longer has them)."""
     import numexpr as ne
 
-    import core.kernel as K
+    import core.engine.kernel as K
 
     src = textwrap.dedent(inspect.getsource(K.Kernel.run))
     src = textwrap.indent(src, "    ")
     for old, new in (BLOCKS[b] for b in blocks):
         if old not in src:
-            raise RuntimeError(f"core.kernel.Kernel.run no longer has the block this prototype swaps:\n{old}")
+            raise RuntimeError(f"core.engine.kernel.Kernel.run no longer has the block this prototype swaps:\n{old}")
         src = src.replace(old, new)
     namespace = dict(vars(K), _ne=ne, _ne_product=_ne_product, _ne_smooth_cosine_rays=_ne_smooth_cosine_rays)
     exec(compile("class _Run:\n" + src, "<numexpr kernel>", "exec"), namespace)
@@ -119,7 +119,7 @@ def numexpr_kernel_class(blocks=tuple(BLOCKS)):
 
 
 def _bake(scene, res, spp, kernel_cls):
-    import core.bake as B
+    import core.pipeline.bake as B
     from core import bake_ao
 
     target, occ, distance = scene
@@ -138,7 +138,7 @@ def main(argv=None):
 
     from bench.harness.common import load_average
     from bench.sections.stages import scenes
-    from core.kernel import Kernel
+    from core.engine.kernel import Kernel
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--pairs", type=int, default=5)

@@ -43,7 +43,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from core import Mesh, bake_ao  # noqa: E402
-from core.analytic import polygon_form_factor, regular_polygon, texel_mean  # noqa: E402
+from core.montecarlo.analytic import polygon_form_factor, regular_polygon, texel_mean  # noqa: E402
 
 from ..harness.common import log  # noqa: E402
 from ..harness.mcao import core_bake  # noqa: E402

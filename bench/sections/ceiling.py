@@ -5,7 +5,7 @@ For each scene (the benchmark's Suzanne scene and a dense terrain), one thread:
 
 - the bake, timed (wall and process CPU), with embreex's own time from ``BakeResult.trace_seconds``
   (wall) and ``trace_cpu_seconds`` (thread CPU): the share inside embreex;
-- the same bake once more with ``on_rays`` (core.tracing.RayBatch) recording every chunk of rays;
+- the same bake once more with ``on_rays`` (core.tracing.tracer.RayBatch) recording every chunk of rays;
 - embreex alone replaying those chunks, 1 and 2 threads, interleaved with repeats of the bake: the
   bake's rays/s against embreex's on the very same rays, fastest repeat each.
 """
@@ -39,9 +39,9 @@ def _profile(ctx, target, occluders, res, spp, distance):
         by_file[short] = by_file.get(short, 0.0) + tt
     rows.sort(key=lambda x: -x["tottime"])
     # embreex's run() is compiled Cython that cProfile does not see: its time lands in the own time of
-    # core/tracing.py. Move the measured (thread CPU) trace time to a group of its own.
-    if "core/tracing.py" in by_file:
-        by_file["core/tracing.py"] -= r.trace_cpu_seconds
+    # core/tracing/tracer.py. Move the measured (thread CPU) trace time to a group of its own.
+    if "core/tracing/tracer.py" in by_file:
+        by_file["core/tracing/tracer.py"] -= r.trace_cpu_seconds
     by_file["embreex (scene.run, from trace_cpu_seconds)"] = r.trace_cpu_seconds
     groups = sorted(({"where": k, "seconds": v, "share": v / total} for k, v in by_file.items()),
                     key=lambda x: -x["seconds"])

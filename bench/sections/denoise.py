@@ -2,7 +2,7 @@
 
 On the bench's Suzanne scene (bench/data/scene_suzanne.npz: Suzanne with smart-project UVs over a
 plane and two blocks, as the add-on extracts it), one noisy bake at --samples is denoised by
-core.denoise and by Open Image Denoise (pyoidn: RT, RT with the surface normals as an auxiliary
+core.post.denoise and by Open Image Denoise (pyoidn: RT, RT with the surface normals as an auxiliary
 image, RTLightmap; each on the bake's image with its 16-texel margin) and compared with a converged
 reference of its own seed that no filter touched: RMSE over the covered texels, over island-border
 texels (covered texels with an uncovered 8-neighbour), and across UV seams (mean |difference| of the
@@ -20,6 +20,11 @@ to a 64-sample bake at N^2, and with ``--cost-against COMMIT`` that commit's cor
     .venv/bin/python -m bench.sections.denoise --cycles --resolution 512 --reference-samples 2048
     .venv/bin/python -m bench.sections.denoise --resolution 0 --cost-resolution 4096 --cost-against COMMIT
                                              --cost-repeats 2
+    .venv/bin/python -m bench.sections.denoise --done-when --resolutions 256 512 --reference-samples 2048
+                                             --reference-cache DIR --json bench/results/denoise-done.json
+
+``--done-when``: the issue's figures (:func:`done_when`): the add-on's operator with Denoise on against
+Cycles, each against its own converged image; the high-gradient check; OIDN RTLightmap; z.
 """
 
 import argparse
@@ -36,7 +41,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from core import Mesh, bake_ao  # noqa: E402
-from core import denoise as D  # noqa: E402
+from core.post import denoise as D  # noqa: E402
 
 SCENE = ROOT / "bench" / "data" / "scene_suzanne.npz"
 
@@ -102,8 +107,8 @@ class _Ref:
 
 def picture(path, maps, ref, mask, crop=None):
     """A PNG: the maps side by side (top), their |error| against the reference x 5 (bottom), on the
-    covered texels (grey elsewhere); row 0 of the maps is v = 0, as core.imageio writes it."""
-    from core.imageio import write_image
+    covered texels (grey elsewhere); row 0 of the maps is v = 0, as core.files.imageio writes it."""
+    from core.files.imageio import write_image
 
     h, w = ref.shape
     rows, cols = crop or (slice(0, h), slice(0, w))
@@ -186,7 +191,7 @@ import json, sys, time
 sys.path.insert(0, sys.argv[1])
 import numpy as np
 from core import Mesh, bake_ao
-from core import denoise as D
+from core.post import denoise as D
 z = np.load(sys.argv[2])
 target = Mesh(z["P"], z["F"], z["UV"], z["N"], name="Suzanne")
 occ = [Mesh(z[f"O{i}P"], z[f"O{i}F"], name=f"occluder{i}") for i in range(int(z["occluders"]))]
@@ -363,7 +368,7 @@ def cycles_equal_error(res=512, ref_samples=2048, threads=2, cache=None, scenes=
 
     from bench.comparators import cycles
     from bench.harness.common import erode
-    from core.margin import dilate
+    from core.geometry.margin import dilate
 
     filters, version = oidn_filters()
     filters = {k: v for k, v in filters.items() if k in ("OIDN RT", "OIDN RTLightmap")}
@@ -456,6 +461,164 @@ def cycles_equal_error(res=512, ref_samples=2048, threads=2, cache=None, scenes=
     return out
 
 
+# --- the issue's figures: the operator with Denoise on against Cycles, each against its own converged image --
+
+def _gradient(img, mask):
+    """|grad| per texel of ``img`` (central differences between covered texels, one-sided at borders)."""
+    h, w = img.shape
+    f = np.pad(np.asarray(img, np.float64), 1)
+    m = np.pad(mask, 1)
+    c = (slice(1, h + 1), slice(1, w + 1))
+    out = np.zeros((h, w))
+    for lo, hi in (((slice(0, h), slice(1, w + 1)), (slice(2, h + 2), slice(1, w + 1))),
+                   ((slice(1, h + 1), slice(0, w)), (slice(1, h + 1), slice(2, w + 2)))):
+        a, b = m[lo], m[hi]
+        d = np.where(a & b, (f[hi] - f[lo]) / 2, np.where(b, f[hi] - f[c], np.where(a, f[c] - f[lo], 0.0)))
+        out += d * d
+    return np.sqrt(out)
+
+
+def _cached(path, make):
+    """``make()``'s dict of arrays, kept in ``path`` (an .npz) when a path is given."""
+    if path is not None and Path(path).exists():
+        z = np.load(path)
+        return {k: z[k] for k in z.files}
+    out = make()
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, **out)
+    return out
+
+
+def _load():
+    import os
+
+    return [round(x, 2) for x in os.getloadavg()]
+
+
+def done_when(res=512, scenes=CYCLES_SCENES, threads=2, ref_samples=2048, cycles_ref_samples=2048, cache=None,
+              cycles_samples=(32, 64, 128, 256), raw_samples=(16, 32, 64, 128, 256), dn_samples=(8, 16, 32, 64),
+              seed=1):
+    """The issue's figures in one run, per scene: Cycles' AO bake at ``cycles_samples`` against a Cycles
+    bake of ``cycles_ref_samples``; the add-on's operator (bpy.ops.object.mc_ao_bake, Processes =
+    ``threads``) with Denoise on at ``dn_samples`` and off at ``raw_samples``, against a core bake of
+    ``ref_samples`` that no filter touched; Open Image Denoise RTLightmap on the same noisy bake as a
+    denoised one (core, two replicates, its margin dilated 16 texels). Each baker against its own
+    converged image, over the texels both cover away from island borders (interior); borders apart.
+
+    - time to Cycles 128's RMSE over Cycles 128's time (CPU seconds of Blender's process and the
+      operator's worker processes; log-log interpolation between sample counts);
+    - the high-gradient check: RMSE over the 10% of interior texels with the largest gradient of mc_ao's
+      converged image, denoised at each count against the raw operator at the same CPU time
+      (interpolated in log-log over the raw series);
+    - z sd of (denoised - reference) / sqrt(stderr^2 + reference stderr^2) (core bake, 16 samples);
+    - the machine's load average before and after each scene.
+    """
+    import bpy
+
+    from bench.comparators import cycles
+    from bench.harness import mcao
+    from bench.harness.common import erode, interp_time_at
+    from core.geometry.margin import dilate
+
+    filters, version = oidn_filters()
+    rtl = filters.get("OIDN RTLightmap")
+    out = {"resolution": res, "threads": threads, "reference_samples": ref_samples,
+           "cycles_reference_samples": cycles_ref_samples, "oidn": version, "scenes": {}}
+    for name in scenes:
+        load0 = _load()
+        obj, target, occ, dist = _open_scene(bpy, name)
+        key = lambda what: None if cache is None else Path(cache) / f"done_{what}_{name}_{res}.npz"  # noqa: E731
+        ref = _cached(key(f"mcao{ref_samples}"), lambda: (lambda r: {"ao": r.ao, "stderr": r.stderr, "mask": r.mask})(
+            bake_ao(target, occ, resolution=res, samples=ref_samples, max_distance=dist, seed=10_000 + seed,
+                    threads=threads, margin=0)))
+        cycles.bake(bpy, obj, 32, 32, 1, threads)  # warm-up (kernels, BVH) outside the measurements
+        mcao.operator_bake(bpy, obj, 32, 1, threads, dist, margin=0)
+        cref = _cached(key(f"cycles{cycles_ref_samples}"), lambda: {"ao": cycles.bake(
+            bpy, obj, res, res, cycles_ref_samples, threads, seed=97, margin=0, sentinel=-1.0)[0]})
+        rows = []
+        for n in cycles_samples:
+            ao, wall = cycles.bake(bpy, obj, res, res, n, threads, seed=11, margin=0, sentinel=-1.0)
+            rows.append(dict(kind="Cycles", samples=n, ao=ao, cpu=cycles.LAST["cpu"], wall=wall))
+        for kind, counts, dn in (("raw", raw_samples, False), ("denoised", dn_samples, True)):
+            for n in counts:
+                ao, wall = mcao.operator_bake(bpy, obj, res, n, threads, dist, margin=0, seed=seed + n, denoise=dn)
+                rows.append(dict(kind=kind, samples=n, ao=ao, cpu=mcao.LAST["cpu"], wall=wall))
+        # The core's denoised bake at 16 samples: its error for z, its raw estimate for OIDN.
+        c0, w0 = mcao.process_cpu(), time.perf_counter()
+        r16 = bake_ao(target, occ, resolution=res, samples=16, max_distance=dist, seed=seed + 16, threads=threads,
+                      margin=0, denoise=True)
+        dn_cpu = mcao.process_cpu() - c0
+        if rtl is not None:
+            with Clock() as t:
+                padded = r16.raw_ao.copy()
+                dilate(padded, r16.mask, 16, out=padded)
+                img = rtl(padded, None)
+            base = next(x for x in rows if x["kind"] == "denoised" and x["samples"] == 16)
+            rows.append(dict(kind="OIDN RTLightmap", samples=16, ao=img, cpu=base["cpu"] + t.cpu,
+                             wall=base["wall"] + t.wall, note="the operator's denoised 16's time plus OIDN's"))
+        cmask = cref["ao"] >= 0
+        common = cmask & ref["mask"]
+        inner = erode(common)
+        edge = border(ref["mask"]) & common
+        grad = _gradient(ref["ao"], ref["mask"])
+        steep = inner & (grad >= np.quantile(grad[inner], 0.9))
+
+        def rm(e, sel):
+            return float(np.sqrt(np.mean(e[sel] ** 2)))
+
+        for x in rows:
+            truth = cref["ao"] if x["kind"] == "Cycles" else ref["ao"]
+            e = np.asarray(x.pop("ao"), np.float64) - truth
+            x.update(rmse=rm(e, inner), rmse_border=rm(e, edge), rmse_steep=rm(e, steep), rmse_common=rm(e, common))
+        goal_row = next(x for x in rows if x["kind"] == "Cycles" and x["samples"] == 128)
+        goal = goal_row["rmse"]
+        matched = {}
+        for kind in ("raw", "denoised"):
+            pts = [x for x in rows if x["kind"] == kind]
+            t = interp_time_at([p["cpu"] for p in pts], [p["rmse"] for p in pts], goal)
+            matched[kind] = {"cpu": t, "ratio": None if t is None else t / goal_row["cpu"]}
+        raw_pts = [x for x in rows if x["kind"] == "raw"]
+        steep_check = []
+        for x in (r for r in rows if r["kind"] == "denoised"):
+            # the raw series' steep RMSE at the denoised bake's CPU time (log-log between its counts)
+            ts = np.log([p["cpu"] for p in raw_pts])
+            es = np.log([p["rmse_steep"] for p in raw_pts])
+            at = float(np.exp(np.interp(np.log(x["cpu"]), ts, es)))
+            steep_check.append({"samples": x["samples"], "cpu": x["cpu"], "denoised": x["rmse_steep"],
+                                "raw_at_same_cpu": at, "ok": x["rmse_steep"] <= at,
+                                "extrapolated": not (ts.min() <= np.log(x["cpu"]) <= ts.max())})
+        sel = inner & (r16.stderr > 0)
+        z = (r16.ao - ref["ao"])[sel] / np.sqrt(r16.stderr[sel].astype(np.float64) ** 2
+                                                 + ref["stderr"][sel].astype(np.float64) ** 2)
+        out["scenes"][name] = {
+            "triangles": int(target.triangle_count), "distance": dist, "texels_interior": int(inner.sum()),
+            "texels_border": int(edge.sum()), "texels_steep": int(steep.sum()), "goal_rmse": goal,
+            "cycles128_cpu": goal_row["cpu"], "rows": rows, "matched": matched, "steep_check": steep_check,
+            "z_sd": float(z.std()), "z_mean": float(z.mean()), "core_denoised16_cpu": dn_cpu,
+            "load_before": load0, "load_after": _load()}
+        print(done_table(name, out["scenes"][name]), flush=True)
+    return out
+
+
+def done_table(name, c):
+    fmt = lambda v, f="{:.3f}": "-" if v is None else f.format(v)  # noqa: E731
+    lines = [f"\n{name}: {c['texels_interior']} interior texels ({c['texels_border']} border, {c['texels_steep']} "
+             f"steepest 10%); Cycles 128: RMSE {c['goal_rmse']:.4f} against Cycles' own converged image, "
+             f"{c['cycles128_cpu']:.1f} CPU s; load {c['load_before']} -> {c['load_after']}",
+             "", "| map | samples | RMSE (interior) | border | steepest 10% | CPU s | wall s |", "|---|---|---|---|---|---|---|"]
+    for x in c["rows"]:
+        lines.append(f"| {x['kind']} | {x['samples']} | {x['rmse']:.4f} | {x['rmse_border']:.4f} | "
+                     f"{x['rmse_steep']:.4f} | {x['cpu']:.2f} | {x['wall']:.2f} |")
+    lines += ["", "Time to Cycles 128's RMSE over Cycles 128's (CPU): " + "; ".join(
+        f"{k} {fmt(v['ratio'])}x" for k, v in c["matched"].items()),
+        "Steepest 10%, denoised against raw at the same CPU time: " + "; ".join(
+        f"{s['samples']}: {s['denoised']:.4f} vs {s['raw_at_same_cpu']:.4f}{' (extrapolated)' if s['extrapolated'] else ''}"
+        for s in c["steep_check"]),
+        f"z sd (core, denoised 16, against the reference): {c['z_sd']:.3f} (mean {c['z_mean']:+.3f})"]
+    return "\n".join(lines)
+
+
 def cycles_table(name, c):
     fmt = lambda v, f="{:.3f}": "-" if v is None else f.format(v)  # noqa: E731
     lines = [f"\n{name}: {c['texels_interior']} interior texels ({c['texels_border']} border, {c['seam_pairs']} seam "
@@ -507,10 +670,22 @@ def main(argv=None):
     ap.add_argument("--cycles", action="store_true",
                     help="the equal-error table against Cycles (bpy) on the Suzanne scene, the room and dense.blend")
     ap.add_argument("--scenes", nargs="+", default=list(CYCLES_SCENES))
+    ap.add_argument("--done-when", action="store_true",
+                    help="the issue's figures: the operator with Denoise on against Cycles, each against its own "
+                         "converged image, at --resolution (several allowed with --resolutions)")
+    ap.add_argument("--resolutions", type=int, nargs="+", default=None)
+    ap.add_argument("--cycles-reference-samples", type=int, default=2048)
     ap.add_argument("--picture", type=Path, default=None,
                     help="PNG: raw, mc_ao denoised, OIDN RTLightmap, reference; |error| x 5 below")
     a = ap.parse_args(argv)
     out = {}
+    if a.done_when:
+        out["done_when"] = [done_when(r, a.scenes, threads=a.threads, ref_samples=a.reference_samples,
+                                      cycles_ref_samples=a.cycles_reference_samples, cache=a.reference_cache)
+                            for r in (a.resolutions or [a.resolution])]
+        if a.json:
+            a.json.write_text(json.dumps(out, indent=1))
+        return out
     if a.resolution and not a.cycles:
         out["compare"] = compare(a.resolution, a.samples, a.reference_samples, threads=a.threads,
                                  cache=a.reference_cache, picture_path=a.picture)

@@ -4,7 +4,7 @@ The target asks for at least 80% of a one-thread bake's time inside embreex (the
 1.3x of embreex alone on the same rays), on the bench's Suzanne scene and a dense terrain. That is
 a budget: everything else may cost at most a quarter of Embree's time per ray. This measures, on
 the simplest texels there are (a whole texel inside one triangle, its samples one piece), the
-cheapest form found of each numpy stage a ray of :mod:`core.kernel` goes through, in the same run
+cheapest form found of each numpy stage a ray of :mod:`core.engine.kernel` goes through, in the same run
 as Embree's own time per ray on each scene's bake:
 
 - gather: the sample's pool features (a texel's aligned block of a pattern), as (n, 6) rows or as
@@ -37,10 +37,10 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from core.kernel import CURVED_ENTRIES, FLAT_ENTRIES, Kernel, _row_table, smooth_cosine_rays  # noqa: E402
+from core.engine.kernel import CURVED_ENTRIES, FLAT_ENTRIES, Kernel, _row_table, smooth_cosine_rays  # noqa: E402
 
 N_RAYS = 1 << 16          # rays per call, as core.bake_ao's chunk_rays
-POOL = 1 << 18            # pool points, as core.patterns.POOL_POINTS
+POOL = 1 << 18            # pool points, as core.engine.patterns.POOL_POINTS
 SPAN = 1024
 TEXELS = 1 << 15
 
@@ -63,7 +63,7 @@ class Chunk:
         turn = rng.random(TEXELS) * 2 * np.pi
         self.cos, self.sin = np.cos(turn).astype(np.float32), np.sin(turn).astype(np.float32)
         self.corner = rng.random((TEXELS, 2)).astype(np.float32)
-        # Per texel a matrix with the kernel's nonzero entries (core.kernel's FLAT_ENTRIES or
+        # Per texel a matrix with the kernel's nonzero entries (core.engine.kernel's FLAT_ENTRIES or
         # CURVED_ENTRIES), as rows (6, cols), transposed (cols, 6) and as the kernel's entry table.
         self.entries = CURVED_ENTRIES if columns == 11 else FLAT_ENTRIES
         m = np.zeros((TEXELS, 6, columns), np.float32)
@@ -133,11 +133,11 @@ class Chunk:
         np.matmul(self.mt[s], self.x.transpose(1, 0, 2), out=self.y.transpose(1, 0, 2))
 
     def map_planes_elementwise(self, s):
-        # The kernel's own code (core.kernel.Kernel._linear), each texel's entries broadcast.
+        # The kernel's own code (core.engine.kernel.Kernel._linear), each texel's entries broadcast.
         Kernel._linear(np.take(self.table, s, axis=1)[:, :, None], self.entries, self.x, self.y, self.tmp[0])
 
     def finish_planes(self, s):
-        # The kernel's own code (core.kernel.smooth_cosine_rays), with the reach of a finite distance.
+        # The kernel's own code (core.engine.kernel.smooth_cosine_rays), with the reach of a finite distance.
         smooth_cosine_rays(self.y, 1.0, self.dirs, self.tfar, self.below, self.tmp[2], self.tmp[0], self.tmp[1])
 
     def sum(self, s):

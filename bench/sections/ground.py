@@ -1,4 +1,4 @@
-"""What the analytic ground plane (core.ground) costs a bake: time(ground='auto') / time(no ground).
+"""What the analytic ground plane (core.tracing.ground) costs a bake: time(ground='auto') / time(no ground).
 
     .venv/bin/python -m bench.sections.ground            # 256^2 x 64, 512^2 x 64: about 2 minutes on 2 cores
     .venv/bin/python -m bench.sections.ground --quick    # 256^2 x 64

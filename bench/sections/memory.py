@@ -150,12 +150,12 @@ class Poller:
 def child(case, triangles, workers, res, spp):
     sys.path.insert(0, str(ROOT))
     from core import Mesh, bake_ao
-    from core import workers as W
+    from core.execution import workers as W
 
     out = {"case": case, "triangles": triangles, "workers": workers, "resolution": res, "spp": spp}
     base = status()
     if case == "embree":
-        from core.tracing import embree_scene
+        from core.tracing.tracer import embree_scene
 
         P, F, _ = grid(grid_side(triangles), False)
         mesh = Mesh(P, F, name="grid")

@@ -77,8 +77,8 @@ def bake(target, occ, dist, udim, res, samples, seed, cache=None, tag=""):
 
 
 def png_roundtrip(planes):
-    """The planes as an 8-bit PNG (core.imageio) reads them back: what a saved 8-bit map holds."""
-    from core.imageio import read_image, write_image
+    """The planes as an 8-bit PNG (core.files.imageio) reads them back: what a saved 8-bit map holds."""
+    from core.files.imageio import read_image, write_image
 
     out = np.empty_like(planes, dtype=np.float32)
     with tempfile.TemporaryDirectory() as d:

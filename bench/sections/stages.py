@@ -218,7 +218,7 @@ def _fixed_once(scene, res, spp, fresh):
 
 def _capture_job(scene, res, spp, workers):
     """The job dict a worker receives for this bake (the parent's ``job()``), and the bake's wall time."""
-    import core.workers as W
+    import core.execution.workers as W
 
     got = {}
     original = W.bake_tiles
@@ -240,7 +240,7 @@ def _capture_job(scene, res, spp, workers):
 
 def fixed_costs(scene, res=128, spp=1, repeats=7, workers=2):
     """Steps of a small bake, in this process and on ``workers`` warm worker processes."""
-    import core.workers as W
+    import core.execution.workers as W
 
     out = {"resolution": res, "samples": spp, "load": [load_average()]}
     # In this process, one thread: a kept scene (the same mesh again) and a fresh one, interleaved.
@@ -276,7 +276,7 @@ def fixed_costs(scene, res=128, spp=1, repeats=7, workers=2):
     out["in_process_wall_ms"] = 1e3 * statistics.median(local)
     # What each worker does with its job, timed here on the same job: its set-up steps.
     if job is not None:
-        # As the pool sends it (core.workers.Pool.run): progress counted in quanta, one thread.
+        # As the pool sends it (core.execution.workers.Pool.run): progress counted in quanta, one thread.
         job = dict(job, quantum=1 << 62, settings=dict(job["settings"], threads=1, auto_tiles=False))
         steps = [("worker set-up: the rest", "_setup")] + FIXED_STEPS
         runs = []
@@ -354,7 +354,7 @@ def main(argv=None):
     if not a.no_save:
         (RESULTS / f"{a.stem}.json").write_text(json.dumps(out, indent=1, default=float))
         (RESULTS / f"{a.stem}.txt").write_text("".join(lines))
-    from core.workers import shutdown
+    from core.execution.workers import shutdown
 
     shutdown()
     return out

@@ -12,7 +12,7 @@ or by a Python that has the bpy module (then the .blend file is the first argume
 Writes <image>_AO.png (and/or .exr, .tif, per --format) for each object into the output folder
 and prints a summary.
 
-Selected to Active (as Cycles' bake, see core.highpoly for the exact rules): the AO of high-poly
+Selected to Active (as Cycles' bake, see core.highpoly.match for the exact rules): the AO of high-poly
 objects baked into a low-poly's UVs, into <low>_AO:
 
     ... --selected-to-active --active Chair_low --objects Chair_high Bolts --extrusion 0.05
@@ -74,16 +74,16 @@ from ..choose import Pick, choose
 from ..extract import ExtractError
 from ..terminal import EscapingStream, escape
 from .blendsave import check_save
-from .options import (BITS, FORMATS, UsageError, default_formats, early_summary_args, make_parser,
-                      run_by_blender, script_argv)
-from .rules import settings_from
+from ..schema import BITS, FORMATS
+from .options import (UsageError, default_formats, early_summary_args, make_parser, run_by_blender, script_argv,
+                      settings_from)
 from .scriptrun import bake
 from .summary import Summary, cancel_note
 
 
 def check_paths(args, summary):
     """The output folder and the summary's file can be written (before anything is baked)."""
-    atomicfile = corelink.load("atomicfile")
+    atomicfile = corelink.load("files.atomicfile")
 
     problem = filecheck.folder_problem(args.output)
     if problem is not None:

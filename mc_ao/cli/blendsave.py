@@ -32,7 +32,7 @@ def check_save(args, input_blend):
 
 def save_blend(bpy, path):
     """Save the open file (with its baked color attributes) to ``path`` atomically, as a copy."""
-    atomicfile = corelink.load("atomicfile")
+    atomicfile = corelink.load("files.atomicfile")
 
     def write(temp):
         try:

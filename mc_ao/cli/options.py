@@ -1,18 +1,14 @@
 """The script's command line: its options (one per mc_ao.schema setting that has one, and the
-script's own: what to bake, where files go), the arguments under Blender or a plain Python, and
+script's own, mc_ao.schema.OPTIONS: what to bake, where files go), the arguments under Blender or a
+plain Python, the settings they give (every value and rule checked: mc_ao.settings.from_options), and
 UsageError, a refusal before anything is baked (exit status 2). No bpy."""
 
 import argparse
 import sys
 from pathlib import Path
 
-from .. import schema
+from .. import schema, settings
 from ..terminal import escape
-
-# --format choice -> Blender's file format name (mc_ao.settings.FILE_FORMATS)
-FORMATS = {"png": "PNG", "exr": "OPEN_EXR", "tif": "TIFF", "ply": "PLY"}
-BITS = {"8": 8, "16": 16, "half": "half", "float": "float"}
-
 
 class UsageError(Exception):
     """Bad arguments or input: exit status 2. ``usage``: the usage text to show after the message.
@@ -89,9 +85,32 @@ def _add_setting(parser, setting):
     parser.add_argument(option, **kwargs)
 
 
+def _add_option(parser, option):
+    """The argument of one of the script's own options (mc_ao.schema.OPTIONS)."""
+    names = [option.option] + ([option.short] if option.short else [])
+    if option.shape == "flag":
+        parser.add_argument(*names, action="store_true", help=option.help)
+        return
+    kwargs = {"help": option.help}
+    if option.kind == "path":
+        kwargs["type"] = Path
+    elif option.kind == "size":
+        kwargs["type"] = parse_resolution
+    if option.default is not None:
+        kwargs["default"] = Path(option.default) if option.kind == "path" else option.default
+    if option.choices:
+        kwargs["choices"] = list(option.choices)
+    if option.metavar is not None:
+        kwargs["metavar"] = option.metavar
+    kwargs["nargs"] = {"list": "+", "pair": 2, "value?": "?"}.get(option.shape)
+    if option.shape == "value?":
+        kwargs["const"] = ""
+    parser.add_argument(*names, **kwargs)
+
+
 def make_parser(with_blend):
     """The script's options: every mc_ao.schema setting that has an option (its manifest key is the
-    option's name with '_' for '-'), and the script's own (what to bake, where files go)."""
+    option's name with '_' for '-'), and the script's own (mc_ao.schema.OPTIONS)."""
     parser = Parser(
         prog="bake_ao.py",
         description="Bake ambient occlusion of objects in a .blend file into image files.",
@@ -101,28 +120,9 @@ def make_parser(with_blend):
     )
     if with_blend:
         parser.add_argument("blend", help=".blend file to open")
-    parser.add_argument("--objects", nargs="+", metavar="NAME",
-                        help="mesh objects to bake (default: the selected ones with a UV map, "
-                             "else every mesh with a UV map in the view layer)")
-    parser.add_argument("--output", "-o", type=Path, default=Path("out"),
-                        help="output folder, created if missing (default: out)")
-    parser.add_argument("--format", nargs="+", choices=sorted(FORMATS), default=None,
-                        help="file formats to write, one file each (default: png; ply for --target "
-                             "vertex-colors)")
-    parser.add_argument("--bits", choices=sorted(BITS),
-                        help="sample type of the files: png 8|16, exr half|float, tif 8|16|float "
-                             "(default: 8-bit PNG and TIFF, half EXR)")
-    parser.add_argument("--resolution", type=parse_resolution, default=(1024, 1024), metavar="N|WxH",
-                        help="image size, N or WxH (default: 1024)")
-    parser.add_argument("--attribute-type", choices=("float", "byte"), default="float",
-                        help="type of a new color attribute: float (linear) or byte (sRGB-encoded, as "
-                             "Blender stores byte colors) (default: float)")
-    parser.add_argument("--save", type=Path, metavar="PATH.blend",
-                        help="with --target vertex-colors: save the .blend file with the baked color "
-                             "attributes to PATH (atomically; never the input file unless "
-                             "--overwrite-input is given)")
-    parser.add_argument("--overwrite-input", action="store_true",
-                        help="allow --save to replace the .blend file the bake read")
+    for option in schema.OPTIONS:
+        if option.section == "files":
+            _add_option(parser, option)
     for setting in schema.SETTINGS:
         if setting.option_key is not None and "selected_to_active" not in setting.targets:
             _add_setting(parser, setting)
@@ -131,19 +131,12 @@ def make_parser(with_blend):
     for setting in schema.SETTINGS:
         if setting.option_key is not None and "selected_to_active" in setting.targets:
             _add_setting(s2a, setting)
-    s2a.add_argument("--active", metavar="NAME",
-                     help="the low-poly to bake onto (default: the file's active object)")
-    s2a.add_argument("--cage", metavar="NAME", nargs="?", const="",
-                     help="cast the rays from a cage (Cycles' Cage): alone, the low-poly extruded along its "
-                          "smooth vertex normals; with NAME, that object, a copy of the low-poly with its "
-                          "vertices moved outwards (the extrusion is then not used)")
-    s2a.add_argument("--match-suffix", nargs=2, metavar=("HIGH", "LOW"),
-                     help="bake each object named <base>HIGH onto <base>LOW (e.g. _high _low: Chair_high "
-                          "onto Chair_low), one image per low-poly; implies --selected-to-active")
-    parser.add_argument("--summary-json", type=Path, metavar="PATH",
-                        help="write a JSON record of the run (settings, each object's status, time, "
-                             "rays and files) to PATH at the end, whatever the exit status")
-    parser.add_argument("--quiet", "-q", action="store_true", help="no progress")
+    for option in schema.OPTIONS:
+        if option.section == "selected_to_active":
+            _add_option(s2a, option)
+    for option in schema.OPTIONS:
+        if option.section == "run":
+            _add_option(parser, option)
     return parser
 
 
@@ -152,6 +145,16 @@ def default_formats(args):
     if getattr(args, "format", None) is None:
         args.format = ["ply"] if getattr(args, "target", "") == "vertex-colors" else ["png"]
     return args.format
+
+
+def settings_from(args):
+    """The BakeSettings of the arguments, after checking every value and rule (UsageError lists what
+    is wrong); fills in --format's default."""
+    default_formats(args)
+    baked, problems = settings.from_options(args)
+    if problems:
+        raise UsageError(problems)
+    return baked
 
 
 def early_summary_args(argv, in_blender):

@@ -42,7 +42,7 @@ class Summary:
         """Write the record atomically; False (after saying why) when it cannot be written."""
         if self.path is None:
             return True
-        atomicfile = corelink.load("atomicfile")
+        atomicfile = corelink.load("files.atomicfile")
         version = corelink.load("_version")
 
         record = {

@@ -83,7 +83,7 @@ def plan_files(kinds, folder, jobs, formats):
     files = output_files(kinds, folder, jobs, formats)
     problems = [p for job in jobs for kind in kinds for p in kind.check_files(job, files)]
     if problems:
-        raise corelink.load("errors").FileWriteError("; ".join(dict.fromkeys(problems)) + "; nothing was baked")
+        raise corelink.load("base.errors").FileWriteError("; ".join(dict.fromkeys(problems)) + "; nothing was baked")
     return files
 
 

@@ -94,7 +94,7 @@ class OutputKind:
 @dataclass
 class FileWrite:
     """One file of an object: where, and how: ``write(target)`` writes the complete file at ``target``
-    with a checking writer (core.imageio, core.plyio, Blender's through mc_ao.images), raising
+    with a checking writer (core.files.imageio, core.files.plyio, Blender's through mc_ao.images), raising
     core.McAoError, OSError or RuntimeError when it cannot."""
 
     path: str
@@ -124,15 +124,15 @@ def save_files(writes):
     Every file is written to a temporary file beside its target and checked first (a file of
     another kind at a target, an unwritable folder, a full disk, a writer that fails: nothing is
     replaced); only then are the temporary files moved over their targets, together
-    (core.atomicfile.commit_together: a failed move puts back the files already moved). Raises
+    (core.files.atomicfile.commit_together: a failed move puts back the files already moved). Raises
     :class:`SaveError` naming the files that failed; every old file is then as it was.
     """
     writes = list(writes)
     if not writes:
         return []
-    atomicfile = corelink.load("atomicfile")
+    atomicfile = corelink.load("files.atomicfile")
     core = corelink.load()
-    errors = corelink.load("errors")
+    errors = corelink.load("base.errors")
     problems = [(w.path, errors.FileWriteError(p)) for w in writes for p in [filewriter.kind_problem(w.path)] if p]
     if problems:
         raise SaveError(problems)

@@ -42,7 +42,7 @@ class ColorAttributeOutput(OutputKind):
         meta = dict(result.metadata, **metadata, content="ao")
 
         def write(target):
-            corelink.load("plyio").write_ply(target, *ply, meta)
+            corelink.load("files.plyio").write_ply(target, *ply, meta)
 
         return [FileWrite(os.fspath(f.path), write, self.name) for f in files.get(job.image_name, [])]
 

@@ -19,7 +19,7 @@ class MapOutput(OutputKind):
 
     name = "map"
     what = "map"
-    #: The files' metadata "content" (core.imageio reads it back).
+    #: The files' metadata "content" (core.files.imageio reads it back).
     content = "ao"
     #: The image's float buffer: None for the settings' 32-bit Float, else always this.
     float_image = None
@@ -60,7 +60,7 @@ class MapOutput(OutputKind):
         return [self.image_name(job)]
 
     def targets(self, entry):
-        """[(path, file format, bits for core.imageio, bits for Blender's writer)] of one planned
+        """[(path, file format, bits for core.files.imageio, bits for Blender's writer)] of one planned
         OutputFile of this map."""
         return [(entry.path, entry.file_format, entry.bits, entry.bits)]
 
@@ -129,7 +129,7 @@ def _writer(plane, file_format, bits, blender_bits, metadata):
 
     def write(target):
         if filewriter.oiio_available():
-            corelink.load("imageio").write_image(target, plane, bits=bits, metadata=metadata)
+            corelink.load("files.imageio").write_image(target, plane, bits=bits, metadata=metadata)
         else:
             from .. import images
 

@@ -302,7 +302,7 @@ def test_a_missing_output_folder_is_created(bpy, scene, capfd, tmp_path):
 
 def test_a_failed_file_write_keeps_the_bake_in_blender_and_the_old_file(bpy, scene, capfd, tmp_path, monkeypatch):
     """The disk fills up while the file is written: the image keeps the bake, the old file stays."""
-    from core import imageio
+    from core.files import imageio
 
     ground = add_plane(bpy, "Ground", size=4)
     select_only(bpy, ground)
@@ -317,7 +317,7 @@ def test_a_failed_file_write_keeps_the_bake_in_blender_and_the_old_file(bpy, sce
             fh.write(b"half a PNG")
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    # core.imageio writes a temporary file through this function, then renames it over the target.
+    # core.files.imageio writes a temporary file through this function, then renames it over the target.
     monkeypatch.setattr(imageio, "_write_temp", disk_full)
     scene.mc_ao.save_to_file = True
     scene.mc_ao.output_dir = str(tmp_path)
@@ -394,7 +394,7 @@ def test_esc_during_a_bake_puts_the_images_back(bpy, scene, hold_bake):
 def test_a_live_bake_draws_its_tiles_over_the_previous_pixels(bpy, scene, hold_bake):
     """A rebake into an image of the same size: the texels not baked yet still show the previous bake."""
     ground = add_plane(bpy, "Ground", size=4)
-    scene.mc_ao.resolution = 512  # one thread: four tiles of 256^2 (core.settings.auto_tile_shape)
+    scene.mc_ao.resolution = 512  # one thread: four tiles of 256^2 (core.engine.settings.auto_tile_shape)
     scene.mc_ao.threads = 1
     old = pattern_image(bpy, "Ground_AO", 512, 512, float_buffer=True, is_data=True)
     held = hold_bake("Ground")
@@ -407,7 +407,7 @@ def test_a_live_bake_draws_its_tiles_over_the_previous_pixels(bpy, scene, hold_b
 
     live = images.pixels_of(bpy.data.images["Ground_AO"])
     changed = np.any(live != old, axis=2)
-    from core.settings import auto_tile_shape
+    from core.engine.settings import auto_tile_shape
 
     tw, th = auto_tile_shape(512, 512, 1)
     assert tw * th < 512 * 512  # more than one tile

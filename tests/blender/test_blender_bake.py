@@ -177,7 +177,7 @@ def test_image_name_setting_and_one_image_per_object(bpy, scene):
 
 
 def test_save_to_file(bpy, scene, tmp_path):
-    from core import imageio
+    from core.files import imageio
 
     ground = add_plane(bpy, "Ground", size=4)
     add_cube(bpy, "Block", size=1.0, location=(0, 0, 0.8))
@@ -302,7 +302,7 @@ def test_overlapping_uv_islands_are_reported(bpy, scene, capfd):
 
 def test_save_without_openimageio_goes_through_blenders_writer(bpy, scene, tmp_path, monkeypatch):
     """Debian's Blender has no OpenImageIO module: the file is then written by Blender itself."""
-    from core import imageio
+    from core.files import imageio
     from mc_ao import filewriter
 
     monkeypatch.setattr(filewriter, "oiio_available", lambda: False)

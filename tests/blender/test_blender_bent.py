@@ -84,8 +84,8 @@ def test_tangent_space_is_what_cycles_normal_map_node_decodes(bpy, scene):
     that would reflect the view below the surface (ensure_valid_specular_reflection), which for a
     bake looking along the normal means leans past 45 degrees."""
     import core
-    from core.bent import barycentric
-    from core.raster import prepare, rasterize_tile
+    from core.post.bent import barycentric
+    from core.geometry.raster import prepare, rasterize_tile
     from mc_ao import baking
     from mc_ao.settings import BakeSettings
 

@@ -73,7 +73,7 @@ def test_an_image_of_another_size_is_refused_before_any_work(bpy, scene, capfd):
 
 
 def test_a_file_image_gets_a_copy_of_its_file_in_the_output_folder(bpy, scene, capfd, tmp_path):
-    from core import imageio
+    from core.files import imageio
     from mc_ao import images
 
     floor_under_lid(bpy, scene)
@@ -123,7 +123,7 @@ def script(blend_file, *args):
 
 
 def test_the_script_writes_into_a_copy_of_the_into_file_and_bakes_both_quantities_at_once(blend_file, tmp_path):
-    from core import imageio
+    from core.files import imageio
 
     source = tmp_path / "orm.exr"
     imageio.write_image(str(source), np.random.default_rng(2).random((16, 16, 4)).astype(np.float32), bits="half")

@@ -56,7 +56,7 @@ def test_no_error_map_image_without_the_setting(bpy, scene):
 
 
 def test_save_to_file_writes_the_error_map_beside_the_ao(bpy, scene, tmp_path):
-    from core import imageio
+    from core.files import imageio
 
     _scene(bpy)
     scene.mc_ao.error_map = True

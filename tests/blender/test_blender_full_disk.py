@@ -211,7 +211,7 @@ def test_saved_files_get_the_umask_or_keep_their_permissions(bpy, scene, tmp_pat
 def test_blenders_writer_reads_every_format_back(bpy, scene, tmp_path):
     """The fallback writer's check passes for what it writes (a check that refused good files would
     make every save fail), and its files hold the pixels."""
-    from core import imageio
+    from core.files import imageio
     from mc_ao import images
 
     pixels = np.random.default_rng(3).random((16, 24, 4), dtype=np.float32)

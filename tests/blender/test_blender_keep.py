@@ -208,7 +208,7 @@ def test_a_bake_survives_save_and_reopen(bpy, scene, tmp_path, kind):
 def test_link_to_file_makes_the_image_the_saved_file(bpy, scene, tmp_path, file_format, float_buffer):
     """Save to File with Link Image to File: the image loads from the file it was saved to (relative
     to the .blend), is not packed, and reopens with the file's pixels; a later undo keeps them."""
-    from core import imageio
+    from core.files import imageio
 
     blend = tmp_path / "scene.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))  # so that "//textures" is a folder

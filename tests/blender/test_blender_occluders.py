@@ -449,7 +449,7 @@ def test_quantity_thickness_and_both_from_the_panel(bpy, scene, capfd):
 def test_a_channel_is_checked_against_the_image_before_any_work(bpy, scene, capfd, tmp_path):
     import dataclasses
 
-    from core import imageio
+    from core.files import imageio
     from mc_ao import baking
     from mc_ao.settings import BakeSettings
 
@@ -467,7 +467,7 @@ def test_a_channel_is_checked_against_the_image_before_any_work(bpy, scene, capf
     # the image has a red channel, but not the bake's size: refused, rather than baking somewhere else
     assert result is None and "image 'orm.png' is 8x8, not the bake's 24x24" in error, error
     assert "Floor_AO" not in bpy.data.images
-    # a file: core.imageio's check names it and the channels it has
+    # a file: core.files.imageio's check names it and the channels it has
     settings = BakeSettings(channel="A", into=str(rgb), resolution=8)
     assert "orm.png" in baking.channel_problem(settings, {}) and "A" in baking.channel_problem(settings, {})
     assert baking.channel_problem(dataclasses.replace(settings, channel="G"), {}) is None  # it has G, 8 x 8
@@ -493,7 +493,7 @@ def run_script(*args):
 
 
 def script_halves(blend_file, tmp_path, *args):
-    from core import imageio
+    from core.files import imageio
 
     out = tmp_path / "out"
     proc = run_script(blend_file, "--objects", "Floor", "--samples", "16", "--resolution", "24", "--margin", "0",
@@ -522,7 +522,7 @@ def test_the_script_takes_collections_only_local_ground_and_both_quantities(blen
     (left, right), metadata, out = script_halves(blend_file, tmp_path, "--quantity", "ao", "thickness", "--ground")
     assert sorted(p.name for p in out.iterdir()) == ["Floor_AO.exr", "Floor_Thickness.exr"]
     assert metadata["ground"] == "auto" and left == right == 0.0  # the floor lies on its ground: in contact
-    from core import imageio
+    from core.files import imageio
 
     assert imageio.read_image(str(out / "Floor_Thickness.exr"))[1]["map"] == "thickness"
 
@@ -632,7 +632,7 @@ def test_both_quantities_keep_an_error_map_each(bpy, scene, capfd, tmp_path):
         assert name in bpy.data.images, name
     assert sorted(p.name for p in tmp_path.iterdir()) == ["Slab_AO.exr", "Slab_AO_stderr.exr", "Slab_Thickness.exr",
                                                           "Slab_Thickness_stderr.exr"]
-    from core import imageio
+    from core.files import imageio
 
     assert imageio.read_image(str(tmp_path / "Slab_Thickness.exr"))[1]["map"] == "thickness"
     assert "map" not in imageio.read_image(str(tmp_path / "Slab_AO.exr"))[1]

@@ -37,7 +37,7 @@ def script(blend_file, *args):
 
 
 def orm_file(path):
-    from core import imageio
+    from core.files import imageio
 
     imageio.write_image(str(path), np.random.default_rng(4).random((16, 16, 4)).astype(np.float32), bits=8)
     return path.read_bytes()

@@ -51,7 +51,7 @@ def test_a_dangling_symlink_as_the_output_folder_is_refused_before_baking(blend_
 def test_denoise_with_one_sample_names_the_samples_to_raise(blend_file, tmp_path):
     p = script(blend_file, "--resolution", "16", "--samples", "1", "--denoise", "--output", tmp_path / "out")
     assert p.returncode == 2, p.stdout + p.stderr
-    assert "--samples must be at least 2 with Denoise" in p.stderr and "replicates" not in p.stderr, p.stderr
+    assert "--samples must be at least 2 with --denoise" in p.stderr and "replicates" not in p.stderr, p.stderr
     assert not (tmp_path / "out").exists()
 
 

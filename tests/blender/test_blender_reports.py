@@ -232,13 +232,13 @@ def test_the_panel_shows_what_the_bake_will_cost_and_warns_before_it_does_not_fi
     assert estimate.startswith("Estimate: about ") and ("MiB" in estimate or "GiB" in estimate)
     cost = baking.bake_cost(BakeSettings.from_properties(scene.mc_ao), [ground])
     # A 1024^2 plane (all of it covered) at 128 samples, alone in the scene, on the workers Processes 0
-    # picks for its 2 triangles: what core.cost says, the panel shows.
+    # picks for its 2 triangles: what core.execution.cost says, the panel shows.
     processes, threads = bake_processes(scene, (2, 0, 0))
-    assert cost == corelink.load("cost").estimate(1024 * 1024, 128, 2, image_texels=1024 * 1024,
+    assert cost == corelink.load("execution.cost").estimate(1024 * 1024, 128, 2, image_texels=1024 * 1024,
                                                    threads=threads, processes=processes)
     assert estimate == f"Estimate: {cost.describe()}"
     assert not any(icon == "ERROR" for _, icon in labels)
-    monkeypatch.setattr(corelink.load("workers"), "memory_limit", lambda: 1 << 20)  # 1 MiB free
+    monkeypatch.setattr(corelink.load("execution.workers"), "memory_limit", lambda: 1 << 20)  # 1 MiB free
     warned = [text for text, icon in draw_main_panel(bpy, SIDEBAR) if icon == "ERROR"]
     assert warned and warned[0].startswith("This bake needs about")
 
@@ -283,12 +283,12 @@ def occluder_triangles(job):
 
 def test_the_estimate_prices_the_occluders_the_bake_will_use_apart(bpy, scene):
     """The estimate counts the target's triangles and those of the occluders plan() gives it (Include and
-    Exclude, instances, Occludes Other Objects) apart, as core.cost prices them: excluding a heavy
-    occluder collection lowers its memory by core.cost's bytes for those triangles, in each process."""
+    Exclude, instances, Occludes Other Objects) apart, as core.execution.cost prices them: excluding a heavy
+    occluder collection lowers its memory by core.execution.cost's bytes for those triangles, in each process."""
     from mc_ao import baking, corelink
     from mc_ao.settings import BakeSettings
 
-    cost = corelink.load("cost")
+    cost = corelink.load("execution.cost")
     for collection in list(bpy.data.collections):
         bpy.data.collections.remove(collection)
     floor = add_plane(bpy, "Floor", size=4)
@@ -341,7 +341,7 @@ def test_the_estimate_prices_the_occluders_the_bake_will_use_apart(bpy, scene):
     assert shown_estimate(bpy) == f"Estimate: {fewer.describe()}"
     assert estimate_and_plan() == (fewer, 2 * 12)
 
-    # Processes 0: as many as the bake picks for these counts (core.workers.auto_workers).
+    # Processes 0: as many as the bake picks for these counts (core.execution.workers.auto_workers).
     s.processes = 0
     auto, occluders = estimate_and_plan()
     assert auto == expected(occluders)
@@ -354,7 +354,7 @@ def test_the_estimate_of_selected_to_active_prices_the_high_poly_apart(bpy, scen
     from mc_ao import baking, corelink, selected_to_active
     from mc_ao.settings import BakeSettings
 
-    cost = corelink.load("cost")
+    cost = corelink.load("execution.cost")
     low = add_plane(bpy, "Low", size=2)
     high = grid(bpy, "High", 49, (0, 0, 0.01))  # 2 x 50^2 triangles
     box = add_cube(bpy, "Box", size=0.5, location=(0, 0, 1))  # renders: an occluder of All Rendered
@@ -379,7 +379,7 @@ def bake_processes(scene, triangles):
     bake of ``triangles`` (target, occluders, high-poly)."""
     from mc_ao import corelink
 
-    workers = corelink.load("workers")
+    workers = corelink.load("execution.workers")
     threads = scene.mc_ao.threads or None
     return workers.processes_of("auto" if scene.mc_ao.processes == 0 else scene.mc_ao.processes, threads,
                                 types.SimpleNamespace(threads=threads or workers.cpu_count()), triangles)

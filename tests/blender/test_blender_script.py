@@ -28,7 +28,7 @@ def run_script(*args):
 
 
 def test_bakes_each_object_into_files(blend_file, tmp_path):
-    from core import imageio
+    from core.files import imageio
 
     out = tmp_path / "out"
     proc = run_script(blend_file, "--objects", "Ground", "Block", "--samples", "8", "--resolution", "16x8",

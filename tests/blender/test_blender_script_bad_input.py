@@ -162,7 +162,7 @@ CTRL_C_AFTER_FIRST_FILE = """
 import os, runpy, signal, sys
 signal.signal(signal.SIGINT, signal.default_int_handler)
 sys.path.insert(0, sys.argv[1])
-import core.imageio as imageio
+import core.files.imageio as imageio
 real = imageio.write_image
 def write_image(*args, **kwargs):
     written = real(*args, **kwargs)
@@ -199,7 +199,7 @@ def test_ctrl_c_between_an_objects_files_writes_all_of_them_and_says_so(blends, 
 KILLED_MID_WRITE = """
 import os, runpy, signal, sys
 sys.path.insert(0, sys.argv[1])
-from core import atomicfile
+from core.files import atomicfile
 def finish(self, verify=None):
     os.kill(os.getpid(), signal.SIGKILL)
 atomicfile.PendingFile.finish = finish
@@ -284,7 +284,7 @@ def test_an_unwritable_summary_path_exits_2_before_baking(blends, tmp_path):
 
 @pytest.mark.parametrize("distance", ["0", "inf"])
 def test_zero_and_inf_max_distance_are_unlimited(blends, tmp_path, distance):
-    from core import imageio
+    from core.files import imageio
 
     proc = run_script(blends["mixed"], "--objects", "Ground", "--output", tmp_path, "--max-distance", distance,
                       "--summary-json", tmp_path / "s.json", *FAST)
@@ -310,7 +310,7 @@ def test_a_bad_uv_map_fails_that_object_and_the_others_are_baked(blends, tmp_pat
     proc = run_script(blends["uvs"], "--objects", "Awry", "Ground", "--output", tmp_path / "out",
                       "--summary-json", summary, *FAST)
     assert proc.returncode == 1
-    # The core's words (core.mesh), named by the object: "mesh 'Awry': 2 triangles have UV coordinates
+    # The core's words (core.geometry.mesh), named by the object: "mesh 'Awry': 2 triangles have UV coordinates
     # beyond +-65536 (largest 1e+17, first at triangle 0); a UV map lies in [0, 1]: ..."
     assert re.search(r"^bake_ao: Awry: mesh 'Awry': .*UV coordinates.*1e\+17.*$", proc.stderr, re.M), proc.stderr
     assert "Traceback" not in proc.stderr
@@ -328,7 +328,7 @@ def test_a_bad_uv_map_fails_that_object_and_the_others_are_baked(blends, tmp_pat
 # -- the summary of a run that went well --------------------------------------------------------------
 
 def test_the_summary_records_the_settings_every_file_carries(blends, tmp_path):
-    from core import imageio
+    from core.files import imageio
     from core._version import OUTPUT_VERSION, __version__
 
     summary = tmp_path / "summary.json"

@@ -68,7 +68,7 @@ def run_script(*args):
 
 
 def read(path):
-    from core import imageio
+    from core.files import imageio
 
     ao, metadata = imageio.read_image(path)
     return np.squeeze(ao), metadata
@@ -167,10 +167,12 @@ def test_misses_are_reported(blends, tmp_path):
     (["--match-suffix", "_high", "_low", "--objects", "Lamp_low"], "Lamp_low has no high-poly 'Lamp_high' in the view layer"),
     (["--match-suffix", "_high", "_low", "--objects", "Box"], "Box does not end with the low-poly suffix '_low'"),
     (["--match-suffix", "_top", "_bottom"], "no pair of objects named <base>_top and <base>_bottom in the view layer"),
-    (["--selected-to-active", "--udim"], "--udim: --selected-to-active bakes AO into one image texture of the low-poly"),
-    (["--selected-to-active", "--bent-normals"], "--bent-normals: --selected-to-active bakes AO into one image"),
+    (["--selected-to-active", "--udim"],
+     "--selected-to-active bakes AO into one image texture of the low-poly: turn off --udim"),
+    (["--selected-to-active", "--bent-normals"], "--selected-to-active bakes AO into one image texture of the "
+                                                 "low-poly: turn off --bent-normals"),
     (["--match-suffix", "_high", "_low", "--target", "vertex-colors", "--format", "ply"],
-     "--target vertex-colors: --selected-to-active bakes AO into one image texture of the low-poly"),
+     "--selected-to-active bakes AO into one image texture of the low-poly: set --target to image-textures"),
 ])
 def test_bad_options_exit_2_before_baking(blends, tmp_path, args, message):
     proc = run_script(blends, "--output", tmp_path / "out", "--summary-json", tmp_path / "s.json", *FAST, *args)

@@ -39,7 +39,7 @@ def run_script(*args):
 
 
 def test_udim_and_bent_normals_write_one_file_per_tile_and_map(blend_file, tmp_path):
-    from core import imageio
+    from core.files import imageio
 
     out = tmp_path / "out"
     proc = run_script(blend_file, "--objects", "Ground", "--udim", "--bent-normals", "--format", "exr", "--stderr",
@@ -63,7 +63,7 @@ def test_udim_and_bent_normals_write_one_file_per_tile_and_map(blend_file, tmp_p
 
 
 def test_vertex_colors_write_ply_files_and_save_the_attribute(blend_file, tmp_path, bpy):
-    from core.plyio import read_ply
+    from core.files.plyio import read_ply
 
     out = tmp_path / "out"
     saved = tmp_path / "baked.blend"

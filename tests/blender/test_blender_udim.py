@@ -130,11 +130,11 @@ def test_a_tiled_image_of_another_size_or_a_plain_image_is_refused_by_name(bpy, 
 def test_esc_leaves_no_tiled_image_behind(bpy, udim_scene, monkeypatch):
     import threading
 
-    import core.udim
+    import core.targets.udim
 
     ground_over_two_tiles(bpy)
     held = threading.Event()
-    real = core.udim.bake_ao
+    real = core.targets.udim.bake_ao
 
     def holding(*args, progress=None, cancel=None, **kwargs):
         def step(fraction):
@@ -143,7 +143,7 @@ def test_esc_leaves_no_tiled_image_behind(bpy, udim_scene, monkeypatch):
             progress(fraction)
         return real(*args, progress=step, cancel=cancel, **kwargs)
 
-    monkeypatch.setattr(core.udim, "bake_ao", holding)
+    monkeypatch.setattr(core.targets.udim, "bake_ao", holding)
     session, reports = new_session()
     assert session.start(bpy.context, live=True)
     tick_until(bpy, session, held.is_set)
@@ -164,11 +164,11 @@ def test_save_to_file_writes_one_file_per_tile_and_links_the_image_to_them(bpy, 
     image = bpy.data.images["Ground_AO"]
     assert image.filepath == str(tmp_path / "out" / "Ground_AO.<UDIM>.exr")
     assert len(image.packed_files) == 0 and [t.number for t in image.tiles] == [1001, 1002]
-    import core.imageio
+    import core.files.imageio
 
     want = core_tiles(bpy, udim_scene)
     for number in (1001, 1002):
-        pixels, meta = core.imageio.read_image(tmp_path / "out" / f"Ground_AO.{number}.exr")
+        pixels, meta = core.files.imageio.read_image(tmp_path / "out" / f"Ground_AO.{number}.exr")
         np.testing.assert_array_equal(pixels, want.tiles[number].ao)
         assert meta["udim_tile"] == number and meta["udim"] is True and meta["object"] == "Ground"
     tiles = udim.tile_pixels(image)  # Blender reads the linked files back
@@ -202,7 +202,7 @@ def test_the_error_map_of_a_udim_bake_is_a_tiled_image_and_one_file_per_tile(bpy
     """Error Map with UDIM tiles: "<image>_stderr" is a tiled float image with the AO's tiles, each
     the core's standard error of that tile (two replicates); Save to File writes
     <image>_stderr.<tile>.exr beside the AO's tiles and links the image to them."""
-    import core.imageio
+    import core.files.imageio
     from mc_ao import udim
 
     ground_over_two_tiles(bpy)
@@ -221,7 +221,7 @@ def test_the_error_map_of_a_udim_bake_is_a_tiled_image_and_one_file_per_tile(bpy
     tiles = udim.tile_pixels(image)
     for number in (1001, 1002):
         # The files are half-float EXRs (the AO's EXR depth), and the image loads them.
-        pixels, meta = core.imageio.read_image(tmp_path / "out" / f"Ground_AO_stderr.{number}.exr")
+        pixels, meta = core.files.imageio.read_image(tmp_path / "out" / f"Ground_AO_stderr.{number}.exr")
         np.testing.assert_allclose(pixels, want.tiles[number].stderr, rtol=2.0 ** -11, atol=1e-7)
         np.testing.assert_array_equal(tiles[number][..., 0], pixels)
         assert meta["content"] == "stderr" and meta["udim_tile"] == number

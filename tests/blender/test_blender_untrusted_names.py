@@ -63,7 +63,7 @@ def hostile_blend(bpy, tmp_path_factory):
 
 
 def test_the_script_writes_every_file_inside_the_output_folder(hostile_blend, tmp_path):
-    from core import imageio
+    from core.files import imageio
 
     base, blend, names = hostile_blend
     work = tmp_path / "deep" / "er"

@@ -193,7 +193,7 @@ def test_esc_leaves_the_mesh_as_it_was_and_a_finished_bake_is_one_undo_step(bpy,
 
 
 def test_save_to_file_writes_the_ply_of_each_object(bpy, scene, tmp_path):
-    from core.plyio import read_ply
+    from core.files.plyio import read_ply
 
     obj = grid(bpy, subdivisions=3)
     add_cube(bpy, "Block", size=1.0, location=(0, 0, 0.7))

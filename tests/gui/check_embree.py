@@ -5,10 +5,10 @@ From the repository root, after ``python scripts/build_extension.py --platform l
     ../shared/tools/blender-gui.sh exec 'MC_AO_ZIP=$(ls dist/mc_ao-*-linux_x64.zip | head -1) \\
         blender -b --factory-startup --python tests/gui/check_embree.py'
 
-It installs the zip into a temporary user repository, then prints whether core.embree_upload's C-API
+It installs the zip into a temporary user repository, then prints whether core.tracing.embree_upload's C-API
 upload is on, the library it calls, every Embree mapped into Blender, and a small bake's mean AO
 against the exact value, and the Embree scene flags of the occlusion and contact scenes (robust mode
-off and on, core.tracing.OCCLUSION_ROBUST). Seen in Debian's Blender 4.3 (2026-12-02): Blender links the system
+off and on, core.tracing.tracer.OCCLUSION_ROBUST). Seen in Debian's Blender 4.3 (2026-12-02): Blender links the system
 libembree4 and its symbols are global, so embreex's extension calls it too, although its own copy
 (embreex.libs) is mapped as well; the upload finds the system library from the scene's vtable and
 uses the same one. With the bpy module it is embreex's own copy (tests/test_embree_upload.py).
@@ -29,9 +29,9 @@ repos.new(name="MC AO Embree check", module="mc_ao_embree_check", custom_directo
 print("install:", bpy.ops.extensions.package_install_files(filepath=os.environ["MC_AO_ZIP"],
                                                           repo="mc_ao_embree_check", enable_on_install=True))
 package = next(m for m in sys.modules if m.startswith("bl_ext.mc_ao_embree_check.") and m.count(".") == 2)
-upload = importlib.import_module(package + ".core.embree_upload")
+upload = importlib.import_module(package + ".core.tracing.embree_upload")
 core = importlib.import_module(package + ".core")
-analytic = importlib.import_module(package + ".core.analytic")
+analytic = importlib.import_module(package + ".core.montecarlo.analytic")
 
 on = upload.available()
 print("C-API upload:", on, upload.reason() or "", "library:", upload._library_path())
@@ -48,8 +48,8 @@ exact = analytic.texel_mean(lambda p: 1.0 - analytic.polygon_form_factor(p, lid_
 err = float(np.abs(r.ao - exact).max())
 z = float(np.max(np.abs(r.ao - exact) / np.maximum(r.stderr, 1e-9)))
 print(f"bake: largest |AO - exact| {err:.4f}, largest |z| {z:.2f}")
-# The occlusion scene without Embree's robust mode, the contact scene with it (core.tracing).
-tracing = importlib.import_module(package + ".core.tracing")
+# The occlusion scene without Embree's robust mode, the contact scene with it (core.tracing.tracer).
+tracing = importlib.import_module(package + ".core.tracing.tracer")
 tracer = tracing.Tracer([plane, lid])
 flags = (upload.scene_flags(tracer.scene), upload.scene_flags(tracer.contact_scene))
 print("scene flags (occlusion, contact):", flags)

@@ -1,0 +1,58 @@
+"""The thickness map: ambient occlusion with the normal inverted, occluded by the object itself alone.
+
+``bake_ao(..., quantity='thickness')`` bakes, per texel, the mean over its footprint of
+
+    T(x) = (1/pi) * integral over the hemisphere around -n of V(x, w) * cos(theta) dw
+
+where -n is the inverted shading normal (the hemisphere pointing into the mesh), theta the angle to
+it, and V = 1 where the ray from x along w meets no surface of the object within ``max_distance``,
+0 where it meets the far side. It is the AO estimator (:func:`core.engine.estimators.sample_terms`) on
+rays cast into the mesh: the same sampler, patterns, error map, adaptive sampling, targets (images,
+UDIM tiles, colour attributes, selected to active) and tile baker; only the kernel's direction
+stage flips (:class:`core.engine.kernel.TileContext` with ``inward``: origins pushed off the surface to the
+inside, directions negated, which for both warps (Malley's disk, the sphere point of the smooth
+form) gives the same distribution about -n as about n), and the tracer holds the object alone.
+
+Which definition, and how it reads. This follows Substance's "Thickness map from mesh" baker
+(Substance 3D Bakers documentation, https://substance3d.adobe.com/documentation/bake/
+thickness-map-from-mesh-172818642.html, and Substance Painter's "Thickness" page,
+https://docs.substance3d.com/spdoc/thickness-142213479.html): "very similar to the ambient occlusion
+baker, but it casts the rays in the opposite direction of the surface normal (so it's as if you were
+baking an AO with the normal inverted)", with black values the thin parts of the model and white
+values the thick parts, and a maximum occluder distance and a cosine or uniform ray distribution.
+So here: **black = thin** (most inward rays meet the far side within ``max_distance``), **white =
+thick** (rays travel ``max_distance`` inside without meeting it). Some tools and tutorials store
+the inverse (white = thin, for subsurface scattering masks); invert the image for those. For a slab
+of thickness d and cosine rays, T = (d / D)^2 for D = max_distance > d (a ray meets the far side
+when cos(theta) >= d / D, with cosine-weighted probability 1 - (d / D)^2); on a sphere of radius R,
+whose chord at angle theta is 2 R cos(theta), T = 1 - (D / 2R)^2 for D < 2R and 0 beyond.
+
+Rules, stated where the established bakers leave them open:
+
+- *Occluders*: the object itself only (with selected to active, the high-poly meshes). Other
+  objects, the ``occluders`` passed, contact with them and the ground plane play no part: thickness
+  is a property of the object. A ground with thickness is refused (it cannot apply), and so is
+  ``ignore_backfaces`` (every far side is met from behind: nothing would ever count) and bent normals.
+- *Open meshes*: a ray that leaves through an opening without meeting the far side within
+  ``max_distance`` counts as not meeting it (V = 1): a single-sided plane is white everywhere, a
+  cup's wall reads its own thickness only where its rays meet the far wall.
+- *Smooth-shading terminators*: a direction of the inverted shading hemisphere that points out
+  through the geometric surface (possible where interpolated normals bend away from the face)
+  counts as meeting the surface at distance 0 (V = 0, thin), without being traced: the mirror of AO's
+  rule for directions below the surface (:mod:`core.pipeline.bake`), and like it continuous across the
+  terminator.
+"""
+
+from ..base.errors import SettingsError
+
+QUANTITIES = ("ao", "thickness")
+
+
+def check_quantity(quantity):
+    """'ao' or 'thickness'; anything else raises SettingsError naming the setting."""
+    if not isinstance(quantity, str) or quantity not in QUANTITIES:
+        raise SettingsError(f"quantity must be one of {', '.join(repr(q) for q in QUANTITIES)}, got {quantity!r}")
+    return quantity
+
+
+__all__ = ["QUANTITIES", "check_quantity"]

@@ -1,0 +1,1 @@
+"""Who bakes the tiles: threads, worker processes, a Dask cluster; what a bake costs."""

@@ -1,0 +1,1 @@
+"""Files: images, PLY, atomic writes read back, safe names."""

@@ -1,0 +1,1 @@
+"""Selected to active: the high-poly input, the automatic extrusion, the matching start stage."""

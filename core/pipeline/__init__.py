@@ -1,0 +1,1 @@
+"""The pipeline every bake runs and the public calls."""

@@ -1,0 +1,1 @@
+"""After the rays: the denoiser and bent normals."""
