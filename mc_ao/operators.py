@@ -176,17 +176,25 @@ HANDLERS = {
 }
 
 
-def total_summary(results):
-    """One line for a bake of several objects: their number, time, samples per texel, ray throughput."""
+def total_summary(results, objects=None, quantities=("ao",)):
+    """One line for a bake of several maps: the objects' number (``objects``, default one a result:
+    an object baked for AO and thickness is one object, two results), time, samples per texel, ray
+    throughput; the quantities when more than AO."""
     seconds = sum(r.seconds for r in results)
     rays = sum(r.rays for r in results)
     covered = sum(int(r.mask.sum()) for r in results)
     per_texel = sum(float(r.samples[r.mask].sum()) for r in results) / covered if covered else 0.0
     rate = rays / seconds / 1e6 if seconds > 0 else float("nan")
+    n = len(results) if objects is None else objects
+    what = f" ({' and '.join(QUANTITY_WORDS.get(q, q) for q in quantities)})" if tuple(quantities) != ("ao",) else ""
     return (
-        f"AO bake: {len(results)} objects in {seconds:.2f} s, {per_texel:.0f} samples per texel, "
-        f"{rate:.2f} M rays/s"
+        f"AO bake: {n} object{'s' if n != 1 else ''}{what} in {seconds:.2f} s, {per_texel:.0f} samples per "
+        f"texel, {rate:.2f} M rays/s"
     )
+
+
+#: A quantity (core.bake_ao's) as a summary names it.
+QUANTITY_WORDS = {"ao": "AO", "thickness": "thickness"}
 
 
 def with_warnings(text, warnings, errors=0):
@@ -272,7 +280,8 @@ class BakeSession:
         w, h = settings.size
         # UDIM tiles and colour attributes are stored when their object's bake finishes.
         self.live = live and w * h <= LIVE_MAX_TEXELS and not (settings.vertex_colors or settings.use_udim)
-        self.errors = 0  # objects whose bake failed
+        self.errors = 0  # jobs whose bake failed
+        self.failed_objects = set()  # their objects
         self.file_errors = 0  # objects baked whose files were not saved
         self.finished = []
         self.results = []  # of the finished jobs, for the summary of a bake of several objects
@@ -346,6 +355,7 @@ class BakeSession:
         name = outcome.object_name
         if not outcome.baked:
             self.errors += 1
+            self.failed_objects.add(name)
             if outcome.trace:
                 print(f"mc_ao: the bake of {name} failed:\n{outcome.trace}", file=sys.stderr)
             self.report({"ERROR"}, f"{name}: {outcome.error}" + ("; see the console" if outcome.trace else ""))
@@ -453,8 +463,10 @@ class BakeSession:
             _redraw(context)  # restored images, and the panel without its "Baking" line
         except (AttributeError, ReferenceError, RuntimeError):
             pass
-        done = [self.run.jobs[i].object_name for i in self.finished]
-        total = len(self.run.jobs)
+        # Objects, not jobs: an object baked for AO and thickness is one object of two jobs.
+        done = [name for name in dict.fromkeys(self.run.jobs[i].object_name for i in self.finished)
+                if name not in self.failed_objects]
+        total = len({job.object_name for job in self.run.jobs})
         if cancelled:
             kept = f"kept the finished bakes of {', '.join(done)}; the other images" if done else "the images"
             files = ""
@@ -470,10 +482,10 @@ class BakeSession:
                     {"WARNING"},
                     f"AO bake: {len(done)} of {total} objects baked, the failed ones' images are as they were",
                 )
-            elif len(done) > 1:
+            elif len(self.results) > 1:
                 self.unsummarised = self.warnings
                 self.unsummarised_errors = self.file_errors
-                self._summarise(total_summary(self.results))
+                self._summarise(total_summary(self.results, len(done), self.settings.quantities))
             self.ended = {"FINISHED"} if done else {"CANCELLED"}
         # Blender keeps the last registered operators, and with them this session, for its redo
         # and history: keep nothing heavy (the jobs' geometry, the images' old pixels) past the end.

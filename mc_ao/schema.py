@@ -50,6 +50,9 @@ class Setting:
         the default. None: the option takes the choice as a value.
     sets : ``(name, identifier)``: giving this setting's option also sets that enum setting
         (``--ground-height H`` sets Ground to Height); its option's default is then None (not given).
+    cli_help : the option's help where ``help``'s words are the panel's (a click, a panel-only
+        setting); absent, the option's help is ``help`` with other settings' names as their options
+        (mc_ao.cli.options.script_help).
     """
 
     name: str
@@ -66,6 +69,7 @@ class Setting:
     ui: dict = field(default_factory=dict)
     flag: object = None
     sets: tuple = ()
+    cli_help: str = ""
 
     @property
     def option_key(self):
@@ -181,10 +185,15 @@ SETTINGS = (
     Setting("ground_height", "float", 0.0, "Height",
             "World Z of the ground plane when Ground is Height (the script's --ground-height H sets both)",
             lo=None, sets=("ground", "HEIGHT"),
+            cli_help="A ground plane at world Z = X, which occludes as an endless floor mesh would "
+                     "(instead of --ground's, at each object's lowest point)",
             ui={"soft_min": -100.0, "soft_max": 100.0, "subtype": "DISTANCE", "unit": "LENGTH"}),
     Setting("quantity", "flags", ("AO",), "Quantity",
             "What to bake: ambient occlusion into \"<object>_AO\", thickness into \"<object>_Thickness\" "
-            "(rays into the mesh up to Distance: black is thin, white thick), or both (shift-click)", items=(
+            "(rays into the mesh up to Distance: black is thin, white thick), or both (shift-click)",
+            cli_help="What to bake: ambient occlusion into \"<object>_AO\", thickness into \"<object>_Thickness\" "
+                     "(rays into the mesh up to --max-distance: black is thin, white thick), or both "
+                     "(--quantity ao thickness)", items=(
                 ("AO", "AO", "Ambient occlusion, into \"<object>_AO\""),
                 ("THICKNESS", "Thickness", "How thick the mesh is behind each point (black thin, white thick), "
                                            "into \"<object>_Thickness\"; only the object itself counts"))),
@@ -229,6 +238,9 @@ SETTINGS = (
             "Threads of each process that bakes; 0 uses the add-on preferences' default (all cores). With "
             "Processes 0, as many processes bake as the cores hold at this many threads each (on 2 cores, "
             "Threads 2 bakes in Blender's own process)",
+            cli_help="Threads of each process that bakes; 0: all cores. With --processes 0, as many processes "
+                     "bake as the cores hold at this many threads each (on 2 cores, --threads 2 bakes in this "
+                     "process)",
             lo=0, hi=MAX_THREADS, zero="every core", ui={"soft_max": 256}),
     Setting("processes", "int", 0, "Processes",
             "Worker processes the bake's tiles are baked in, each with its own copy of the scene, so that every "
@@ -248,6 +260,8 @@ SETTINGS = (
     Setting("attribute_name", "str", "AO", "Attribute",
             "Color attribute to bake into, created if missing (as a float color with 32-bit Float on, else a "
             "byte color); an existing one of another type or domain is refused", key="attribute",
+            cli_help="Color attribute to bake into, created if missing (of --attribute-type); an existing one "
+                     "of another type or domain is refused",
             targets=("vertex",)),
     Setting("attribute_domain", "enum", "POINT", "Domain", "Where the color attribute stores its values", items=(
         ("POINT", "Vertex", "One value per vertex: the mean of its face corners' values, as Cycles bakes it"),
@@ -267,6 +281,9 @@ SETTINGS = (
             "Also keep how far each texel's AO may be off (its standard error) in the image \"<image>_stderr\", "
             "and in <file>_stderr.exr with Save to File. The error holds for every sampler: texels then draw "
             "two independent sample sets, about 1.2 times the noise of one at the same samples",
+            cli_help="Also write how far each texel's AO may be off (its standard error) into "
+                     "<image>_stderr.exr. The error holds for every sampler: texels then draw two independent "
+                     "sample sets, about 1.2 times the noise of one at the same samples",
             key="stderr", targets=("image", "udim")),
     Setting("use_selected_to_active", "bool", False, "Selected to Active",
             "Bake the ambient occlusion of the selected objects onto the active object's UV map, into "

@@ -88,7 +88,7 @@ class Progress:
         if not self.quiet or record["status"] == "failed":
             text = f"[{self.done}/{self.total}] {escape(record['task'])}: {status_word(record)}"
             if record["status"] != "skipped":
-                text += f", {len(record['objects'])} objects, {record['seconds']:.1f} s"
+                text += f", {object_count(record)} objects, {record['seconds']:.1f} s"
             if record["error"]:
                 text += ": " + escape(record["error"].splitlines()[0])
             self.line(text)
@@ -100,6 +100,11 @@ class Progress:
         self.stream.flush()
 
 
+def object_count(record):
+    """The objects a task baked: an object baked for AO and thickness is one object of two entries."""
+    return len({o.get("object", i) for i, o in enumerate(record["objects"])})
+
+
 def _mrays(record):
     return record["rays"] / record["bake_seconds"] / 1e6 if record["bake_seconds"] > 0 else 0.0
 
@@ -109,7 +114,7 @@ def table(records):
     header = ("#", "asset", "status", "objects", "seconds", "Mrays/s", "files")
     rows = []
     for r in sorted(records, key=lambda r: r["index"]):
-        rows.append((str(r["index"]), escape(r["task"]), status_word(r), str(len(r["objects"])),
+        rows.append((str(r["index"]), escape(r["task"]), status_word(r), str(object_count(r)),
                      f"{r['seconds']:.1f}", f"{_mrays(r):.2f}" if r["status"] == "ok" else "-",
                      str(len(r["files"]))))
     widths = [max(len(row[i]) for row in rows + [header]) for i in range(len(header))]

@@ -27,3 +27,36 @@ def test_local_dask_cluster_is_quiet_beside_another_cluster():
         assert [str(w.message) for w in caught if "already in use" in str(w.message)] == []
     finally:
         holder.close()
+
+
+def test_script_help_speaks_of_options_not_of_the_panel():
+    """bake_ao.py --help names other settings by their options (--min-samples, not "Min Samples"), and
+    says nothing a script cannot do (shift-click) or set (32-bit Float, Save to File)."""
+    import re
+
+    from mc_ao import schema
+    from mc_ao.cli.options import make_parser, script_help
+
+    labels = {s.label for s in schema.SETTINGS}
+    for setting in schema.SETTINGS:
+        if setting.option is None:
+            continue
+        text = script_help(setting)
+        named = [label for label in labels if label != setting.label
+                 and re.search(rf"(?<![.] )(?<!^)(?<![\w-]){re.escape(label)}\b", text)]
+        assert named == [], f"{setting.option}: {named} in {text!r}"
+        assert "click" not in text.lower() and "panel" not in text.lower(), text
+    shown = " ".join(make_parser(with_blend=True).format_help().split())
+    assert "Min Samples" not in shown and "shift-click" not in shown and "Ground is Height" not in shown
+    assert "stop at --min-samples" in shown and "(--quantity ao thickness)" in shown
+
+
+def test_the_batch_counts_an_object_with_two_quantities_once():
+    """A task's summary lists AO and thickness of one object as two entries: the batch's line and
+    table say one object."""
+    from mc_ao_batch.report import object_count
+
+    record = {"objects": [{"object": "Suzanne", "files": ["Suzanne_AO.png"]},
+                          {"object": "Suzanne", "files": ["Suzanne_Thickness.png"]},
+                          {"object": "Ground", "files": ["Ground_AO.png"]}]}
+    assert object_count(record) == 2

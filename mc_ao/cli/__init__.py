@@ -73,6 +73,7 @@ from .. import baking, corelink, filecheck, filewriter, interrupts, service
 from ..choose import Pick, choose
 from ..extract import ExtractError
 from ..terminal import EscapingStream, escape
+from .blenderlog import blender_output
 from .blendsave import check_save
 from ..schema import BITS, FORMATS
 from .options import (UsageError, default_formats, early_summary_args, make_parser, run_by_blender, script_argv,
@@ -157,7 +158,8 @@ def run(argv, in_blender, summary):
         if not os.path.isfile(args.blend):
             raise UsageError(f"no such .blend file: {args.blend}")
         try:
-            bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
+            with blender_output():  # without Blender's "Read blend: ..." line
+                bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend), load_ui=False)
         except RuntimeError as exc:
             raise UsageError(f"cannot open {args.blend}: {exc}") from None
 

@@ -5,6 +5,7 @@ import os
 import sys
 
 from .. import corelink, filecheck
+from .blenderlog import blender_output
 from .options import UsageError
 
 
@@ -38,8 +39,9 @@ def save_blend(bpy, path):
         try:
             # An absolute path: Blender 4.2 resolves a relative one against $PWD, not the working directory,
             # and the two differ when a program starts the script in another folder.
-            result = bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(os.fspath(temp)), copy=True,
-                                                 check_existing=False)
+            with blender_output():  # without Blender's "Saved copy as" line, which names the temporary file
+                result = bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(os.fspath(temp)), copy=True,
+                                                     check_existing=False)
         finally:
             # The temporary file existed (empty) when Blender saved over it: Blender kept it as a
             # backup version, "<temp>1".

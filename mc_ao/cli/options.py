@@ -4,6 +4,7 @@ plain Python, the settings they give (every value and rule checked: mc_ao.settin
 UsageError, a refusal before anything is baked (exit status 2). No bpy."""
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -53,11 +54,26 @@ def parse_resolution(text):
     return parts[0], parts[-1]
 
 
+def script_help(setting):
+    """The option's help in the script's words: ``setting.cli_help``, else its tooltip with every other
+    setting's panel name (a capitalised label inside a sentence: "stop at Min Samples") as that
+    setting's option ("stop at --min-samples")."""
+    if setting.cli_help:
+        return setting.cli_help
+    text = setting.help
+    others = sorted((s for s in schema.SETTINGS if s is not setting and s.option is not None),
+                    key=lambda s: -len(s.label))  # "Min Samples" before "Samples"
+    for other in others:
+        # not at the start of the text or of a sentence, where a capital is only a capital
+        text = re.sub(rf"(?<![.] )(?<!^)(?<![\w-]){re.escape(other.label)}\b", other.option, text)
+    return text
+
+
 def _add_setting(parser, setting):
     """The option of one schema setting (mc_ao.schema): its type, choices, default and help."""
     option, dest = setting.option, setting.option_key
     default = setting.default
-    help_text = setting.help.replace("%", "%%")  # argparse formats help with %
+    help_text = script_help(setting).replace("%", "%%")  # argparse formats help with %
     if setting.kind == "bool" or setting.flag is not None:
         parser.add_argument(option, dest=dest, action="store_true", help=help_text)
         return

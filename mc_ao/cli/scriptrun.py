@@ -30,17 +30,30 @@ class ScriptRun:
                                 store_kinds={"color_attribute"}, blend=bpy.data.filepath, hold_interrupts=True,
                                 store_after_save=True)
         self.progress = Progress(enabled=not args.quiet)
-        self.rows, self.failures = [], 0
+        self.rows, self.failed = [], set()
+        # An object baked for two quantities (AO and thickness) is two jobs, one after the other, and
+        # one object: counted, announced and shown progressing once.
+        self.objects = list(dict.fromkeys(job.object_name for job in plan.jobs))
+        self.quantities = {name: [job.quantity for job in plan.jobs if job.object_name == name]
+                           for name in self.objects}
+
+    def first_of_object(self, i):
+        jobs = self.plan.jobs
+        return i == 0 or jobs[i].object_name != jobs[i - 1].object_name
 
     def begin(self, i):
         jobs = self.plan.jobs
-        if i < len(jobs):
-            name = escape(jobs[i].object_name)
-            print(f"bake_ao: [{i + 1}/{len(jobs)}] baking {name}", flush=True)
-            self.progress.begin(f"[{i + 1}/{len(jobs)}] {name}")
+        if i < len(jobs) and self.first_of_object(i):
+            name = jobs[i].object_name
+            label = f"[{self.objects.index(name) + 1}/{len(self.objects)}] {escape(name)}"
+            quantities = self.quantities[name]
+            what = f" ({' and '.join(table.QUANTITY_WORDS.get(q, q) for q in quantities)})" if len(quantities) > 1 else ""
+            print(f"bake_ao: {label.replace('] ', '] baking ', 1)}{what}", flush=True)
+            self.progress.begin(label)
 
     def on_progress(self, i, fraction):
-        self.progress.update(fraction)
+        if self.first_of_object(i):  # the object's first job bakes every quantity of it (core.bake_maps)
+            self.progress.update(fraction)
 
     def on_outcome(self, outcome):
         self.progress.end()
@@ -59,7 +72,7 @@ class ScriptRun:
             if outcome.trace:
                 error += "; the traceback is above"
             print(f"bake_ao: {name}: {escape(error)}", file=sys.stderr)
-            self.failures += 1
+            self.failed.add(job.object_name)
             if result is None:
                 seconds = time.monotonic() - self.run.started.get(outcome.index, time.monotonic())
                 self.summary.add(job.object_name, "failed", seconds, error=error, **s2a_record(job))
@@ -71,7 +84,9 @@ class ScriptRun:
             per_texel, _ = baking.throughput(result)
             self.summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, outcome.files,
                              **s2a_record(job, result))
-            self.rows.append(table.row(name, result, settings, outcome.files))
+            label = name if len(self.quantities[job.object_name]) == 1 else (
+                f"{name}: {table.QUANTITY_WORDS.get(job.quantity, job.quantity)}")
+            self.rows.append(table.row(label, result, settings, outcome.files))
         self.begin(outcome.index + 1)
 
 
@@ -93,13 +108,15 @@ def bake(plan, args, summary):
             summary.add(outcome.object_name, "failed", error=f"not baked: {why}")
         raise
     run.stop()
-    rows, failures = handler.rows, handler.failures
-    if getattr(args, "save", None) is not None and rows:
-        if not save_baked(args.save, settings, [r[0] for r in rows], summary):
+    rows, objects = handler.rows, handler.objects
+    baked = [name for name in objects if name not in handler.failed]
+    failures = len(objects) - len(baked)
+    if getattr(args, "save", None) is not None and baked:
+        if not save_baked(args.save, settings, [escape(name) for name in baked], summary):
             failures += 1
     table.show(rows)
-    print(f"bake_ao: baked {len(rows)} of {len(plan.jobs)} objects" + (f", {failures} failed" if failures else ""))
+    print(f"bake_ao: baked {len(baked)} of {len(objects)} objects" + (f", {failures} failed" if failures else ""))
     if failures and summary.error is None:
-        summary.error = f"{failures} of {len(plan.jobs)} objects failed"
+        summary.error = f"{failures} of {len(objects)} objects failed"
     return 1 if failures else 0
 

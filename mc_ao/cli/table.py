@@ -5,6 +5,8 @@ from .. import baking
 from ..terminal import escape
 
 HEADER = ("object", "size", "seconds", "samples/texel", "Mrays/s", "files")
+#: A job's quantity (core.bake_ao's) as a row or a line names it.
+QUANTITY_WORDS = {"ao": "AO", "thickness": "thickness"}
 
 
 def row(name, result, settings, files):
