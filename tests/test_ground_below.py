@@ -54,3 +54,21 @@ def test_a_floor_under_the_ground_facing_up_has_the_truncated_cone(depth):
     assert abs(_total_z(r, (depth / D) ** 2)) < normal_quantile(1 - SUITE_ALPHA / 8)
     assert np.all(bake_ao(plane(z=-depth), ground=0.0, ignore_backfaces=True, **kw).ao == 1.0)
     assert np.all(bake_ao(plane(z=-depth, flip=True), ground=0.0, **kw).ao == 1.0)  # facing down: nothing below
+
+
+@pytest.mark.parametrize("height", [1e30, 1e39, 1e300])
+@pytest.mark.parametrize("ignore_backfaces", [False, True])
+def test_a_ground_at_any_finite_height_occludes_as_an_endless_floor(height, ignore_backfaces):
+    """Without a maximum distance the ground is an endless plane at any height: below a floor facing down,
+    every ray meets its front; above a floor facing up, every ray meets its back (passes with Ignore
+    Backfaces). Embree's rays stop at a float32 length; the ground did not occlude beyond it (a far
+    height baked as without a ground)."""
+    kw = dict(resolution=8, samples=16, margin=0, ignore_backfaces=ignore_backfaces)
+    assert np.all(bake_ao(plane(flip=True), ground=-height, **kw).ao == 0.0)
+    assert np.all(bake_ao(plane(), ground=-height, **kw).ao == 1.0)
+    assert np.all(bake_ao(plane(), ground=height, **kw).ao == (1.0 if ignore_backfaces else 0.0))
+    # The same in a bake that needs hit distances (a back face passed through: the visibility path).
+    kw["ignore_backfaces"] = True
+    assert np.all(bake_ao(plane(flip=True), ground=-height, **kw).ao == 0.0)
+    # With a maximum distance it is out of reach.
+    assert np.all(bake_ao(plane(flip=True), ground=-height, max_distance=10.0, **kw).ao == 1.0)

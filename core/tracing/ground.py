@@ -61,12 +61,18 @@ def frame_height(height, centre_z, unit):
     return None if height is None else (float(height) - float(centre_z)) / float(unit)
 
 
-def crossing(oz, dz, tfar, h, two_sided):
+def crossing(oz, dz, tfar, h, two_sided, unlimited=False):
     """Per ray, whether its segment from ``oz`` (origin's z) over ``tfar`` times its direction's z
     ``dz`` crosses z = h: from above (starts at or above, ends below), or with ``two_sided`` also
-    from below. Rays of length 0 (not traced) cross nothing."""
+    from below. Rays of length 0 (not traced) cross nothing. ``unlimited``: the bake has no
+    maximum distance, so a traced ray is endless (Embree's rays stop at a float32 length; a ground
+    farther than that still occludes every ray that heads for it, as an endless floor would)."""
     oz = np.asarray(oz, np.float64)
-    ez = oz + np.asarray(tfar, np.float64) * np.asarray(dz, np.float64)
+    tfar = np.asarray(tfar, np.float64)
+    if unlimited:
+        tfar = np.where(tfar > 0, np.inf, 0.0)
+    with np.errstate(invalid="ignore"):  # inf * 0: a level ray stays level
+        ez = oz + np.nan_to_num(tfar * np.asarray(dz, np.float64), nan=0.0)
     out = (oz >= h) & (ez < h)
     if two_sided:
         out |= (oz < h) & (ez > h)
@@ -74,8 +80,8 @@ def crossing(oz, dz, tfar, h, two_sided):
 
 
 def distance(oz, uz, reach, h, two_sided):
-    """Per ray (unit direction's z ``uz``, length ``reach``), the distance along it to z = h where it
-    crosses it (see :func:`crossing`), else inf."""
+    """Per ray (unit direction's z ``uz``, length ``reach``: inf for an endless ray), the distance
+    along it to z = h where it crosses it (see :func:`crossing`), else inf."""
     oz = np.asarray(oz, np.float64)
     uz = np.asarray(uz, np.float64)
     down = (oz >= h) & (uz < 0)

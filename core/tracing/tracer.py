@@ -12,6 +12,7 @@ absolute precision with both).
 
 import copy
 import functools
+import math
 import time
 from dataclasses import dataclass
 
@@ -209,7 +210,8 @@ class Tracer:
             return np.zeros(len(tfar), bool)
         if self.ground is None:
             return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
-        out = _ground.crossing(origins[:, 2], directions[:, 2], tfar, self.ground, True)
+        out = _ground.crossing(origins[:, 2], directions[:, 2], tfar, self.ground, True,
+                               unlimited=not math.isfinite(self.max_distance))
         rest = np.flatnonzero(~out)
         if len(rest) == len(out):
             return self.scene.run(origins, directions, query="OCCLUDED", dists=tfar) >= 0
@@ -272,7 +274,8 @@ class Tracer:
         floor = None
         if self.ground is not None:
             # Embree looks no farther than the ground; a ray that meets nothing before it meets the ground.
-            floor = _ground.distance(org[:, 2], dirs[:, 2], reach, self.ground, not self.ignore_backfaces)
+            endless = np.where(reach > 0, np.inf, 0.0) if not math.isfinite(self.max_distance) else reach
+            floor = _ground.distance(org[:, 2], dirs[:, 2], endless, self.ground, not self.ignore_backfaces)
             reach = np.minimum(reach, floor)
             remaining = reach.astype(np.float32)
             met = np.zeros(n, bool)
