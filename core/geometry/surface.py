@@ -103,24 +103,31 @@ class SurfaceTable:
         gradients) stay a slice's whatever the mesh, and the values are the same bits as in one go."""
         xy = uvtris.corners32
         T = len(xy)
-        FN = mesh.face_normals
-        maps = {name: tuple(np.empty((T, 3), DTYPE) for _ in range(3)) for name in ("P", "N")}
-        FN32 = FN.astype(DTYPE)
-        if not mesh.has_corner_normals:
-            # Flat: the corner normals are the face normal, N0 is the table's FN itself (not a copy).
-            maps["N"] = (None,) + maps["N"][1:]
+        maps = {"P": tuple(np.empty((T, 3), DTYPE) for _ in range(3))}
+        FN32 = np.empty((T, 3), DTYPE)
+        flat = not mesh.has_corner_normals
+        if flat:
+            # Flat: the corner normals are the face normal, N0 is the table's FN itself (not a copy),
+            # and the normal does not change across a triangle: Nx = Ny = 0, one read-only row of
+            # zeros seen as (T, 3) (24 bytes a triangle not held).
+            zeros = np.broadcast_to(np.zeros(3, DTYPE), (T, 3))
+            normal = (FN32, zeros, zeros)
+        else:
+            maps["N"] = normal = tuple(np.empty((T, 3), DTYPE) for _ in range(3))
         smooth = np.empty(T, bool)
         for lo in range(0, T, SLICE):
             hi = min(lo + SLICE, T)
             tri = np.arange(lo, hi)
-            N = mesh.corner_normals(tri)
-            smooth[lo:hi] = _smooth(mesh, N, FN[lo:hi])
+            # The face normals of the slice (row by row: the mesh keeps none it did not have).
+            FN = mesh.face_geometry_of(tri)[1]
+            FN32[lo:hi] = FN
+            N = None if flat else mesh.corner_normals(tri)
+            smooth[lo:hi] = False if flat else _smooth(mesh, N, FN)
             cls._slice(uvtris.corners_of(slice(lo, hi)), uvtris.valid[lo:hi],
                        corner_positions(mesh.positions, mesh.triangles[lo:hi]), N, maps, lo, hi)
         # origin: the first corners, a view of the corners the UV triangles keep (not a copy).
         return cls(origin=xy[:, 0], P0=maps["P"][0], corners_xy=xy, Px=maps["P"][1], Py=maps["P"][2],
-                   N0=FN32 if maps["N"][0] is None else maps["N"][0], Nx=maps["N"][1], Ny=maps["N"][2], FN=FN32,
-                   smooth=smooth,
+                   N0=normal[0], Nx=normal[1], Ny=normal[2], FN=FN32, smooth=smooth,
                    positions=mesh.positions, triangles=mesh.triangles)
 
     @staticmethod
@@ -137,6 +144,8 @@ class SurfaceTable:
         d1x, d1y = e2y / safe, -e2x / safe   # d b1 / d(x, y)
         d2x, d2y = -e1y / safe, e1x / safe   # d b2 / d(x, y)
         for name, V in (("P", P), ("N", N)):
+            if name not in maps:
+                continue  # a flat mesh's normal maps are constant (SurfaceTable.build)
             v0_out, vx_out, vy_out = maps[name]
             if v0_out is not None:
                 v0_out[lo:hi] = V[:, 0]
