@@ -10,12 +10,12 @@ import math
 import numpy as np
 import pytest
 
-import core.kernel as kernel_mod
+import core.engine.kernel as kernel_mod
 from core import Mesh, bake_ao
-from core.estimators import TexelEstimates
-from core.raster import prepare
-from core.stats import normal_quantile
-from core.surface import SurfaceTable
+from core.engine.estimators import TexelEstimates
+from core.geometry.raster import prepare
+from core.montecarlo.stats import normal_quantile
+from core.geometry.surface import SurfaceTable
 from scenes import plane, polygon_form_factor, texel_mean
 
 LID = np.array([[0.25, 0.25, 0.3], [0.75, 0.25, 0.3], [0.75, 0.75, 0.3], [0.25, 0.75, 0.3]])
