@@ -414,9 +414,14 @@ def test_rasteriser_covers_exactly_the_uv_area():
     W = H = 16
     tris = prepare(m, W, H)
     frag = rasterize_tile(tris, np.flatnonzero(tris.valid), W, H, 0, 0, W, H)
-    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum() * W * H
+    # The area of the corners the UV triangles keep (float32, as Blender's UVs are), in texels.
+    xy = tris.corners
+    e1, e2 = xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]
+    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
     assert frag.coverage.sum() == pytest.approx(uv_area, rel=1e-9)
+    assert uv_area == pytest.approx(0.5 * np.abs((uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
+                                                 - (uv[:, 1, 1] - uv[:, 0, 1]) * (uv[:, 2, 0] - uv[:, 0, 0])).sum()
+                                    * W * H, rel=1e-6)
     # Every sub-triangle lies inside its texel square.
     tex = frag.texels[frag.sub_texel]
     x0, y0 = tex % W, tex // W

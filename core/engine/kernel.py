@@ -95,7 +95,10 @@ def triangle_matrices(table, tris, offset, curved_all=False, inward=False):
     ``inward``: ray origins pushed off the surface to the side opposite the shading normal (rays
     into the mesh, :mod:`core.engine.thickness`)."""
     def take(a, rows):
-        return np.take(a, rows, axis=0, mode="clip")  # numpy's a[rows] is 2-3 times slower on (T, 3[, 3]) arrays
+        # numpy's a[rows] is 2-3 times slower on (T, 3[, 3]) arrays; the table's float32 rows are
+        # computed with in float64 (the matrices are rounded to float32 once, at the end).
+        out = np.take(a, rows, axis=0, mode="clip")
+        return out.astype(np.float64) if out.dtype.kind == "f" else out
 
     smooth = take(table.smooth, tris) | bool(curved_all)
     n = len(tris)

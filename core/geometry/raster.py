@@ -59,7 +59,9 @@ SLICE = 1 << 18
 class UVTriangles:
     """Per-triangle data of the target in texel space, shared by every tile.
 
-    corners : (T, 3, 2) corners in texel coordinates, in the mesh's order; valid : (T,) bool, positive
+    corners32 : (T, 3, 2) float32 corners in texel coordinates, in the mesh's order (float32 as
+    Blender's UVs are: half the bytes a triangle, every worker holds them; :meth:`corners_of` and
+    :attr:`corners` read them as float64, the precision every computation on them takes); valid : (T,) bool, positive
     UV area and area in space (others are skipped); cw : (T,) bool, corners clockwise in texel space;
     degenerate : number of triangles with zero UV area (skipped); degenerate_space : number of
     triangles with UV area but zero area in space (skipped); outside : number of valid triangles
@@ -70,16 +72,28 @@ class UVTriangles:
     :attr:`xy` or :attr:`edges` is asked for (then kept); the same bits either way.
     """
 
-    def __init__(self, corners, valid, cw, degenerate, degenerate_space, outside):
-        self.corners, self.valid, self.cw = corners, valid, cw
+    def __init__(self, corners32, valid, cw, degenerate, degenerate_space, outside):
+        self.corners32 = np.asarray(corners32, np.float32)
+        self.valid, self.cw = valid, cw
         self.degenerate, self.degenerate_space, self.outside = degenerate, degenerate_space, outside
+
+    @property
+    def corners(self):
+        """(T, 3, 2) float64 corners of every triangle (a copy: for passes over the whole mesh)."""
+        return self.corners32.astype(np.float64)
+
+    def corners_of(self, tri):
+        """(n, 3, 2) float64 corners of triangles ``tri`` (indices, or a slice), in the mesh's order."""
+        if isinstance(tri, slice):
+            return self.corners32[tri].astype(np.float64)
+        return np.take(self.corners32, tri, axis=0).astype(np.float64)
 
     def xy_of(self, tri):
         """(n, 3, 2) corners of triangles ``tri`` (indices), counter-clockwise: every edge function is
         positive inside."""
         if "xy" in self.__dict__:
             return self.xy[tri]
-        xy = np.take(self.corners, tri, axis=0)
+        xy = self.corners_of(tri)
         cw = self.cw[tri]
         if cw.any():
             xy[cw, 1], xy[cw, 2] = xy[cw, 2], xy[cw, 1]
@@ -105,7 +119,7 @@ class UVTriangles:
     @functools.cached_property
     def xy(self):
         """(T, 3, 2) :meth:`xy_of` every triangle (kept once asked for)."""
-        out = np.empty(self.corners.shape)
+        out = np.empty(self.corners32.shape)
         for lo in range(0, len(out), SLICE):
             out[lo:lo + SLICE] = self.xy_of(np.arange(lo, min(lo + SLICE, len(out))))
         return out
@@ -113,7 +127,7 @@ class UVTriangles:
     @functools.cached_property
     def edges(self):
         """(T, 3, 3) :meth:`edges_of` every triangle (kept once asked for)."""
-        out = np.empty(self.corners.shape[:2] + (3,))
+        out = np.empty(self.corners32.shape[:2] + (3,))
         for lo in range(0, len(out), SLICE):
             out[lo:lo + SLICE] = self.edges_of(np.arange(lo, min(lo + SLICE, len(out))))
         return out
@@ -129,16 +143,19 @@ def prepare(mesh, width, height):
     """
     uv = mesh.uvs
     T = len(uv)
-    xy = np.empty((T, 3, 2))
+    xy32 = np.empty((T, 3, 2), np.float32)
     valid = np.empty(T, bool)
     cw = np.empty(T, bool)
     flat_valid = outside = 0
     for lo in range(0, T, SLICE):
         hi = min(lo + SLICE, T)
-        part = xy[lo:hi]
+        part = np.empty((hi - lo, 3, 2))
         xf, uf = part.reshape(-1, 2), uv[lo:hi].reshape(-1, 2)
         np.multiply(uf[:, 0], np.float64(width), out=xf[:, 0])
         np.multiply(uf[:, 1], np.float64(height), out=xf[:, 1])
+        # Kept in float32; everything below (and every later use) reads the kept values, in float64.
+        xy32[lo:hi] = part
+        part[...] = xy32[lo:hi]
         e1x, e1y = part[:, 1, 0] - part[:, 0, 0], part[:, 1, 1] - part[:, 0, 1]
         e2x, e2y = part[:, 2, 0] - part[:, 0, 0], part[:, 2, 1] - part[:, 0, 1]
         det = e1x * e2y - e1y * e2x  # twice the signed UV area, in texels
@@ -158,7 +175,7 @@ def prepare(mesh, width, height):
         for j in range(2, 6):
             any_out |= of[:, j]
         outside += int((v & any_out).sum())
-    return UVTriangles(xy, valid, cw, degenerate=int((~valid).sum()) - flat_valid, degenerate_space=flat_valid,
+    return UVTriangles(xy32, valid, cw, degenerate=int((~valid).sum()) - flat_valid, degenerate_space=flat_valid,
                        outside=outside)
 
 
@@ -195,7 +212,7 @@ def bin_triangles(tris, width, height, tile):
     for s0 in range(0, len(valid), SLICE):
         idx = valid[s0:s0 + SLICE]
         # The corners in the mesh's order: the same bounds as counter-clockwise (min and max are exact).
-        lo, hi = _corner_bounds(np.take(tris.corners, idx, axis=0))
+        lo, hi = _corner_bounds(tris.corners_of(idx))
         lo = np.maximum(np.floor(lo).astype(np.int64), 0)
         hi = np.ceil(hi).astype(np.int64) - 1  # last texel the bbox reaches
         # Column by column (numpy is slow over an inner axis of 2).

@@ -42,6 +42,8 @@ CANDIDATE_PAD = 4
 #: A padding candidate's edge functions: below any real one's at any point of the texel.
 NEVER = np.float32(3e38)
 _TAG_ALLOCATE = 21
+#: The surface table's and the UV triangles' storage type (:class:`SurfaceTable`).
+DTYPE = np.float32
 
 
 def _smooth(mesh, N, FN):
@@ -62,7 +64,12 @@ class SurfaceTable:
     """Affine maps from texel space (x, y) to the surface, per triangle, anchored at its first corner.
 
     position(x, y) = P0 + (x - ox) Px + (y - oy) Py; normal(x, y) = N0 + (x - ox) Nx + (y - oy) Ny
-    (the interpolated corner normals, unnormalised); FN the unit face normal. float64.
+    (the interpolated corner normals, unnormalised); FN the unit face normal.
+
+    Kept in float32 (:data:`DTYPE`), as Blender's and Embree's geometry is: half the bytes a triangle
+    in every process that bakes. Each map is computed in float64 and rounded once; whoever computes
+    with the table reads its rows in float64 (:meth:`take`), so no arithmetic runs in float32 by
+    accident (numpy 1.26 and 2.x promote float32 arrays with float64 scalars differently).
     """
 
     origin: np.ndarray
@@ -79,6 +86,10 @@ class SurfaceTable:
     positions: np.ndarray = None   # the mesh's (V, 3) positions and (T, 3) triangles, where ``corners``
     triangles: np.ndarray = None   # is None (72 bytes a triangle not held)
 
+    def take(self, field, tri):
+        """Rows ``tri`` of the table's ``field`` ('P0', 'Px', ..., 'FN', 'origin'), in float64."""
+        return np.take(getattr(self, field), tri, axis=0, mode="clip").astype(np.float64)
+
     def corners_of(self, tri):
         """(n, 3, 3) corner positions of triangles ``tri``."""
         if self.corners is not None:
@@ -90,31 +101,40 @@ class SurfaceTable:
         """The table of ``mesh`` over its UV triangles ``uvtris`` (:func:`core.geometry.raster.prepare`), built
         :data:`SLICE` triangles at a time: the temporaries (the corner normals, the barycentric
         gradients) stay a slice's whatever the mesh, and the values are the same bits as in one go."""
-        xy = uvtris.corners
+        xy = uvtris.corners32
         T = len(xy)
-        FN = mesh.face_normals
-        maps = {name: (np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 3))) for name in ("P", "N")}
-        if not mesh.has_corner_normals:
-            # Flat: the corner normals are the face normal, N0 is FN itself (its bits, not a copy).
-            maps["N"] = (None,) + maps["N"][1:]
+        maps = {"P": tuple(np.empty((T, 3), DTYPE) for _ in range(3))}
+        FN32 = np.empty((T, 3), DTYPE)
+        flat = not mesh.has_corner_normals
+        if flat:
+            # Flat: the corner normals are the face normal, N0 is the table's FN itself (not a copy),
+            # and the normal does not change across a triangle: Nx = Ny = 0, one read-only row of
+            # zeros seen as (T, 3) (24 bytes a triangle not held).
+            zeros = np.broadcast_to(np.zeros(3, DTYPE), (T, 3))
+            normal = (FN32, zeros, zeros)
+        else:
+            maps["N"] = normal = tuple(np.empty((T, 3), DTYPE) for _ in range(3))
         smooth = np.empty(T, bool)
         for lo in range(0, T, SLICE):
             hi = min(lo + SLICE, T)
             tri = np.arange(lo, hi)
-            N = mesh.corner_normals(tri)
-            smooth[lo:hi] = _smooth(mesh, N, FN[lo:hi])
-            cls._slice(xy[lo:hi], uvtris.valid[lo:hi], corner_positions(mesh.positions, mesh.triangles[lo:hi]), N,
-                       maps, lo, hi)
+            # The face normals of the slice (row by row: the mesh keeps none it did not have).
+            FN = mesh.face_geometry_of(tri)[1]
+            FN32[lo:hi] = FN
+            N = None if flat else mesh.corner_normals(tri)
+            smooth[lo:hi] = False if flat else _smooth(mesh, N, FN)
+            cls._slice(uvtris.corners_of(slice(lo, hi)), uvtris.valid[lo:hi],
+                       corner_positions(mesh.positions, mesh.triangles[lo:hi]), N, maps, lo, hi)
         # origin: the first corners, a view of the corners the UV triangles keep (not a copy).
         return cls(origin=xy[:, 0], P0=maps["P"][0], corners_xy=xy, Px=maps["P"][1], Py=maps["P"][2],
-                   N0=FN if maps["N"][0] is None else maps["N"][0], Nx=maps["N"][1], Ny=maps["N"][2], FN=FN,
-                   smooth=smooth,
+                   N0=normal[0], Nx=normal[1], Ny=normal[2], FN=FN32, smooth=smooth,
                    positions=mesh.positions, triangles=mesh.triangles)
 
     @staticmethod
     def _slice(xy, valid, P, N, maps, lo, hi):
         # Column by column (see core.geometry.mesh.face_geometry: numpy is slow over an inner axis of 2 or 3);
-        # the same operations as the (T, 2) and (T, 3) forms, so the same bits.
+        # the same operations as the (T, 2) and (T, 3) forms, so the same bits. In float64 (``xy``,
+        # ``P``, ``N`` are), each map rounded once into the float32 table.
         x0, y0 = xy[:, 0, 0], xy[:, 0, 1]
         e1x, e1y = xy[:, 1, 0] - x0, xy[:, 1, 1] - y0
         e2x, e2y = xy[:, 2, 0] - x0, xy[:, 2, 1] - y0
@@ -124,10 +144,12 @@ class SurfaceTable:
         d1x, d1y = e2y / safe, -e2x / safe   # d b1 / d(x, y)
         d2x, d2y = -e1y / safe, e1x / safe   # d b2 / d(x, y)
         for name, V in (("P", P), ("N", N)):
+            if name not in maps:
+                continue  # a flat mesh's normal maps are constant (SurfaceTable.build)
             v0_out, vx_out, vy_out = maps[name]
-            vx, vy = vx_out[lo:hi], vy_out[lo:hi]
             if v0_out is not None:
                 v0_out[lo:hi] = V[:, 0]
+            vx, vy = np.empty((hi - lo, 3)), np.empty((hi - lo, 3))
             for c in range(3):
                 v0 = V[:, 0, c]
                 dv1, dv2 = V[:, 1, c] - v0, V[:, 2, c] - v0
@@ -135,6 +157,8 @@ class SurfaceTable:
                 vx[:, c] += d2x * dv2
                 np.multiply(d1y, dv1, out=vy[:, c])
                 vy[:, c] += d2y * dv2
+            vx_out[lo:hi] = vx
+            vy_out[lo:hi] = vy
 
     def position(self, tri, x, y):
         return self._affine(tri, x, y, self.P0, self.Px, self.Py)
@@ -144,10 +168,10 @@ class SurfaceTable:
 
     def _affine(self, tri, x, y, v0, vx, vy):
         # np.take: numpy's fancy indexing of these (T, 3) arrays is 2-3 times slower.
-        origin = np.take(self.origin, tri, axis=0, mode="clip")  # triangle ids of the table: in range
-        dx, dy = x - origin[:, 0], y - origin[:, 1]
-        g0, gx, gy = (np.take(v, tri, axis=0, mode="clip") for v in (v0, vx, vy))
-        out = np.empty(g0.shape, np.result_type(g0, dx))
+        origin = np.take(self.origin, tri, axis=0, mode="clip").astype(np.float64)  # ids of the table: in range
+        dx, dy = np.asarray(x, np.float64) - origin[:, 0], np.asarray(y, np.float64) - origin[:, 1]
+        g0, gx, gy = (np.take(v, tri, axis=0, mode="clip").astype(np.float64) for v in (v0, vx, vy))
+        out = np.empty(g0.shape)
         for c in range(g0.shape[1]):  # column by column (numpy is slow over an inner axis of 3)
             np.multiply(dx, gx[:, c], out=out[:, c])
             out[:, c] += g0[:, c]
@@ -192,13 +216,14 @@ def point_table(p, n, gn, corners, smooth=None):
     high-poly points a selected-to-active bake matched). ``smooth``: None (a point whose normals
     differ takes the smooth form), or one bool for all."""
     m = len(p)
-    zeros = np.zeros((m, 3))
+    zeros = np.zeros((m, 3), DTYPE)
     if smooth is None:
         smooth = np.any(np.abs(n - gn) > 1e-7, axis=1)
     else:
         smooth = np.full(m, bool(smooth))
-    return SurfaceTable(origin=np.zeros((m, 2)), P0=p, Px=zeros, Py=zeros, N0=n, Nx=zeros, Ny=zeros, FN=gn,
-                        corners=corners, smooth=smooth, corners_xy=np.zeros((m, 3, 2)))
+    return SurfaceTable(origin=np.zeros((m, 2), DTYPE), P0=np.asarray(p, DTYPE), Px=zeros, Py=zeros,
+                        N0=np.asarray(n, DTYPE), Nx=zeros, Ny=zeros, FN=np.asarray(gn, DTYPE),
+                        corners=corners, smooth=smooth, corners_xy=np.zeros((m, 3, 2), DTYPE))
 
 
 def point_units(tri, texel):
@@ -244,8 +269,9 @@ def build_units(frag, table, width):
     # Squares: a translation to the texel's corner.
     kind[at] = SQUARE
     tri[at] = tri_s
-    planes[0, at] = (tex % width) - np.take(table.origin[:, 0], tri_s)  # np.take: origin[tri_s, 0] costs twice
-    planes[3, at] = (tex // width) - np.take(table.origin[:, 1], tri_s)
+    origin_x, origin_y = table.origin[:, 0], table.origin[:, 1]  # float32 views; read in float64
+    planes[0, at] = (tex % width) - np.take(origin_x, tri_s).astype(np.float64)  # np.take: origin[tri_s, 0] costs twice
+    planes[3, at] = (tex // width) - np.take(origin_y, tri_s).astype(np.float64)
     # Located texels: a square each; its candidates' translations.
     loc = np.flatnonzero(full == _LOCATED)
     loc_start = frag.loc_start if frag.loc_start is not None else np.zeros(n + 1, np.int64)
@@ -263,15 +289,15 @@ def build_units(frag, table, width):
     per_c = padded
     cand_tex = np.repeat(frag.texels[loc], per_c)
     cand_coef = np.empty((len(cand_tri), 2), np.float32)  # column by column (see SurfaceTable.build)
-    cand_coef[:, 0] = (cand_tex % width) - np.take(table.origin[:, 0], cand_tri)
-    cand_coef[:, 1] = (cand_tex // width) - np.take(table.origin[:, 1], cand_tri)
+    cand_coef[:, 0] = (cand_tex % width) - np.take(origin_x, cand_tri).astype(np.float64)
+    cand_coef[:, 1] = (cand_tex // width) - np.take(origin_y, cand_tri).astype(np.float64)
     at = first[loc]
     kind[at] = LOCATED
     tri[at] = cand_tri[loc_start[loc]] if len(loc) else 0
     # Sub-triangles: corner 2 plus the weights of corners 0 and 1 times the edges to them.
     tri_t = frag.sub_tri
     at = first[frag.sub_texel] + (np.arange(len(tri_t)) - frag.sub_start[frag.sub_texel])
-    c = frag.sub_xy - table.origin[tri_t][:, None, :]
+    c = np.asarray(frag.sub_xy, np.float64) - table.take("origin", tri_t)[:, None, :]
     kind[at] = TRIANGLE
     tri[at] = tri_t
     cdf[at] = frag.sub_cdf
@@ -423,7 +449,7 @@ def contact_texels(frag, table, width, tracer, samples):
     tri = np.concatenate([tri_s, tri_p])
     own = np.concatenate([own_s, own_p])
     pos = table.position(tri, xy[:, 0], xy[:, 1])
-    hit = tracer.contact(pos, table.FN[tri])
+    hit = tracer.contact(pos, table.take("FN", tri))
     return (np.bincount(own[hit], minlength=n_tex) > 0) | located
 
 

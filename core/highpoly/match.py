@@ -446,11 +446,12 @@ class LowPoints:
         self.s2a, self.table, self.cage_table = s2a, table, cage_table
         # Per triangle, [P0, Px, Py] and [N0, Nx, Ny] (or the cage's positions) as one (T, 3, 3) map each:
         # a point is [1, a, b] times its triangle's map.
-        self.position = np.stack([table.P0, table.Px, table.Py], axis=1)
+        # In float64: the tables keep float32 maps, every computation reads them in float64.
+        self.position = np.stack([table.P0, table.Px, table.Py], axis=1).astype(np.float64)
         if cage_table is None:
-            self.second = np.stack([table.N0, table.Nx, table.Ny], axis=1)
+            self.second = np.stack([table.N0, table.Nx, table.Ny], axis=1).astype(np.float64)
         else:
-            self.second = np.stack([cage_table.P0, cage_table.Px, cage_table.Py], axis=1)
+            self.second = np.stack([cage_table.P0, cage_table.Px, cage_table.Py], axis=1).astype(np.float64)
 
     def rays(self, tri, a, b):
         """Matching rays of the points at texel-space offsets (a, b) from their triangles' first corners.
@@ -465,7 +466,7 @@ class LowPoints:
         p = np.einsum("ij,ijk->ik", x, self.position[tri])
         other = np.einsum("ij,ijk->ik", x, self.second[tri])
         if self.cage_table is None:
-            return (p,) + extruded(p, other, self.table.FN[tri], self.s2a.extrusion)
+            return (p,) + extruded(p, other, self.table.take("FN", tri), self.s2a.extrusion)
         return (p,) + towards(other, p)
 
 
@@ -864,8 +865,9 @@ class HighPolyStage:
             xy = np.concatenate([xy_full, xy_sub]).astype(np.float64)
             if not len(t):
                 continue
-            a = xy[:, 0] - self.table.origin[t, 0]
-            b = xy[:, 1] - self.table.origin[t, 1]
+            origin = self.table.take("origin", t)
+            a = xy[:, 0] - origin[:, 0]
+            b = xy[:, 1] - origin[:, 1]
             _, origin, direction, usable = self.points.rays(t, a, b)
             if self.scene.match(origin[usable], direction[usable])[0].any():
                 return True

@@ -135,7 +135,7 @@ def primary_pieces(frag, width):
 
 def barycentric(corners_xy, tri, x, y):
     """Weights (n, 3) of the point (x, y) in the texel-space triangles ``corners_xy[tri]``."""
-    c = corners_xy[tri]
+    c = np.asarray(corners_xy[tri], np.float64)  # the UV triangles keep float32 corners
     e1 = c[:, 1] - c[:, 0]
     e2 = c[:, 2] - c[:, 0]
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]

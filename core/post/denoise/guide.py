@@ -119,7 +119,7 @@ def _centre_barycentrics(xy, texel, tri, width):
     centre's own where it lies inside): :func:`_point_triangle`, measured only where needed."""
     row, col = np.divmod(texel, width)
     cx, cy = col + 0.5, row + 0.5
-    a, b, c = xy[tri, 0], xy[tri, 1], xy[tri, 2]
+    a, b, c = (np.asarray(xy[tri, k], np.float64) for k in range(3))  # float32 corners, read in float64
     bary = _barycentrics(cx, cy, a, b, c)
     out = ~(bary >= 0).all(axis=1)
     if out.any():
@@ -154,7 +154,7 @@ def _choose(xy, uvtris, texel, tri, width):
     out = ~np.isin(texel, it)
     nt, nk = texel[out], tri[out]
     r, c = np.divmod(nt, width)
-    nd, nb = _point_triangle(c + 0.5, r + 0.5, xy[nk, 0], xy[nk, 1], xy[nk, 2])
+    nd, nb = _point_triangle(c + 0.5, r + 0.5, *(np.asarray(xy[nk, k], np.float64) for k in range(3)))
     order = np.lexsort((nk, nd, nt))
     nt, nk, nb = nt[order], nk[order], nb[order]
     first = np.ones(len(nt), bool)
@@ -208,7 +208,7 @@ def tile_guide(frag, uvtris, mesh, width):
     """
     texels = frag.texels
     n = len(texels)
-    xy = uvtris.corners
+    xy = uvtris.corners32  # gathered per texel below, in float64 (not a whole-mesh copy per tile)
     tri = np.asarray(frag.full_tri, np.int64).copy()
     bary = np.zeros((n, 3))
     full = np.flatnonzero(tri >= 0)
