@@ -3,8 +3,8 @@
 # undo takes another path in background mode). From the repository root:
 #
 #   python scripts/build_extension.py --platform linux-x64
-#   flock /work/notes/gui.lock ../shared/tools/blender-gui.sh exec 'bash tests/gui/undo.sh packed'
-#   flock /work/notes/gui.lock ../shared/tools/blender-gui.sh exec 'bash tests/gui/undo.sh file'
+#   flock -o /work/notes/gui.lock ../shared/tools/blender-gui.sh exec 'bash tests/gui/undo.sh packed'
+#   flock -o /work/notes/gui.lock ../shared/tools/blender-gui.sh exec 'bash tests/gui/undo.sh file'
 #
 # tests/gui/check_undo.py sets up the scene; this script clicks Bake AO twice (the second after a
 # setting changed), presses Ctrl-Z, then Ctrl-Shift-Z, over the 3D Viewport, and fails unless the image
