@@ -30,8 +30,10 @@ BOUND_ROUNDS = 4
 
 
 def _dot(a, b):
-    # numpy's pairwise sum, not BLAS: the same bits for any BLAS thread count.
-    return float(np.add.reduce(a * b))
+    # A running sum (np.cumsum adds in order): the same bits for any BLAS thread count and numpy's
+    # reduction loops (pairwise, SIMD-unrolled differently by numpy 1.26 and 2.x).
+    p = a * b
+    return float(np.cumsum(p)[-1]) if len(p) else 0.0
 
 
 @dataclass
