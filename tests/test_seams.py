@@ -5,7 +5,8 @@ exact scenes (tests/seam_scenes.py). Sizes 64^2 and below; nothing timed."""
 import numpy as np
 import pytest
 
-from bench.harness import seams as S
+from core.geometry import seams as G
+from core.post import fixseams as F
 from core import Mesh, bake_ao
 from seam_scenes import bilinear_lookup, charts
 
@@ -36,8 +37,8 @@ def point_position(mesh, tri, uv):
 
 def test_every_chart_edge_inside_the_plane_is_a_seam_sampled_four_times_a_texel():
     target, _, _, _ = charts(grid=2, cell=28)
-    L = S.seam_lookups(target, W)
-    assert L.edges == 4 and L.points == 4 * 28 * S.POINTS_PER_TEXEL
+    L = G.seam_lookups(target, W)
+    assert L.edges == 4 and L.points == 4 * 28 * G.POINTS_PER_TEXEL
     assert np.allclose(L.length, 0.25)
     # Each side's weights are a partition of unity; side B's are negated.
     assert np.allclose(L.weight[:, :4].sum(1), 1) and np.allclose(L.weight[:, 4:].sum(1), -1)
@@ -46,7 +47,7 @@ def test_every_chart_edge_inside_the_plane_is_a_seam_sampled_four_times_a_texel(
 @pytest.mark.parametrize("wrap", ["repeat", "extend"])
 def test_the_two_lookups_of_a_point_are_one_surface_point_read_as_blender_reads_it(wrap):
     target, _, _, _ = charts(grid=3, cell=18, gap=3)
-    L = S.seam_lookups(target, W, wrap=wrap)
+    L = G.seam_lookups(target, W, wrap=wrap)
     image = np.random.default_rng(1).random((W, W)).astype(np.float32)
     diff = L.difference(image)
     for k in np.linspace(0, L.points - 1, 60).astype(int):
@@ -59,7 +60,7 @@ def test_the_two_lookups_of_a_point_are_one_surface_point_read_as_blender_reads_
 
 
 def test_a_seam_on_the_image_border_reads_the_opposite_border_when_the_image_repeats():
-    L = {w: S.seam_lookups(split_plane(), 8, wrap=w) for w in ("repeat", "extend")}
+    L = {w: G.seam_lookups(split_plane(), 8, wrap=w) for w in ("repeat", "extend")}
     assert L["repeat"].edges == 1
     # Side B lies on u = 1: its lookups read column 7 and, wrapped, column 0 (extend: 7 twice).
     cols = {w: np.unique(l.index[:, 4:][l.weight[:, 4:] != 0] % 8) for w, l in L.items()}
@@ -68,9 +69,9 @@ def test_a_seam_on_the_image_border_reads_the_opposite_border_when_the_image_rep
 
 def test_a_constant_map_has_no_mismatch_and_a_map_of_the_surface_none_inside_an_island():
     target, _, _, _ = charts()
-    L = S.seam_lookups(target, W)
+    L = G.seam_lookups(target, W)
     assert L.mismatch(np.full((W, W), 0.37, np.float32)) == pytest.approx(0, abs=1e-7)
-    assert S.seam_mismatch(target, np.zeros((W, W))) == 0
+    assert G.seam_mismatch(target, np.zeros((W, W))) == 0
 
 
 def folded_plane(smooth):
@@ -94,11 +95,11 @@ def test_a_seam_on_a_crease_is_measured_but_left_alone(smooth):
     # seam is what lets the map show that), so the fix takes no part there; with one shading normal
     # on both sides (smooth shading) it makes them agree.
     m = folded_plane(smooth)
-    L = S.seam_lookups(m, 16)
+    L = G.seam_lookups(m, 16)
     assert L.edges == 1 and L.points == 64 and L.crease.all() != smooth
     image = np.random.default_rng(4).random((16, 16)).astype(np.float32)
     stderr = np.full((16, 16), 0.01, np.float32)
-    out, se, info = S.fix_seams(image, stderr, np.ones((16, 16), bool), L)
+    out, se, info = F.fix_seams(image, stderr, np.ones((16, 16), bool), L)
     if smooth:
         assert info.after < 0.1 * info.before == pytest.approx(0.1 * L.mismatch(image))
     else:
@@ -112,8 +113,8 @@ def test_udim_tiles_meet_at_a_seam_even_where_the_uvs_run_on():
     P = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]], float)
     F = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]])
     m = Mesh(P, F, P[F][:, :, :2].copy(), name="two tiles")
-    assert S.seam_lookups(m, 8).edges == 0
-    L = S.seam_lookups(m, 8, tiles=(1001, 1002))
+    assert G.seam_lookups(m, 8).edges == 0
+    L = G.seam_lookups(m, 8, tiles=(1001, 1002))
     assert L.edges == 1 and L.shape == (2, 8, 8)
     tile_of = lambda tri: 0 if tri in (0, 1) else 1  # noqa: E731  (triangles 0, 1 lie in tile 1001)
     tiles = np.random.default_rng(2).random((2, 8, 8))
@@ -164,9 +165,9 @@ def _dense_solution(values, stderr, mask, L, seam_weight, margin_weight):
 def test_the_fix_is_the_least_squares_solution_of_its_objective():
     target, occ, _, _ = charts(width=24, grid=2, cell=10, gap=2)
     r = bake_ao(target, occ, resolution=24, samples=16, seed=3, margin=2)
-    L = S.seam_lookups(target, 24)
-    out, _, info = S.fix_seams(r.ao, r.stderr, r.mask, L, value_range=(-np.inf, np.inf), tolerance=1e-10)
-    free, x = _dense_solution(r.ao, r.stderr, r.mask, L, S.SEAM_WEIGHT, S.MARGIN_WEIGHT)
+    L = G.seam_lookups(target, 24)
+    out, _, info = F.fix_seams(r.ao, r.stderr, r.mask, L, value_range=(-np.inf, np.inf), tolerance=1e-10)
+    free, x = _dense_solution(r.ao, r.stderr, r.mask, L, F.SEAM_WEIGHT, F.MARGIN_WEIGHT)
     assert np.array_equal(np.sort(info.texels), free)
     np.testing.assert_allclose(out.reshape(-1)[free], x, atol=2e-6)
 
@@ -181,8 +182,8 @@ def lid_bake():
 
 def test_the_fix_changes_only_texels_a_seam_lookup_reads_and_holds_exact_ones(lid_bake):
     target, r, _ = lid_bake
-    L = S.seam_lookups(target, W)
-    out, se, info = S.fix_seams(r.ao, r.stderr, r.mask, L)
+    L = G.seam_lookups(target, W)
+    out, se, info = F.fix_seams(r.ao, r.stderr, r.mask, L)
     read = np.zeros(W * W, bool)
     read[L.index.reshape(-1)] = True
     untouched = ~read.reshape(W, W)
@@ -195,28 +196,28 @@ def test_the_fix_changes_only_texels_a_seam_lookup_reads_and_holds_exact_ones(li
     changed[info.texels] = True
     assert not (changed & (exact | untouched).reshape(-1)).any()
     # The same input gives the same bits.
-    again, _, _ = S.fix_seams(r.ao, r.stderr, r.mask, L)
+    again, _, _ = F.fix_seams(r.ao, r.stderr, r.mask, L)
     assert np.array_equal(again.view(np.uint32), out.view(np.uint32))
 
 
 def test_the_fix_brings_the_mismatch_below_what_the_exact_map_shows(lid_bake):
     target, r, truth = lid_bake
-    L = S.seam_lookups(target, W)
-    out, _, info = S.fix_seams(r.ao, r.stderr, r.mask, L)
+    L = G.seam_lookups(target, W)
+    out, _, info = F.fix_seams(r.ao, r.stderr, r.mask, L)
     exact_map = np.where(r.mask, truth, r.ao)  # the exact texels with the bake's margin
     assert info.before == pytest.approx(L.mismatch(r.ao))
     assert info.after == pytest.approx(L.mismatch(out))
     assert info.after < 0.05 * info.before and info.after < 0.25 * L.mismatch(exact_map)
-    assert 0 < info.iterations < S.MAX_ITERATIONS and info.residual <= S.TOLERANCE
+    assert 0 < info.iterations < F.MAX_ITERATIONS and info.residual <= F.TOLERANCE
 
 
 def test_texels_of_another_target_are_held():
     target, occ, _, _ = charts()
     r = bake_ao(target, occ, resolution=W, samples=16, seed=1)
-    L = S.seam_lookups(target, W)
+    L = G.seam_lookups(target, W)
     owner = np.where(r.mask, 0, -1)
     owner[:, W // 2:] = np.where(r.mask[:, W // 2:], 1, -1)  # the right-hand charts belong to target 1
-    out, _, _ = S.fix_seams(r.ao, r.stderr, r.mask, L, owner=owner)
+    out, _, _ = F.fix_seams(r.ao, r.stderr, r.mask, L, owner=owner)
     other = owner == 1
     assert np.array_equal(out[other], r.ao[other])
     assert not np.array_equal(out[owner == 0], r.ao[owner == 0])
@@ -231,11 +232,11 @@ def test_the_fixed_map_error_is_honest_on_exact_scenes(occluder, layout):
     # texel with an error, and over the covered texels the fix changed, pooled over 8 bakes.
     kw = dict(cell=28, gap=4) if layout == "apart" else dict(cell=32, gap=0)
     target, occ, truth, covered = charts(occluder=occluder, **kw)
-    L = S.seam_lookups(target, W)
+    L = G.seam_lookups(target, W)
     z_all, z_changed, z_raw = [], [], []
     for seed in range(8):
         r = bake_ao(target, occ, resolution=W, samples=64, seed=seed)
-        out, se, info = S.fix_seams(r.ao, r.stderr, r.mask, L)
+        out, se, info = F.fix_seams(r.ao, r.stderr, r.mask, L)
         changed = np.zeros(W * W, bool)
         changed[info.texels] = True
         changed = changed.reshape(W, W) & covered

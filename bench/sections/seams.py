@@ -1,6 +1,6 @@
 """Bench section: how much a baked map's UV seams show, and what Fix Seams does about it.
 
-The seam mismatch (bench.harness.seams): every mesh edge shared in space by two triangles whose UVs
+The seam mismatch (core.geometry.seams): every mesh edge shared in space by two triangles whose UVs
 differ is sampled at 4 points a texel (the smooth ones, where both sides have one shading normal,
 are those the fix makes agree; at a crease the AO may differ, and both figures are given); each point is looked up in both triangles' UVs as Blender's
 Linear interpolation reads the image (texel centres at (j + 0.5) / W, the image repeating at its
@@ -36,7 +36,8 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.harness import seams as S  # noqa: E402
+from core.geometry import seams as G  # noqa: E402
+from core.post import fixseams as F  # noqa: E402
 from bench.harness.common import git_state, load_average, machine  # noqa: E402
 from core import bake_ao, bake_udim  # noqa: E402
 
@@ -94,9 +95,9 @@ def scene_figures(name, res, cache=None):
     (ao64, se64, m64), tiles, cpu64 = bake(target, occ, dist, udim, res, 64, 1, cache, name)
     (ao16, _, _), _, _ = bake(target, occ, dist, udim, res, 16, 1, cache, name)
     (ref, _, mref), _, _ = bake(target, occ, dist, udim, res, 2048, 10_001, cache, name)
-    L = S.seam_lookups(target, res, tiles=tiles)
+    L = G.seam_lookups(target, res, tiles=tiles)
     c = time.process_time()
-    fixed, se_fixed, info = S.fix_seams(ao64, se64, m64, L)
+    fixed, se_fixed, info = F.fix_seams(ao64, se64, m64, L)
     fix_cpu = time.process_time() - c
     read = np.zeros(ao64.size, bool)
     read[L.index.reshape(-1)] = True
@@ -143,8 +144,8 @@ def cost(res, threads=2):
     image_bytes = r.ao.nbytes + r.stderr.nbytes + r.samples.nbytes + r.mask.nbytes
     tracemalloc.start()
     c = time.process_time()
-    L = S.seam_lookups(target, res)
-    _, _, info = S.fix_seams(r.ao, r.stderr, r.mask, L, out=r.ao, stderr_out=r.stderr)
+    L = G.seam_lookups(target, res)
+    _, _, info = F.fix_seams(r.ao, r.stderr, r.mask, L, out=r.ao, stderr_out=r.stderr)
     fix_cpu = time.process_time() - c
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()

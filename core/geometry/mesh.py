@@ -8,7 +8,7 @@ import copy
 
 import numpy as np
 
-from ..base.errors import MeshError, MeshTypeError
+from ..base.errors import MeshError, MeshTypeError, SettingsError
 
 #: Largest |u| or |v| accepted. UV maps live in [0, 1] (UDIM tiles reach u = 10, v = 100); values far
 #: beyond come from broken importers or scripts, and texel coordinates of 1e17 lose all precision.
@@ -125,6 +125,24 @@ def _own(arr, dtype):
     return arr.astype(dtype, order="C")
 
 
+def mesh_list(meshes, what="occluders"):
+    """``meshes`` (any iterable of Mesh, or None) as a list; SettingsError saying what to pass for
+    anything else, a single Mesh included (a list of one: ``[mesh]``)."""
+    if meshes is None:
+        return []
+    if isinstance(meshes, Mesh):
+        raise SettingsError(f"{what} must be a list of core.Mesh objects, got the single mesh {meshes.name!r}: "
+                            f"pass it in a list, {what}=[mesh]")
+    try:
+        out = list(meshes)
+    except TypeError:
+        raise SettingsError(f"{what} must be a list of core.Mesh objects, got {type(meshes).__name__}") from None
+    for mesh in out:
+        if not isinstance(mesh, Mesh):
+            raise SettingsError(f"{what} must be core.Mesh objects, got {type(mesh).__name__}")
+    return out
+
+
 class Mesh:
     """A triangle mesh in world space.
 
@@ -182,6 +200,11 @@ class Mesh:
         self.uvs = None
         if uvs is not None:
             uv = _real_array(uvs, "uvs", self.name)
+            if uv.shape == (len(p), 2):
+                raise MeshError(
+                    f"mesh {self.name!r}: uvs has one UV per vertex, shape {uv.shape}; a Mesh takes one UV per "
+                    f"triangle corner, shape ({T}, 3, 2): pass uvs[triangles] (the per-vertex UVs gathered "
+                    "at each triangle's corners)")
             _check_shape(uv, (T, 3, 2), "uvs (one UV per triangle corner)", self.name)
             _check_finite(uv, "uvs", self.name)
             if float(uv.max()) > MAX_UV or float(uv.min()) < -MAX_UV:

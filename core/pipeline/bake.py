@@ -37,7 +37,7 @@ from ..base.errors import BakeCancelled, BakeMemoryError, MeshError, SettingsErr
 from ..engine.estimators import ErrorModel, interval_half_width
 from ..engine.kernel import Kernel
 from ..geometry.margin import dilate
-from ..geometry.mesh import Mesh
+from ..geometry.mesh import Mesh, mesh_list
 from ..engine.patterns import TexelPattern
 from ..geometry import raster as R
 from ..geometry.raster import bin_triangles, prepare
@@ -198,10 +198,7 @@ class Prologue:
             raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
         if uvs and target.uvs is None:
             raise MeshError(f"mesh {target.name!r} has no UVs: the baker needs a UV map to know where each texel lies")
-        occluders = list(occluders or ())
-        for o in occluders:
-            if not isinstance(o, Mesh):
-                raise SettingsError(f"occluders must be core.Mesh objects, got {type(o).__name__}")
+        occluders = mesh_list(occluders)
         self.cancel = cancel
         self.s2a = None
         if bent_normals and settings.quantity != "ao":
@@ -648,7 +645,7 @@ def _bake_images(target, occluders, resolution, samples, quantities, *, maps=Fal
         raise SettingsError("denoise needs replicates >= 2: the filter weighs each texel by its standard error, "
                             "which one replicate only bounds")
     workers = _workers.check_workers(workers)
-    target_in, occluders_in, bent_space_in = target, list(occluders or ()), bent_space
+    target_in, occluders_in, bent_space_in = target, mesh_list(occluders), bent_space
     pro = Prologue(target, occluders_in, s, cancel, uvs=True, highpoly=highpoly, extrusion=extrusion,
                    max_ray_distance=max_ray_distance, cage=cage, bent_normals=bent_normals, bent_space=bent_space)
     s2a = pro.s2a

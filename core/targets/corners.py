@@ -28,7 +28,7 @@ from ..pipeline.bake import BakeResult, Prologue, TileOut
 from ..base.errors import MeshError, SettingsError
 from ..engine.estimators import ErrorModel
 from ..engine.kernel import Kernel
-from ..geometry.mesh import corner_positions
+from ..geometry.mesh import corner_positions, mesh_list
 from ..engine.patterns import POOL_POINTS, TexelPattern
 from ..engine.settings import BakeSettings, pattern_span
 from ..geometry.surface import point_table, point_units
@@ -272,7 +272,7 @@ def _bake_corners(target, occluders, corners, samples, quantities, *, maps=False
         raise SettingsError("denoise needs replicates >= 2: the filter weighs each point by its standard error, "
                             "which one replicate only bounds")
     workers = _workers.check_workers(workers)
-    occluders = list(occluders or ())
+    occluders = mesh_list(occluders)
     pro = Prologue(target, occluders, s, cancel, uvs=False)
     corners = all_corners(pro.target) if corners is None else _check_corners(corners, pro.target)
     bake = vertex_bake(pro, s, corners, quantities, merge, bent_normals)
