@@ -4,7 +4,7 @@ saying why. Standard library only, and shipped to the worker by value (its code 
 Dask unpickles a task's function where the worker reads its messages: a function pickled by
 reference (``mc_ao_batch.runners._dask_task``) that the worker cannot import breaks the worker's
 connection instead of failing the task, and the batch waits for it forever. This module's
-:func:`run` is pickled by value (:func:`submittable`), so unpickling it needs nothing of ours; the
+:func:`run` is sent by value (:func:`submittable`), so unpickling it needs nothing of ours; the
 batch's modules are imported when the task runs, and a worker that cannot import them (another
 ``mc_ao`` first on its path, no checkout of the batch's code there) fails the task with the import
 error, the worker's interpreter and the start of its ``sys.path`` (returned as ``{"cannot_import": text}``,
@@ -41,11 +41,11 @@ def suspicious_counts(dask_scheduler, keys):
 
 
 def submittable():
-    """:func:`run`, pickled by value when Dask sends it (cloudpickle): the worker needs none of our modules
-    to unpickle it."""
-    import sys
+    """:func:`run` as a function of no module (``__main__``'s): Dask pickles a task graph with the standard
+    pickle, which sends a module's function by its name (the worker would have to import this module);
+    a ``__main__`` function Dask and cloudpickle send by value, code and all."""
+    import types
 
-    import cloudpickle
-
-    cloudpickle.register_pickle_by_value(sys.modules[__name__])
-    return run
+    boot = types.FunctionType(run.__code__, {"__builtins__": __builtins__}, "mc_ao_batch_boot")
+    boot.__module__, boot.__qualname__, boot.__doc__ = "__main__", "mc_ao_batch_boot", run.__doc__
+    return boot

@@ -20,9 +20,12 @@ from batch_helpers import BATCH, ROOT
 distributed = pytest.importorskip("distributed")  # requirements-batch.txt; absent from the numpy 2 run
 
 _CLUSTER = """
-import sys
+import os, sys
 import mc_ao_batch.runners  # the scheduler (this process) can import the batch's code
-sys.path.insert(0, sys.argv[1])  # its workers, which take this path, cannot
+if sys.argv[1] == "nothing":  # its workers, which take this path, cannot: no repository on it
+    sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != os.path.abspath(sys.argv[2])]
+else:  # another mc_ao first
+    sys.path.insert(0, sys.argv[1])
 from distributed import LocalCluster
 cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None)
 print(cluster.scheduler_address, flush=True)
@@ -33,14 +36,38 @@ cluster.close()
 
 def _start_cluster(cwd, shadow):
     """A local cluster in a process of its own whose scheduler imports the batch's code and whose worker
-    has ``shadow`` first on its path."""
+    has ``shadow`` first on its path ("nothing": no repository on its path)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     with open(Path(cwd) / "cluster.log", "wb") as log:  # its workers' complaints, kept out of the test's output
-        proc = subprocess.Popen([sys.executable, "-c", _CLUSTER, str(shadow)], cwd=cwd, env=env, stdin=subprocess.PIPE,
+        proc = subprocess.Popen([sys.executable, "-c", _CLUSTER, str(shadow), str(ROOT)], cwd=cwd, env=env,
+                                stdin=subprocess.PIPE,
                                 stdout=subprocess.PIPE, stderr=log, text=True)
     address = proc.stdout.readline().strip()
     assert address.startswith("tcp://"), address
     return proc, address
+
+
+def _batch_on(tmp_path, shadow):
+    manifest = tmp_path / "manifest.toml"
+    manifest.write_text('[defaults]\nsamples = 8\n\n[[bake]]\nblend = "scene.blend"\n')
+    cluster, address = _start_cluster(tmp_path, shadow)
+    try:
+        proc = subprocess.run([sys.executable, str(BATCH), str(manifest), "--output", str(tmp_path / "out"),
+                               "--runner", "dask", "--scheduler", address, "--blender", "bpy"],
+                              capture_output=True, text=True, timeout=300)  # a guard against a hang, not a measure
+    finally:
+        cluster.stdin.close()
+        cluster.wait(timeout=60)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    [task] = json.loads((tmp_path / "out" / "mc_ao_batch.json").read_text())["tasks"]
+    assert task["status"] == "failed" and task["attempts"] == 1
+    return task["error"]
+
+
+def test_a_dask_worker_without_the_batchs_code_fails_its_task_with_the_reason(tmp_path):
+    """No repository on the worker's path: it cannot import mc_ao_batch itself."""
+    error = _batch_on(tmp_path, "nothing")
+    assert "cannot import the batch's code" in error and "No module named 'mc_ao_batch'" in error, error
 
 
 def test_a_dask_worker_that_cannot_import_the_batch_fails_its_task_with_the_reason(tmp_path):
