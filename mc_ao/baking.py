@@ -535,6 +535,39 @@ def check_channel(settings, images=None):
         raise ExtractError(problem)
 
 
+def length_text(value):
+    """A world length as the scene's unit system writes it ("12.3 cm", "1.5 m"; "0.123 units" with
+    units off, or without a scene)."""
+    try:
+        import bpy
+
+        units = bpy.context.scene.unit_settings
+        if units.system != "NONE":
+            return bpy.utils.units.to_string(units.system, "LENGTH", value * units.scale_length, precision=3).strip()
+    except (ImportError, AttributeError, TypeError, ValueError):
+        pass
+    return f"{value:.3g} units"
+
+
+def occlusion_summary(job, settings, result):
+    """What occluded ``job``'s bake, as its summary line says it: "occluded by itself alone", "by 3
+    other objects", "and the ground at 12 cm" (the height used: each object's lowest point with
+    Ground Lowest Point); "" for a thickness map (the object alone, always)."""
+    if getattr(job, "quantity", "ao") != "ao":
+        return ""
+    if getattr(job, "highpoly", None):
+        others = len(getattr(job, "occluders", ()))
+        who = (f"occluded by the high-poly" + (f" and {others} other object{'s' if others != 1 else ''}"
+                                               if others else ""))
+    else:
+        n = len(getattr(job, "occluders", ()))
+        who = "occluded by itself alone" if not n else f"occluded by itself and {n} other object{'s' if n != 1 else ''}"
+    height = (getattr(result, "metadata", None) or {}).get("ground_height")
+    if settings.ground != "OFF" and height is not None:
+        who += f" and the ground at {length_text(float(height))}"
+    return who
+
+
 def miss_summary(result):
     """What the summary line says of a Selected to Active bake's matching rays: "; 312 of 65536
     sample points missed the high-poly", "; no sample point missed the high-poly", or "" for another bake."""
@@ -544,7 +577,7 @@ def miss_summary(result):
         return ""
     missed = getattr(result, "missed", 0)
     auto = (getattr(result, "metadata", None) or {}).get("extrusion_auto") and "extrusion" in report
-    measured = f"; extrusion {report['extrusion']:.4g} measured from the meshes" if auto else ""
+    measured = f"; extrusion {length_text(report['extrusion'])} measured from the meshes" if auto else ""
     if not missed:
         return f"{measured}; no sample point missed the high-poly"
     return f"{measured}; {missed} of {cast} sample points missed the high-poly"

@@ -34,7 +34,7 @@ import traceback
 
 import bpy
 
-from . import bakerun, baking, corelink, filecheck, filewriter, images, rules, schema, service, undo_images, vertex_colors
+from . import bakerun, baking, corelink, filecheck, filewriter, images, precheck, rules, schema, service, undo_images, vertex_colors
 from .choose import ChoiceError, Pick, choose
 from .extract import ExtractError
 from .outputs.store import Store
@@ -46,12 +46,15 @@ from .terminal import escape
 _RUNS = bakerun.RUNS
 # Sessions in flight, so that an undo can end them before it replaces the data they write to.
 _SESSIONS = set()
-# Seconds between two live updates of an image: writing a large image's pixels takes milliseconds.
+# Seconds between two live updates of an image, at least: writing a 1024 x 1024 image's pixels takes
+# milliseconds. A larger image's update takes longer (8192 x 8192: about a second on the main thread),
+# so the next one waits LIVE_DUTY times as long as the last took: the UI stays responsive.
 LIVE_UPDATE_INTERVAL = 0.25
+LIVE_DUTY = 10
 TIMER_INTERVAL = 0.1
-# Live updates keep an RGBA float copy of the image (16 bytes a texel): beyond 4096 x 4096 (256 MiB)
+# Live updates keep an RGBA float copy of the image (16 bytes a texel): beyond 8192 x 8192 (1 GiB)
 # the image is written once, at the end.
-LIVE_MAX_TEXELS = 4096 * 4096
+LIVE_MAX_TEXELS = 8192 * 8192
 
 
 class OutputError(ValueError):
@@ -85,6 +88,23 @@ def _redraw(context):
                 area.tag_redraw()
 
 
+def show_in_image_editors(context, image):
+    """Show ``image`` in every open Image Editor that is free to show it: not pinned to its image, not
+    painting or editing a mask; the image a bake fills in is then in view while it fills in."""
+    wm = getattr(context, "window_manager", None)
+    if wm is None or image is None:
+        return
+    for window in wm.windows:
+        for area in window.screen.areas:
+            if area.type != "IMAGE_EDITOR":
+                continue
+            space = area.spaces.active
+            if space.use_image_pin or getattr(space, "mode", "VIEW") != "VIEW" or space.image == image:
+                continue
+            space.image = image
+            area.tag_redraw()
+
+
 def why_not(context):
     """Why the Bake AO button is disabled in ``context`` (the poll message, the panel's hint), or None."""
     return choice_of(context)[1]
@@ -94,13 +114,17 @@ def choice_of(context):
     """``(choice, None)``: what Bake AO would bake in ``context`` (mc_ao.choose.Choice, no geometry
     read), or ``(None, why not)``."""
     props = getattr(context.scene, "mc_ao", None)
-    settings = BakeSettings() if props is None else BakeSettings.from_properties(props)
+    settings = BakeSettings() if props is None else BakeSettings.from_properties(props).in_effect()
     for field, message in rules.broken(settings, schema.label_of, poll=True):
         return None, f"{schema.label_of(field)} {message}"
     try:
         choice = choose(settings, Pick(list(context.selected_objects), context.active_object), context.view_layer)
     except ChoiceError as exc:
         return None, str(exc)
+    # What the checks after the click would refuse, where names and datablocks tell it cheaply.
+    problem = precheck.problem(settings, choice.targets, bpy.data.images)
+    if problem is not None:
+        return None, problem
     if settings.vertex_colors:
         # A color attribute bake that every selected mesh's modifiers make impossible is greyed out
         # too, with the reason, rather than refused after the click.
@@ -244,7 +268,8 @@ class BakeSession:
         if missing is not None:
             self.report({"ERROR"}, f"Cannot bake: {missing}")
             return False
-        self.settings = settings = BakeSettings.from_properties(context.scene.mc_ao)
+        # What the panel shows as active: a greyed-out setting is neither used nor refused.
+        self.settings = settings = BakeSettings.from_properties(context.scene.mc_ao).in_effect()
         problems = schema.problems(settings)
         if problems:
             # The properties' own limits keep most values in range; what gets past them (a script
@@ -288,6 +313,7 @@ class BakeSession:
         self.buffers = {}  # job index -> live pixel buffer (H, W, channels)
         self.pending = set()  # jobs whose live buffer has tiles not yet in the image
         self.last_flush = 0.0
+        self.live_interval = LIVE_UPDATE_INTERVAL
         self.fraction = 0.0
         self.store = Store(settings, folder, plan.files, lambda kind, text: self.report({kind}, text))
         self.run = service.Bake(plan, resolve_threads(context, settings), self.live, store=self.store,
@@ -305,15 +331,17 @@ class BakeSession:
             w, h = self.settings.size
             self.store.current, self.store.object_name = i, self.run.jobs[i].object_name
             try:
-                self.buffers[i] = images.pixels_of(
-                    self.store.image(self.run.jobs[i].image_name, w, h, self.settings.float_buffer, i=i))
+                image = self.store.image(self.run.jobs[i].image_name, w, h, self.settings.float_buffer, i=i)
+                self.buffers[i] = images.pixels_of(image)
             except images.ImageError:
                 self.buffers[i] = None  # reported when the job is done
+            else:
+                show_in_image_editors(self._context, image)
         return self.buffers[i]
 
     def _flush_live(self, context):
         now = time.monotonic()
-        if not self.pending or now - self.last_flush < LIVE_UPDATE_INTERVAL:
+        if not self.pending or now - self.last_flush < self.live_interval:
             return
         w, h = self.settings.size
         for i in self.pending:
@@ -322,7 +350,9 @@ class BakeSession:
             if buffer is not None and tuple(image.size) == (buffer.shape[1], buffer.shape[0]):
                 images.set_pixels(image, buffer)
         self.pending.clear()
-        self.last_flush = now
+        self.last_flush = time.monotonic()
+        # Throttled by what an update costs: an 8k image's takes about a second of the main thread.
+        self.live_interval = max(LIVE_UPDATE_INTERVAL, LIVE_DUTY * (self.last_flush - now))
         _redraw(context)
 
     def interrupt(self):
@@ -362,6 +392,8 @@ class BakeSession:
             return
         self.finished.append(outcome.index)
         self.results.append(outcome.result)
+        if not self.live and not self.settings.vertex_colors:  # not shown while it filled in: shown now
+            show_in_image_editors(self._context, bpy.data.images.get(outcome.job.image_name))
         if outcome.file_error:
             self.file_errors += 1
             self.unsummarised_errors += 1

@@ -52,20 +52,50 @@ def wrap_text(text, width, measure):
     return lines or [""]
 
 
-def wrapped_label(layout, context, text, icon="NONE"):
-    """A label that continues on more lines where the region is too narrow for it, none of it cut off.
+def fitted_lines(text, width, measure, lines):
+    """``text`` cut into exactly ``lines`` lines that each measure at most ``width`` (at spaces; a
+    single long word is cut, and text that does not fit ends in an ellipsis), padded with empty lines:
+    a label that takes the same rows whatever it says, so the panel below it never moves."""
+    out = []
+    for word in text.split():
+        if out and measure(out[-1] + " " + word) <= width:
+            out[-1] += " " + word
+        else:
+            out.append(word)
+    if len(out) > lines:  # the rest does not fit: the last line ends in an ellipsis, at a space where one is
+        out = out[:lines]
+        words = out[-1].split()
+        while len(words) > 1 and measure(" ".join(words) + " \u2026") > width:
+            words.pop()
+        out[-1] = " ".join(words) + " \u2026"
+    for i, line in enumerate(out):
+        while measure(line) > width and len(line) > 1:  # a word longer than the line
+            line = line[:-2] + "\u2026"
+        out[i] = line
+    return out + [""] * (lines - len(out))
 
-    The first line has the icon; the others are indented as far, so the text lines up.
-    """
+
+def label_width(context):
+    """The pixels a label's text may take in the region, or None without a window (a script)."""
     region = context.region
-    if region is None or region.width <= 0:  # no window (a script): nothing to fit
-        lines = [text]
+    if region is None or region.width <= 0:
+        return None
+    scale = context.preferences.system.ui_scale or 1.0
+    return region.width - LABEL_INSET * scale
+
+
+def fixed_label(layout, context, text, lines=1, icon="NONE"):
+    """A label of exactly ``lines`` rows (see fitted_lines): the first with the icon, the others
+    indented as far, so the text lines up."""
+    width = label_width(context)
+    if width is None:  # no window: nothing to fit
+        rows = ([text] + [""] * (lines - 1)) if text else [""] * lines
     else:
-        scale = context.preferences.system.ui_scale or 1.0
-        lines = wrap_text(text, region.width - LABEL_INSET * scale, lambda t: text_width(t, context))
+        rows = fitted_lines(text, width, lambda t: text_width(t, context), lines)
     col = layout.column(align=True)
-    for n, line in enumerate(lines):
-        col.label(text=line, icon=icon if n == 0 else ("BLANK1" if icon != "NONE" else "NONE"))
+    for n, line in enumerate(rows):
+        shown = icon if n == 0 and line else ("BLANK1" if icon != "NONE" else "NONE")
+        col.label(text=line, icon=shown)
 
 
 class _McAoPanel:
@@ -81,6 +111,19 @@ class _McAoPanel:
         return layout
 
 
+#: Rows of the panel's lines under the buttons, the same whatever they say (the panel never jumps
+#: under the pointer while settings change): what the button bakes (or why it cannot), the estimate,
+#: a note (memory, skipped objects), and the last bake's outcome.
+WHAT_LINES, ESTIMATE_LINES, NOTE_LINES, LAST_LINES = 2, 2, 1, 2
+#: Rows of the Occlusion section's line that says what occludes (its text changes, its rows do not).
+OCCLUDED_BY_LINES = 2
+
+
+def values(context):
+    """The scene's bake settings as the panel shows them: a greyed-out one at its default."""
+    return BakeSettings.from_properties(context.scene.mc_ao).in_effect()
+
+
 class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
     bl_label = "Ambient Occlusion"
 
@@ -93,69 +136,99 @@ class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
         layout.operator(preview.OBJECT_OT_mc_ao_preview.bl_idname, icon="HIDE_ON" if shown else "SHADING_TEXTURE",
                         text="Remove AO Preview" if shown else "Preview on Object", depress=shown)
         if is_running():
-            layout.label(text="Baking, Esc cancels", icon="TIME")
-            return
-        draw_targets(layout, context)
-        if operators.last_outcome is not None:
-            kind, text = operators.last_outcome
-            wrapped_label(layout, context, f"Last bake: {text}", icon=_OUTCOME_ICONS.get(kind, "INFO"))
+            fixed_label(layout, context, "Baking, Esc cancels", WHAT_LINES, icon="TIME")
+            fixed_label(layout, context, "", ESTIMATE_LINES + NOTE_LINES)
+        else:
+            draw_targets(layout, context)
+        outcome = operators.last_outcome
+        kind, text = outcome if outcome is not None else ("INFO", "")
+        fixed_label(layout, context, f"Last bake: {text}" if text else "", LAST_LINES,
+                    icon=_OUTCOME_ICONS.get(kind, "INFO") if text else "NONE")
 
 
 def draw_targets(layout, context):
-    """What the button will bake, or why it cannot; the selected objects it will skip."""
-    settings = BakeSettings.from_properties(context.scene.mc_ao)
+    """What the button will bake, or why it cannot (WHAT_LINES), its estimate (ESTIMATE_LINES) and a
+    note (NOTE_LINES: memory, the selected objects it will skip), always in the same rows."""
+    settings = values(context)
     # The button greys out when its poll fails; say why under it.
     choice, reason = operators.choice_of(context)
+    note, note_icon = "", "NONE"
     if reason is not None:
-        wrapped_label(layout, context, reason, icon="INFO")
+        fixed_label(layout, context, reason, WHAT_LINES, icon="INFO")
+        fixed_label(layout, context, "", ESTIMATE_LINES + NOTE_LINES)
         return
     if settings.use_selected_to_active:
-        draw_selected_to_active(layout, context)
-        return
-    targets = choice.targets
+        what, icon, targets, highpoly, cage = selected_to_active_text(context, settings)
+    else:
+        what, icon, targets, highpoly, cage = targets_text(settings, choice.targets), "IMAGE_DATA", choice.targets, (), None
+        if settings.vertex_colors:
+            icon = "GROUP_VCOL"
+        skipped = choice.skipped
+        if skipped:
+            names = [f"{obj.name} ({'no UV map' if obj.type == 'MESH' else 'not a mesh'})"
+                     for obj in skipped[:MAX_SKIPPED_LINES]]
+            more = f" and {len(skipped) - MAX_SKIPPED_LINES} more" if len(skipped) > MAX_SKIPPED_LINES else ""
+            note, note_icon = f"Skipped: {', '.join(names)}{more}", "ERROR"
+    fixed_label(layout, context, what, WHAT_LINES, icon=icon)
+    estimate, too_big = cost_text(context, settings, targets, highpoly, cage)
+    fixed_label(layout, context, estimate, ESTIMATE_LINES,
+                icon="ERROR" if too_big else "TIME" if estimate else "NONE")
+    fixed_label(layout, context, note, NOTE_LINES, icon=note_icon)
+
+
+def targets_text(settings, targets):
+    """What the button bakes, in words: into which images (or colour attribute)."""
     if settings.vertex_colors:
         domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
         what = f"color attribute {settings.attribute_name} ({domain})"
-        if len(targets) == 1:
-            wrapped_label(layout, context, f"Into {what}", icon="GROUP_VCOL")
-        else:
-            wrapped_label(layout, context, f"{len(targets)} objects, each into its {what}", icon="GROUP_VCOL")
-    elif len(targets) == 1:
-        image_name = " and ".join(settings.quantity_image_name_for(targets[0].name, q, baking.id_name_max_bytes())
-                                  for q in settings.quantities)
-        extra = " (UDIM tiles)" if settings.use_udim else ""
+        return f"Into {what}" if len(targets) == 1 else f"{len(targets)} objects, each into its {what}"
+    if len(targets) == 1:
+        name = targets[0].name
+        images = [settings.quantity_image_name_for(name, q, baking.id_name_max_bytes()) for q in settings.quantities]
         if settings.bent_normals:
-            extra += f" and {settings.bent_image_name_for(targets[0].name, baking.id_name_max_bytes())}"
-        wrapped_label(layout, context, f"Into {image_name}{extra}", icon="IMAGE_DATA")
+            images.append(settings.bent_image_name_for(name, baking.id_name_max_bytes()))
+        text = f"Into {' and '.join(images)}" + (" (UDIM tiles)" if settings.use_udim else "")
     else:
-        each = "one tiled image each" if settings.use_udim else "one image each"
-        layout.label(text=f"{len(targets)} objects, {each}", icon="IMAGE_DATA")
-    draw_cost(layout, context, settings, targets)
-    skipped = choice.skipped
-    for obj in skipped[:MAX_SKIPPED_LINES]:
-        why = "no UV map" if obj.type == "MESH" else "not a mesh"
-        wrapped_label(layout, context, f"Skipped: {obj.name} ({why})", icon="ERROR")
-    if len(skipped) > MAX_SKIPPED_LINES:
-        layout.label(text=f"... and {len(skipped) - MAX_SKIPPED_LINES} more skipped", icon="ERROR")
+        text = f"{len(targets)} objects, " + ("one tiled image each" if settings.use_udim else "one image each")
+    if settings.channel != "NONE":
+        text += f", AO also into {CHANNEL_WORDS[settings.channel]} of {settings.into}"
+    return text
 
 
-def draw_cost(layout, context, settings, targets, highpoly=(), cage=None):
-    """The bake's estimated time and memory (core.execution.cost, calibrated by the bench; the occluders and
-    high-poly objects it will use counted apart), and a warning before a bake that will not fit in
-    memory."""
+#: A Channel setting as the panel's lines name it.
+CHANNEL_WORDS = {"R": "the red", "G": "the green", "B": "the blue", "A": "the alpha"}
+
+
+def cost_text(context, settings, targets, highpoly=(), cage=None):
+    """(the estimate's line, whether the bake will not fit in memory): the bake's estimated time and
+    memory (core.execution.cost, calibrated by the bench; the occluders and high-poly objects it will
+    use counted apart), and, before a bake that will not fit, the memory free."""
     if not targets:
-        return
+        return "", False
     try:
         cost = baking.bake_cost(settings, targets, context.evaluated_depsgraph_get(),
                                 selected=context.selected_objects, view_layer=context.view_layer,
                                 threads=resolve_threads(context, settings), highpoly=highpoly, cage=cage)
         available = baking.corelink.load("execution.workers").memory_limit()
     except Exception:  # the core cannot load (no numpy, no embreex): the bake will say why
-        return
-    wrapped_label(layout, context, f"Estimate: {cost.describe()}", icon="TIME")
+        return "", False
+    text = f"Estimate: {cost.describe()}"
     if available is not None and cost.bytes > available:
-        wrapped_label(layout, context, f"This bake needs about {cost.bytes / 2 ** 30:.1f} GiB, more than the "
-                      f"{available / 2 ** 30:.1f} GiB free: lower the resolution or the processes", icon="ERROR")
+        return f"{text}, more than the {available / 2 ** 30:.1f} GiB free: lower Size or Processes", True
+    return text, False
+
+
+def selected_to_active_text(context, settings):
+    """Selected to Active: which objects bake onto which, into which image; (text, icon, targets,
+    high-poly objects, cage)."""
+    props = context.scene.mc_ao
+    active, cage = context.active_object, selected_to_active.cage_of(props)
+    highs = selected_to_active.high_objects(context.selected_objects, active, cage)
+    names = ", ".join(o.name for o in highs[:MAX_SKIPPED_LINES])
+    if len(highs) > MAX_SKIPPED_LINES:
+        names += f" and {len(highs) - MAX_SKIPPED_LINES} more"
+    image_name = settings.image_name_for(active.name, baking.id_name_max_bytes())
+    return f"From {names} onto {active.name}, into {image_name}", "MOD_SHRINKWRAP", [active], highs, cage
 
 
 class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):
@@ -166,38 +239,24 @@ class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         settings = context.scene.mc_ao
+        v = BakeSettings.from_properties(settings)
         layout = self.split_layout()
         # A menu, not two buttons: at the sidebar's default width each half cut the names off
         # ("Image Te...", "Color Attr...").
         layout.prop(settings, "target")
         col = layout.column()
+        col.prop(settings, "quantity")
+        # Four rows either way: switching the target moves nothing below.
         if settings.target == "VERTEX_COLORS":
-            col.prop(settings, "quantity")
             col.prop(settings, "attribute_name", icon="GROUP_VCOL")
             col.prop(settings, "attribute_domain")
             col.prop(settings, "float_buffer", text="Float Color")
             return
-        col.prop(settings, "quantity")
         col.prop(settings, "use_udim")
         col.prop(settings, "bent_normals")
         sub = col.column()
-        sub.active = settings.bent_normals
+        sub.active = not v.greyed("bent_space")
         sub.prop(settings, "bent_space")
-
-
-def draw_selected_to_active(layout, context):
-    """Selected to Active: which objects bake onto which, into which image."""
-    settings = context.scene.mc_ao
-    active, cage = context.active_object, selected_to_active.cage_of(settings)
-    highs = selected_to_active.high_objects(context.selected_objects, active, cage)
-    names = ", ".join(o.name for o in highs[:MAX_SKIPPED_LINES])
-    if len(highs) > MAX_SKIPPED_LINES:
-        names += f" and {len(highs) - MAX_SKIPPED_LINES} more"
-    bake_settings = BakeSettings.from_properties(settings)
-    image_name = bake_settings.image_name_for(active.name, baking.id_name_max_bytes())
-    wrapped_label(layout, context, f"From {names} onto {active.name}", icon="MOD_SHRINKWRAP")
-    wrapped_label(layout, context, f"Into {image_name}", icon="IMAGE_DATA")
-    draw_cost(layout, context, bake_settings, [active], highpoly=highs, cage=cage)
 
 
 class VIEW3D_PT_mc_ao_selected_to_active(_McAoPanel, bpy.types.Panel):
@@ -212,17 +271,16 @@ class VIEW3D_PT_mc_ao_selected_to_active(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         settings = context.scene.mc_ao
+        v = BakeSettings.from_properties(settings)
         layout = self.split_layout()
         layout.active = settings.use_selected_to_active
         col = layout.column()
         col.prop(settings, "use_cage", text="Cage")
-        if settings.use_cage:
-            col.prop(settings, "cage_object")
+        # Every row always there, greyed where it does not apply: ticking Cage moves nothing.
+        for name, text in (("cage_object", None), ("cage_extrusion", "Extrusion")):
             sub = col.column()
-            sub.active = settings.cage_object is None  # a cage object replaces the extrusion
-            sub.prop(settings, "cage_extrusion", text="Extrusion")
-        else:
-            col.prop(settings, "cage_extrusion", text="Extrusion")
+            sub.active = not v.greyed(name)  # a cage object replaces the extrusion
+            sub.prop(settings, name, **({"text": text} if text else {}))
         # Cycles' name, "Max Ray Distance", is cut off at the sidebar's default width; the tooltip keeps it.
         col.prop(settings, "max_ray_distance", text="Ray Distance")
 
@@ -233,12 +291,13 @@ class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         settings = context.scene.mc_ao
+        v = BakeSettings.from_properties(settings)
         layout = self.split_layout()
         col = layout.column()
         col.prop(settings, "samples")
         col.prop(settings, "target_error")
         sub = col.column()
-        sub.active = settings.target_error > 0
+        sub.active = not v.greyed("min_samples")
         sub.prop(settings, "min_samples")
         col = layout.column()
         col.prop(settings, "source")
@@ -308,24 +367,47 @@ def draw_collections(layout, settings, name):
     split.operator(MC_AO_OT_collection_add.bl_idname, text="Add Collection", icon="ADD").setting = name
 
 
+def occluded_by(v):
+    """What occludes the baked objects with settings ``v`` (in effect), in words: the panel's line
+    above the occlusion settings, so that Only Local says whether the ground still counts."""
+    if v.only_local or v.occluders == "SELF":
+        who = "each object alone"
+    else:
+        who = "every rendered object" if v.occluders == "VISIBLE" else "the selected objects"
+        if v.occluder_collections:
+            who = ("objects in " if v.occluders == "VISIBLE" else who + " in ") + ", ".join(v.occluder_collections)
+        if v.exclude_collections:
+            who += ", not in " + ", ".join(v.exclude_collections)
+    if v.ground == "AUTO":
+        who += ", and the ground at each one's lowest point"
+    elif v.ground == "HEIGHT":
+        who += f", and the ground at height {v.ground_height:g}"
+    if "thickness" in v.quantities:
+        who += " (thickness: the object alone)"
+    return f"Occluded by {who}"
+
+
 class VIEW3D_PT_mc_ao_occlusion(_McAoPanel, bpy.types.Panel):
     bl_label = "Occlusion"
     bl_parent_id = "VIEW3D_PT_mc_ao"
 
     def draw(self, context):
         settings = context.scene.mc_ao
+        v = BakeSettings.from_properties(settings)
+        fixed_label(self.layout, context, occluded_by(v.in_effect()), OCCLUDED_BY_LINES, icon="INFO")
         layout = self.split_layout()
         col = layout.column()
         col.prop(settings, "only_local")
         sub = col.column()
-        sub.active = not settings.only_local
+        sub.active = not v.greyed("occluders")
         sub.prop(settings, "occluders")
         for name in COLLECTION_SETTINGS:
             draw_collections(sub, settings, name)
+        # Not under Only Local's greyed-out group: the ground counts with Only Local too (the line above says so).
         col = layout.column()
         col.prop(settings, "ground")
         sub = col.column()
-        sub.active = settings.ground == "HEIGHT"
+        sub.active = not v.greyed("ground_height")
         sub.prop(settings, "ground_height")
         col = layout.column()
         col.prop(settings, "max_distance")
@@ -356,8 +438,9 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
 
     def draw(self, context):
         settings = context.scene.mc_ao
+        v = BakeSettings.from_properties(settings)
         layout = self.split_layout()
-        layout.active = settings.target != "VERTEX_COLORS"  # a color attribute bake has no image
+        layout.active = not v.greyed("resolution")  # a color attribute bake has no image
         col = layout.column(align=True)
         col.prop(settings, "resolution")
         col.prop(settings, "height")
@@ -366,19 +449,25 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
         obj = context.active_object
         if obj is not None and obj.type == "MESH":
             col.prop_search(settings, "uv_map", obj.data, "uv_layers", text="UV Map", icon="GROUP_UVS")
-            default = default_uv_map(obj.data)
-            if not settings.uv_map and default:
-                col.label(text=f"Active render UV map: {default}")
         else:
             col.prop(settings, "uv_map", icon="GROUP_UVS")
-        col.prop(settings, "image_name", **_placeholder("<object>_AO"))
+        # Always one row: which UV map the active object bakes into.
+        default = default_uv_map(obj.data) if obj is not None and obj.type == "MESH" else ""
+        row = col.row()
+        row.active = False
+        row.label(text=f"Active render UV map: {default}" if not settings.uv_map and default else "")
+        col.prop(settings, "image_name", **_placeholder(IMAGE_NAME_PLACEHOLDER))
         col.prop(settings, "float_buffer")
         col.prop(settings, "error_map")
         col = layout.column()
         col.prop(settings, "channel")
         sub = col.column()
-        sub.active = settings.channel != "NONE"
+        sub.active = not v.greyed("into")
         sub.prop(settings, "into")
+
+
+#: The Image field's placeholder: the name an empty field gives, in the token the field takes.
+IMAGE_NAME_PLACEHOLDER = "{object}_AO"
 
 
 class VIEW3D_PT_mc_ao_output(_McAoPanel, bpy.types.Panel):

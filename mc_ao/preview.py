@@ -283,6 +283,16 @@ def hide(obj, space=None):
     del obj[RECORD]
 
 
+def preview_objects(context):
+    """The selected meshes whose AO a preview shows: with Selected to Active on, the active object alone
+    (the low-poly that was baked; the high-poly objects have no AO of their own to show)."""
+    meshes = [obj for obj in context.selected_objects if obj.type == "MESH"]
+    props = getattr(context.scene, "mc_ao", None)
+    if props is not None and props.use_selected_to_active:
+        return [obj for obj in meshes if obj is context.active_object]
+    return meshes
+
+
 class OBJECT_OT_mc_ao_preview(bpy.types.Operator):
     bl_idname = "object.mc_ao_preview"
     bl_label = "Preview AO on Object"
@@ -295,14 +305,14 @@ class OBJECT_OT_mc_ao_preview(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        meshes = [obj for obj in context.selected_objects if obj.type == "MESH"]
+        meshes = preview_objects(context)
         if not meshes:
             cls.poll_message_set("Select a mesh object that has a baked AO")
             return False
         if any(has_preview(obj) for obj in meshes):
             return True  # the click removes it
         # Greyed out, with the reason, where no selected mesh has a baked AO to show yet.
-        settings = BakeSettings.from_properties(context.scene.mc_ao)
+        settings = BakeSettings.from_properties(context.scene.mc_ao).in_effect()
         reasons = [(obj, source_of(obj, settings)) for obj in meshes]
         missing = [(obj, why) for obj, (kind, why) in reasons if kind is None]
         if len(missing) == len(meshes):
@@ -312,8 +322,8 @@ class OBJECT_OT_mc_ao_preview(bpy.types.Operator):
         return True
 
     def execute(self, context):
-        settings = BakeSettings.from_properties(context.scene.mc_ao)
-        objects = [obj for obj in context.selected_objects if obj.type == "MESH"]
+        settings = BakeSettings.from_properties(context.scene.mc_ao).in_effect()
+        objects = preview_objects(context)
         space = context.space_data if context.area is not None and context.area.type == "VIEW_3D" else None
         active = context.active_object if context.active_object in objects else objects[0]
         if has_preview(active):

@@ -189,20 +189,20 @@ SETTINGS = (
                      "(instead of --ground's, at each object's lowest point)",
             ui={"soft_min": -100.0, "soft_max": 100.0, "subtype": "DISTANCE", "unit": "LENGTH"}),
     Setting("quantity", "flags", ("AO",), "Quantity",
-            "What to bake: ambient occlusion into \"<object>_AO\", thickness into \"<object>_Thickness\" "
+            "What to bake: ambient occlusion into \"{object}_AO\", thickness into \"{object}_Thickness\" "
             "(rays into the mesh up to Distance: black is thin, white thick), or both (shift-click)",
-            cli_help="What to bake: ambient occlusion into \"<object>_AO\", thickness into \"<object>_Thickness\" "
+            cli_help="What to bake: ambient occlusion into \"{object}_AO\", thickness into \"{object}_Thickness\" "
                      "(rays into the mesh up to --max-distance: black is thin, white thick), or both "
                      "(--quantity ao thickness)", items=(
-                ("AO", "AO", "Ambient occlusion, into \"<object>_AO\""),
+                ("AO", "AO", "Ambient occlusion, into \"{object}_AO\""),
                 ("THICKNESS", "Thickness", "How thick the mesh is behind each point (black thin, white thick), "
-                                           "into \"<object>_Thickness\"; only the object itself counts"))),
+                                           "into \"{object}_Thickness\"; only the object itself counts"))),
     Setting("uv_map", "str", "", "UV Map", "UV map to bake into; empty for each mesh's active render UV map",
             targets=("image", "udim", "bent")),
     Setting("margin", "int", 16, "Margin", "Extend the baked islands by this many pixels, against seams",
             lo=0, hi="MAX_RESOLUTION", targets=("image", "udim", "bent"), ui={"soft_max": 64, "subtype": "PIXEL"}),
     Setting("image_name", "str", "", "Image",
-            'Image to bake into; empty for "<object>_AO"; "{object}" is replaced by the object name. An '
+            'Image to bake into; empty for "{object}_AO"; {object} is replaced by the object name. An '
             "existing image is reused, resized to the bake's size; files are named after it, made safe",
             targets=("image", "udim", "vertex")),
     Setting("channel", "enum", "NONE", "Channel",
@@ -272,7 +272,7 @@ SETTINGS = (
             "...) into one tiled image, each tile of the bake's size; an existing tiled image is filled tile by "
             "tile, and saved files are named <image>.<tile>.<ext>", key="udim", targets=("udim",)),
     Setting("bent_normals", "bool", False, "Bent Normals",
-            "Also bake each texel's mean unoccluded direction into \"<object>_BentNormal\" (RGB = n / 2 + 1/2, "
+            "Also bake each texel's mean unoccluded direction into \"{object}_BentNormal\" (RGB = n / 2 + 1/2, "
             "Blender's normal map convention), from the same rays", targets=("image", "udim")),
     Setting("bent_space", "enum", "TANGENT", "Space", "Space of the bent normal map", items=(
         ("TANGENT", "Tangent", "Tangent space of the bake's UV map (MikkTSpace, as Blender's normal bake)"),

@@ -37,8 +37,51 @@ FILE_FORMATS = {
 }
 
 
+def _vertex(v):
+    return v.target == "VERTEX_COLORS"
+
+
+#: The settings the panel greys out, and when (a condition on a BakeSettings). A greyed-out setting
+#: has no effect: what the operator bakes takes it at its default (BakeSettings.in_effect), so a value
+#: the panel shows as inactive is neither used nor refused (Channel back to Own Image with an Into
+#: image still set bakes). The panel greys each out by the same condition (mc_ao.panel). The script
+#: and the batch take every option as given.
+GREYED = {
+    "min_samples": lambda v: not v.target_error > 0,
+    "bent_space": lambda v: not v.bent_normals or _vertex(v),
+    "use_cage": lambda v: not v.use_selected_to_active,
+    "cage_object": lambda v: not (v.use_selected_to_active and v.use_cage),
+    "cage_extrusion": lambda v: not v.use_selected_to_active or (v.use_cage and bool(v.cage_object)),
+    "max_ray_distance": lambda v: not v.use_selected_to_active,
+    "occluders": lambda v: v.only_local,
+    "occluder_collections": lambda v: v.only_local,
+    "exclude_collections": lambda v: v.only_local,
+    "ground_height": lambda v: v.ground != "HEIGHT",
+    # the Image section: a color-attribute bake has no image
+    "resolution": _vertex, "height": _vertex, "margin": _vertex, "uv_map": _vertex, "image_name": _vertex,
+    "error_map": _vertex, "channel": _vertex,
+    "into": lambda v: _vertex(v) or v.channel == "NONE",
+    # Save to File's section, closed by its checkbox
+    "file_format": lambda v: not v.save_to_file, "output_dir": lambda v: not v.save_to_file,
+    "link_to_file": lambda v: not v.save_to_file,
+}
+
+
 class _BakeSettingsMethods:
     """What a BakeSettings does with its values; its fields come from mc_ao.schema (see below)."""
+
+    def greyed(self, name):
+        """Whether the panel greys setting ``name`` out with these values (it then has no effect)."""
+        condition = GREYED.get(name)
+        return bool(condition and condition(self))
+
+    def in_effect(self):
+        """These settings with every greyed-out one at its default: what the panel shows as active."""
+        defaults = {name: BY_NAME[name].default for name in GREYED if self.greyed(name)}
+        for name in ("cage_object", "into"):  # pointers: the default is "no datablock"
+            if name in defaults:
+                defaults[name] = ""
+        return dataclasses.replace(self, **defaults) if defaults else self
 
     @classmethod
     def from_properties(cls, props, **overrides):

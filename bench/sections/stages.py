@@ -326,8 +326,10 @@ def main(argv=None):
     ap.add_argument("--stages-only", action="store_true")
     ap.add_argument("--fixed-only", action="store_true")
     ap.add_argument("--no-save", action="store_true")
-    ap.add_argument("--stem", default="stages")
+    ap.add_argument("--stem", default=None, help="results/STEM.{txt,json} (default: stages; stages-fixed with "
+                    "--fixed-only, stages-tiles with --stages-only)")
     a = ap.parse_args(argv)
+    a.stem = a.stem or ("stages-fixed" if a.fixed_only else "stages-tiles" if a.stages_only else "stages")
     res = a.resolution or (256 if a.quick else 512)
     spp = a.samples or (32 if a.quick else 64)
     repeats = a.repeats or (1 if a.quick else 3)

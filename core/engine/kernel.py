@@ -57,15 +57,13 @@ FLAT_COLUMNS, CURVED_COLUMNS = 6, 11
 # (a feature gather at 8 samples a piece: 6.5 -> 2.4 ns a row alone; the row-by-row entries
 # 59 -> 37 ns a ray).
 #: Pieces shorter than this (and located samples, each on its own triangle) are computed row by row
-#: from the matrices' nonzero entries gathered per ray (a batched product of tiny matrices costs
-#: about 100 ns a row); longer pieces take one product per piece.
+#: from the matrices' nonzero entries gathered per ray; longer pieces broadcast each piece's entries
+#: over its samples. Either way Y = X M is elementwise passes, never a BLAS product: numpy's
+#: elementwise arithmetic rounds the same on every numpy line, BLAS and CPU, and a BLAS product of
+#: these small matrices did not (the rays' last bits moved between numpy 1.26 and 2.x).
 ROW_PIECES = 8
 #: The feature planes gathered from the pool (plane 2 is the constant 1).
 _VARYING = (0, 1, 3, 4, 5)
-#: Located pieces of ROW_PIECES samples or more whose candidates' matrices together have at most
-#: this many columns take one product of all of them per piece and keep each sample's own columns;
-#: more candidates go row by row (the product's cost grows with them, the rows' does not).
-ZSELECT_COLUMNS = 36
 #: The nonzero entries (row j of the feature vector, output column c) of each matrix form, grouped
 #: by output column: a position column is M[2, c] + a M[0, c] + b M[1, c], a direction column
 #: f0 M[3, c] + f1 M[4, c] + f2 M[5, c].
@@ -298,13 +296,10 @@ class Kernel:
             best = self._locate(units, unit, x, k)
             pick = units.cand_first[unit][:, None] + best
             tri_s = units.cand_tri[pick].ravel()
-            m = int(units.cand_first[unit[0] + 1] - units.cand_first[unit[0]])
-            zselect = k >= ROW_PIECES and m * (CURVED_COLUMNS if curved else FLAT_COLUMNS) <= ZSELECT_COLUMNS
-            if not zselect:
-                # row by row: each sample moves to its own triangle's texel space
-                tr = units.cand_coef[pick]
-                a += tr[:, :, 0]
-                b += tr[:, :, 1]
+            # each sample moves to its own triangle's texel space
+            tr = units.cand_coef[pick]
+            a += tr[:, :, 0]
+            b += tr[:, :, 1]
             squares = g
         self._texel_space(tile, unit, x, k, squares, located)
         # The texel's turn about the normal: a rotation of the first two direction features.
@@ -317,36 +312,21 @@ class Kernel:
         f1 += f0 * sin_t
         f0[...] = t0
         entries = CURVED_ENTRIES if curved else FLAT_ENTRIES
-        if located and zselect:
-            # Every candidate's matrix (its translation to the texel folded into the constant row)
-            # in one product per piece; each sample keeps its own candidate's columns.
-            cand = units.cand_first[unit][:, None] + np.arange(m)
-            mc = tile.loc_m[tile.loc_slot[units.cand_tri[cand]]]       # (g, m, cols, 6)
-            tr = units.cand_coef[cand]
-            mc[:, :, :, 2] += tr[:, :, 0, None] * mc[:, :, :, 0]
-            mc[:, :, :, 2] += tr[:, :, 1, None] * mc[:, :, :, 1]
-            cols = mc.shape[2]
-            z = np.matmul(x.transpose(1, 2, 0), np.ascontiguousarray(mc.transpose(0, 3, 1, 2)).reshape(g, 6, m * cols))
-            row = ws.idx[:n]
-            np.multiply(ws.ramp[:n], m, out=row)
-            row += best.reshape(n)
-            y = np.take(z.reshape(n * m, cols), row, axis=0, mode="clip").T  # planes (cols, n), strided
+        # Y = X M as planes, from each matrix's nonzero entries: per ray (a located sample's own
+        # triangle's, or those of a short piece's) or per piece, broadcast over its samples.
+        if located:
+            table, slot = tile.loc_rows, tile.loc_slot[tri_s]
         else:
-            # Y = X M as planes, from each matrix's nonzero entries: per ray (a located sample's own
-            # triangle's, or those of a short piece's) or per piece, broadcast over its samples.
-            if located:
-                table, slot = tile.loc_rows, tile.loc_slot[tri_s]
-            else:
-                table = tile.curved_rows if curved else tile.flat_rows
-                slot = tile.slot[units.tri[unit]]
-            y = ws.y[:len(entries) * n].reshape(len(entries), n)
-            if located or k < ROW_PIECES:
-                if not located and k > 1:
-                    slot = np.repeat(slot, k)
-                self._linear(np.take(table, slot, axis=1, mode="clip"), entries, xf, y, ws.f2[:n])
-            else:
-                mt = (tile.curved_m if curved else tile.flat_m)[slot]   # (g, cols, 6)
-                np.matmul(mt, x.transpose(1, 0, 2), out=y.reshape(len(entries), g, k).transpose(1, 0, 2))
+            table = tile.curved_rows if curved else tile.flat_rows
+            slot = tile.slot[units.tri[unit]]
+        y = ws.y[:len(entries) * n].reshape(len(entries), n)
+        if located or k < ROW_PIECES:
+            if not located and k > 1:
+                slot = np.repeat(slot, k)
+            self._linear(np.take(table, slot, axis=1, mode="clip"), entries, xf, y, ws.f2[:n])
+        else:
+            rows = np.take(table, slot, axis=1, mode="clip")[:, :, None]   # (entries, pieces, 1)
+            self._linear(rows, entries, x, y.reshape(len(entries), g, k), ws.f2[:n].reshape(g, k))
         origins = y[0:3].T
         tfar = ws.tfar[:n]
         below = ws.below[:n]
@@ -552,42 +532,33 @@ class Kernel:
         m = int(units.cand_first[unit[0] + 1] - first[0])
         if m == 1:
             return np.zeros((g, k), np.int64)
-        if k < ROW_PIECES:
-            # Short pieces: candidate by candidate over the samples.
-            best = np.zeros((g, k), np.int64)
-            a = x[0].reshape(-1)
-            b = x[1].reshape(-1)
-            best_d = None
-            for c in range(m):
-                e = units.cand_edges[first + c]
-                if k > 1:
-                    e = np.repeat(e, k, axis=0)
-                d = None
-                for j in range(3):
-                    v = e[:, j, 0] * a
-                    v += e[:, j, 1] * b
-                    v += e[:, j, 2]
-                    d = v if d is None else np.minimum(d, v, out=d)
-                if best_d is None:
-                    best_d = d
-                else:
-                    better = d > best_d
-                    best.reshape(-1)[better] = c
-                    np.maximum(best_d, d, out=best_d)
-            return best
-        # Every candidate's three edge functions at every sample: one product (3m, 3) @ [a, b, 1]^T
-        # per piece, rows (edge, candidate), samples along the last axis.
-        ec = np.take(units.cand_edges, first[:, None] + np.arange(m), axis=0, mode="clip")  # (g, m, edge, coef)
-        coef = np.ascontiguousarray(ec.transpose(0, 2, 1, 3)).reshape(g, 3 * m, 3)
-        e = np.matmul(coef, x[0:3].transpose(1, 0, 2))                # (g, 3m, k)
-        d = np.minimum(e[:, 0:m], e[:, m:2 * m])
-        np.minimum(d, e[:, 2 * m:], out=d)                            # (g, m, k)
+        # Candidate by candidate over the samples, elementwise (the same rounding on every numpy
+        # line and CPU, as the kernel's product): a short piece's edge values repeated per sample,
+        # a long piece's broadcast over its samples.
         best = np.zeros((g, k), np.int64)
-        top = d[:, 0].copy()
-        for c in range(1, m):
-            dc = d[:, c]
-            np.copyto(best, c, where=dc > top)
-            np.maximum(top, dc, out=top)
+        short = k < ROW_PIECES
+        a = x[0].reshape(-1) if short else x[0]
+        b = x[1].reshape(-1) if short else x[1]
+        best_d = None
+        for c in range(m):
+            e = units.cand_edges[first + c]
+            if short and k > 1:
+                e = np.repeat(e, k, axis=0)
+            d = None
+            for j in range(3):
+                e0, e1, e2 = e[:, j, 0], e[:, j, 1], e[:, j, 2]
+                if not short:
+                    e0, e1, e2 = e0[:, None], e1[:, None], e2[:, None]
+                v = e0 * a
+                v += e1 * b
+                v += e2
+                d = v if d is None else np.minimum(d, v, out=d)
+            if best_d is None:
+                best_d = d
+            else:
+                better = d > best_d
+                best.reshape(-1)[better.reshape(-1)] = c
+                np.maximum(best_d, d, out=best_d)
         return best
 
 

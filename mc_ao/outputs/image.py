@@ -23,8 +23,24 @@ class ImageOutput(MapOutput):
             listed = ", ".join(map(str, tiles))
             return (f"{job.object_name}: {len(tiles)} UDIM tile{'s' if len(tiles) != 1 else ''} ({listed}) of {w}x{h} "
                     f"into {job.image_name!r} in {result.seconds:.2f} s, {per:.0f} samples per texel, "
-                    f"{rate:.2f} M rays/s")
+                    f"{rate:.2f} M rays/s{self.occlusion_words(job, result)}")
         h, w = result.ao.shape
         sources = f" from {', '.join(s.name for s in job.highpoly)}" if getattr(job, "highpoly", None) else ""
-        return (f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r} in {result.seconds:.2f} s, "
-                f"{per:.0f} samples per texel, {rate:.2f} M rays/s{baking.miss_summary(result)}")
+        return (f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r}{self.channel_words(job)} in "
+                f"{result.seconds:.2f} s, {per:.0f} samples per texel, {rate:.2f} M rays/s"
+                f"{self.occlusion_words(job, result)}{baking.miss_summary(result)}")
+
+    def channel_words(self, job):
+        """" and the red channel of 'ORM'" where the map also goes into Channel of Into."""
+        s = self.settings
+        if s.channel == "NONE" or getattr(job, "quantity", "ao") != s.quantities[0]:
+            return ""
+        return f" and the {CHANNELS[s.channel]} channel of {s.into!r}"
+
+    def occlusion_words(self, job, result):
+        text = baking.occlusion_summary(job, self.settings, result)
+        return f"; {text}" if text else ""
+
+
+#: A Channel setting in a summary's words.
+CHANNELS = {"R": "red", "G": "green", "B": "blue", "A": "alpha"}

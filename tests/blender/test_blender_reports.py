@@ -85,9 +85,10 @@ def test_each_objects_warnings_come_before_its_summary_and_the_total_comes_last(
     number = r"[0-9]+\.[0-9]{2}"
     assert kinds[2] == "WARNING" and re.fullmatch(
         rf"A: 24x24 into 'A_AO' in {number} s, 16 samples per texel, {number} M rays/s; "
-        "2 warnings before this, in the Info editor", texts[2])
+        "occluded by itself and 1 other object; 2 warnings before this, in the Info editor", texts[2])
     assert kinds[3] == "INFO" and re.fullmatch(
-        rf"B: 24x24 into 'B_AO' in {number} s, 16 samples per texel, {number} M rays/s", texts[3])
+        rf"B: 24x24 into 'B_AO' in {number} s, 16 samples per texel, {number} M rays/s; "
+        "occluded by itself and 1 other object", texts[3])
     assert kinds[4] == "WARNING" and re.fullmatch(
         rf"AO bake: 2 objects in {number} s, 16 samples per texel, {number} M rays/s; "
         "2 warnings before this, in the Info editor", texts[4])
@@ -106,7 +107,7 @@ def test_a_clean_bake_ends_with_its_summary_as_info(bpy, scene):
     assert tick_until(bpy, session, lambda: False) == {"FINISHED"}
     kind, text = reports[-1]
     assert kind == "INFO" and text.startswith("Ground: 24x24 into 'Ground_AO' in ") and "warning" not in text
-    assert text.endswith(" M rays/s")
+    assert text.endswith(" M rays/s; occluded by itself and 1 other object")
     assert operators.last_outcome == reports[-1]
 
 
@@ -158,7 +159,9 @@ SIDEBAR = 280
 
 
 @pytest.mark.parametrize("name", ["Flat", "Suzanne without UVs", "A_very_long_object_name_from_an_importer_001"])
-def test_the_no_uv_reason_wraps_at_the_sidebars_width(bpy, scene, name):
+def test_the_no_uv_reason_fills_its_rows_at_the_sidebars_width(bpy, scene, name):
+    """The reason takes the rows of the panel's first line whatever it says, each row within the
+    sidebar's width; what does not fit ends in an ellipsis (the button's tooltip has it whole)."""
     from mc_ao import baking, panel
 
     flat = add_plane(bpy, name, size=2)
@@ -167,33 +170,52 @@ def test_the_no_uv_reason_wraps_at_the_sidebars_width(bpy, scene, name):
     reason = baking.why_not_bakeable([flat])
     labels = draw_main_panel(bpy, SIDEBAR)
 
-    assert " ".join(text for text, _ in labels) == reason  # all of it, in order
-    assert len(labels) > 1 and labels[0][1] == "INFO" and all(icon == "BLANK1" for _, icon in labels[1:])
+    rows = labels[:panel.WHAT_LINES]
+    shown = " ".join(text for text, _ in rows if text)
+    assert shown == reason or (shown.endswith("\u2026") and reason.startswith(shown[:-1].rstrip("\u2026 ")[:20]))
+    assert rows[0][1] == "INFO" and all(icon == "BLANK1" for text, icon in rows[1:] if text)
     room = SIDEBAR - panel.LABEL_INSET
     for text, _ in labels:
-        assert panel.text_width(text, bpy.context) <= room or " " not in text, text
+        assert panel.text_width(text, bpy.context) <= room, text
+    assert len(labels) == ROWS  # the same rows as a bake that can go
+
+
+#: Rows of the main panel under its two buttons, whatever they say.
+ROWS = 7
 
 
 def test_the_panel_shows_the_last_bakes_outcome(bpy, scene):
+    from mc_ao import panel
+
     ground = add_plane(bpy, "Ground", size=4)
     select_only(bpy, ground)
     outcome = ("WARNING", "Ground: 24x24 into 'Ground_AO' in 0.05 s, 16 samples per texel, 1.00 M rays/s; "
                           "1 warning before this, in the Info editor")
     labels = draw_main_panel(bpy, SIDEBAR, last_outcome=outcome)
+    assert ROWS == panel.WHAT_LINES + panel.ESTIMATE_LINES + panel.NOTE_LINES + panel.LAST_LINES
+    assert len(labels) == ROWS
     assert labels[0] == ("Into Ground_AO", "IMAGE_DATA")
-    start = next(i for i, (text, _) in enumerate(labels) if text.startswith("Last bake: "))
-    assert labels[start - 1][1] in ("TIME", "BLANK1")  # the estimate's line(s) between them
-    assert " ".join(text for text, _ in labels[start:]) == "Last bake: " + outcome[1]
-    assert labels[start][1] == "ERROR"  # the warning icon
-    assert not any(text.startswith("Last bake") for text, _ in draw_main_panel(bpy, SIDEBAR))  # before any bake
+    last = labels[ROWS - panel.LAST_LINES:]
+    assert last[0][0].startswith("Last bake: Ground: 24x24") and last[0][1] == "ERROR"  # the warning icon
+    shown = " ".join(text for text, _ in last)
+    assert shown.endswith("\u2026") and ("Last bake: " + outcome[1]).startswith(shown[:-2])
+    before = draw_main_panel(bpy, SIDEBAR)
+    assert len(before) == ROWS and not any(text.startswith("Last bake") for text, _ in before)  # before any bake
 
 
-def test_wrap_text_cuts_at_spaces_and_keeps_long_words_whole(addon):
+def test_fitted_lines_cut_at_spaces_into_a_fixed_number_of_rows(addon):
     from mc_ao import panel
 
-    assert panel.wrap_text("aa bb cc dd", 5, len) == ["aa bb", "cc dd"]
-    assert panel.wrap_text("aa bbbbbbbb cc", 5, len) == ["aa", "bbbbbbbb", "cc"]
-    assert panel.wrap_text("", 5, len) == [""]
+    assert panel.fitted_lines("aa bb cc dd", 5, len, 2) == ["aa bb", "cc dd"]
+    assert panel.fitted_lines("aa bb", 5, len, 3) == ["aa bb", "", ""]
+    assert panel.fitted_lines("aa bb cc dd ee", 5, len, 2) == ["aa bb", "cc \u2026"]
+    assert panel.fitted_lines("aa bbbbbbbb cc", 5, len, 3) == ["aa", "bbbb\u2026", "cc"]  # a word longer than a row
+    assert panel.fitted_lines("aabbccddee ff", 5, len, 1) == ["aabb\u2026"]
+    assert panel.fitted_lines("", 5, len, 2) == ["", ""]
+    for text in ("aa bb cc dd ee ff", "aabbccddeeff gg", "a b c d e f g h i j"):
+        for rows in (1, 2, 3):
+            lines = panel.fitted_lines(text, 5, len, rows)
+            assert len(lines) == rows and all(len(line) <= 5 for line in lines), (text, rows, lines)
 
 
 def test_the_last_bake_line_belongs_to_the_file_and_the_last_action(bpy, scene, tmp_path):
@@ -206,12 +228,12 @@ def test_the_last_bake_line_belongs_to_the_file_and_the_last_action(bpy, scene, 
     assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
     assert operators.last_outcome[0] == "INFO"
     # A refused bake (settings that cannot go together, found when it starts) is the last action now.
-    scene.mc_ao.target, scene.mc_ao.error_map = "VERTEX_COLORS", True
+    scene.mc_ao.target, scene.mc_ao.quantity = "VERTEX_COLORS", {"AO", "THICKNESS"}
     with pytest.raises(RuntimeError):
         bpy.ops.object.mc_ao_bake()
     assert operators.last_outcome is not None and operators.last_outcome[0] == "ERROR"
-    assert "error_map" in operators.last_outcome[1].lower().replace(" ", "_")
-    scene.mc_ao.target, scene.mc_ao.error_map = "IMAGE_TEXTURES", False
+    assert "one quantity" in operators.last_outcome[1]
+    scene.mc_ao.target, scene.mc_ao.quantity = "IMAGE_TEXTURES", {"AO"}
     assert bpy.ops.object.mc_ao_bake() == {"FINISHED"} and operators.last_outcome[0] == "INFO"
     # Another file: nothing of this one's bake is shown there.
     other = tmp_path / "other.blend"
@@ -239,8 +261,10 @@ def test_the_panel_shows_what_the_bake_will_cost_and_warns_before_it_does_not_fi
     assert estimate == f"Estimate: {cost.describe()}"
     assert not any(icon == "ERROR" for _, icon in labels)
     monkeypatch.setattr(corelink.load("execution.workers"), "memory_limit", lambda: 1 << 20)  # 1 MiB free
-    warned = [text for text, icon in draw_main_panel(bpy, SIDEBAR) if icon == "ERROR"]
-    assert warned and warned[0].startswith("This bake needs about")
+    labels = draw_main_panel(bpy, SIDEBAR)
+    warned = [text for text, icon in labels if icon == "ERROR"]
+    assert warned and warned[0].startswith("Estimate: ") and len(labels) == ROWS
+    assert "GiB free" in " ".join(text for text, _ in labels)
 
 
 def collection_of(bpy, name, *objects):
@@ -270,11 +294,12 @@ def grid(bpy, name, cuts, location):
 
 
 def shown_estimate(bpy):
-    """The panel's estimate line, its wrapped lines joined."""
+    """The panel's estimate line, its rows joined."""
+    from mc_ao import panel
+
     labels = draw_main_panel(bpy, SIDEBAR)
     start = [icon for _, icon in labels].index("TIME")
-    end = next((i for i in range(start + 1, len(labels)) if labels[i][1] != "BLANK1"), len(labels))
-    return " ".join(text for text, _ in labels[start:end])
+    return " ".join(text for text, _ in labels[start:start + panel.ESTIMATE_LINES] if text)
 
 
 def occluder_triangles(job):

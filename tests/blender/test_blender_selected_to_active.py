@@ -79,7 +79,7 @@ def test_bakes_the_selected_objects_onto_the_active_one(bpy, scene, capfd):
     select_only(bpy, low, high)  # the active object last, as in Cycles
     bpy.context.view_layer.objects.active = low
     assert bpy.ops.object.mc_ao_bake.poll()
-    assert panel_labels(bpy)[-2:] == ["From High onto Low", "Into Low_AO"]
+    assert panel_labels(bpy)[-1:] == ["From High onto Low, into Low_AO"]
     result, error, reports = run(bpy, capfd)
     assert (result, error) == ({"FINISHED"}, None)
     assert "High_AO" not in bpy.data.images and "Box_AO" not in bpy.data.images
@@ -157,7 +157,7 @@ def test_several_selected_objects_bake_onto_the_active_one(bpy, scene, capfd):
     s2a_scene(scene, cage_extrusion=0.1, margin=0)
     select_only(bpy, low, left, right, lamp)
     bpy.context.view_layer.objects.active = low
-    assert panel_labels(bpy)[-2:] == ["From Left, Right onto Low", "Into Low_AO"]
+    assert panel_labels(bpy)[-1:] == ["From Left, Right onto Low, into Low_AO"]
     result, error, reports = run(bpy, capfd)
     assert (result, error) == ({"FINISHED"}, None)
     assert ("WARNING", "Lamp: skipped, it is a light, not a mesh") in reports

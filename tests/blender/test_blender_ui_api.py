@@ -108,8 +108,9 @@ def test_panels_use_only_what_this_blenders_uilayout_has(bpy, scene, addon, stat
     # A sidebar as narrow as Blender's default, so that the labels that wrap are drawn line by line.
     context = types.SimpleNamespace(scene=scene, selected_objects=bpy.context.selected_objects,
                                     active_object=bpy.context.view_layer.objects.active,
+                                    region=types.SimpleNamespace(width=240), preferences=bpy.context.preferences,
                                     view_layer=bpy.context.view_layer,
-                                    region=types.SimpleNamespace(width=240), preferences=bpy.context.preferences)
+                                    evaluated_depsgraph_get=bpy.context.evaluated_depsgraph_get)
     for cls in classes:
         if cls.__name__ == "McAoPreferences":
             fake = types.SimpleNamespace(layout=CheckingLayout(bpy, calls), threads=0)

@@ -1,0 +1,81 @@
+"""What the Bake AO button's poll can tell before the click, cheaply: the bake's image names against
+each other and against Blender's images, and the Into image of Channel. Poll runs at every redraw,
+so only names and datablock fields are read here, no file and no pixels (an image not yet loaded is
+left to the checks after the click, mc_ao.service.plan, which stay the ones that hold for the script).
+"""
+
+from . import baking
+
+__all__ = ["problem"]
+
+#: Image.source values an image of a plain bake can be (a tiled one takes UDIM bakes only).
+PLAIN_SOURCES = {"GENERATED", "FILE"}
+
+
+def image_names(settings, target_name):
+    """Every image a bake of ``target_name`` makes or fills: each quantity's, the bent normals', the
+    error map's."""
+    max_bytes = baking.id_name_max_bytes()
+    names = [settings.quantity_image_name_for(target_name, q, max_bytes) for q in settings.quantities]
+    if settings.bent_normals and not settings.vertex_colors:
+        names.append(settings.bent_image_name_for(target_name, max_bytes))
+    if settings.error_map and not settings.vertex_colors:
+        names += [settings.stderr_image_name_for(target_name, max_bytes)] if "ao" in settings.quantities else []
+    return names
+
+
+def problem(settings, targets, images):
+    """Why a bake of ``targets`` (objects) with ``settings`` (in effect) would be refused after the
+    click, as far as names and ``images`` (bpy.data.images, or name -> image) tell; or None."""
+    if settings.vertex_colors:
+        return None  # a colour attribute: no image
+    owners = {}
+    for obj in targets:
+        for name in image_names(settings, obj.name):
+            if name in owners and owners[name] != obj.name:
+                return (f"{owners[name]} and {obj.name} would both bake into image {name!r}: put {{object}} into "
+                        "the Image name")
+            owners[name] = obj.name
+            image = images.get(name)
+            if image is None:
+                continue
+            if settings.use_udim and image.source != "TILED":
+                return (f"image {name!r} is a {image.source.lower()} image, not a tiled (UDIM) one: rename or "
+                        "remove it, or choose another Image name")
+            if not settings.use_udim and image.source not in PLAIN_SOURCES:
+                return f"image {name!r} is a {image.source.lower()} image: bake into a plain image (another Image name)"
+    if settings.channel != "NONE":
+        return _into_problem(settings, targets, owners, images)
+    return None
+
+
+def _into_problem(settings, targets, owners, images):
+    into = settings.into
+    if not into:
+        return f"Into: choose the image whose {settings.channel} channel receives the AO"
+    if into in owners:
+        return (f"image {into!r} is both {owners[into]}'s own image and the Into image: one would replace the "
+                "other; choose another Into or Image name")
+    if len(targets) > 1:
+        return (f"{targets[0].name} and {targets[1].name} would both write into the {settings.channel} channel of "
+                f"{into!r}, each the whole channel: bake one object at a time into it")
+    image = images.get(into)
+    if image is None:
+        return f"Into: there is no image named {into!r} any more; choose the image to write the AO into"
+    size = _known_size(image)
+    w, h = settings.size
+    if size is not None and size != (w, h):
+        return (f"Into image {into!r} is {size[0]}x{size[1]}, not the bake's {w}x{h}: set Size to "
+                f"{size[0]}{'' if size[0] == size[1] else ' and Height to %d' % size[1]} to write into its "
+                f"{settings.channel} channel")
+    return None
+
+
+def _known_size(image):
+    """The size of ``image`` where Blender knows it without loading anything: a generated image's, or
+    one whose pixels are in memory; else None (the check after the click reads it)."""
+    if getattr(image, "has_data", False):
+        return tuple(int(s) for s in image.size)
+    if image.source == "GENERATED":
+        return int(image.generated_width), int(image.generated_height)
+    return None
