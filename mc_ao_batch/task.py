@@ -7,8 +7,11 @@ later run reads back to decide whether the task is done:
 
 - the summary's run ended with exit status 0 and every object in it has status "ok";
 - it was made by this output version (:data:`core._version.OUTPUT_VERSION`);
-- every file it lists exists and carries, in its metadata, the settings the summary records (all but
-  the choice of objects, such as match_suffix, which no file carries) and the same output version.
+- every file it lists exists and is the very file the bake wrote (its size and modification time as
+  the summary records them), or else carries, in its metadata, the settings the summary records (all
+  but the choice of objects, such as match_suffix, which no file carries) and the same output version
+  (an output folder copied elsewhere); a channel-packed copy of another image, which keeps that
+  image's attributes, counts as done only as the file the bake wrote.
 
 The fingerprint covers the .blend file (path, size, modification time), every setting that changes
 the output and the output version, so a changed asset or setting bakes again and everything else is
@@ -160,6 +163,11 @@ def _why_not_complete(task, summary_path, version):
             path = os.path.join(task.output, os.path.basename(recorded))
             if not os.path.isfile(path):
                 return f"{path} is missing"
+            if _as_written(path, (obj.get("file_stats") or {}).get(os.path.basename(recorded))):
+                # The very file the bake wrote (its size and time as the summary recorded them): also a
+                # copy of another image with the map in one of its channels (Channel and Into), which keeps
+                # that image's attributes and carries no record of the bake to check.
+                continue
             try:
                 if path.lower().endswith(".ply"):  # --target vertex-colors
                     from core.files.plyio import read_ply
@@ -181,6 +189,17 @@ def _why_not_complete(task, summary_path, version):
                 if key not in metadata or not _same(metadata[key], value):
                     return f"{path}: {key} is {metadata.get(key)!r}, the bake recorded {value!r}"
     return None
+
+
+def _as_written(path, recorded_stat):
+    """Whether the file at ``path`` has the [size, modification time in ns] the bake's summary recorded."""
+    if not recorded_stat:
+        return False
+    try:
+        st = os.stat(path)
+    except OSError:
+        return False
+    return [st.st_size, st.st_mtime_ns] == list(recorded_stat)
 
 
 def _record(task, status, **fields):

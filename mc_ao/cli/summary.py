@@ -35,6 +35,7 @@ class Summary:
         self.objects.append({
             "object": name, "status": status, "seconds": float(seconds), "rays": int(rays),
             "samples_per_texel": float(samples_per_texel), "files": [str(f) for f in files],
+            "file_stats": {os.path.basename(str(f)): stat for f in files for stat in [file_stat(f)] if stat},
             "error": None if error is None else str(error), **extra,
         })
 
@@ -63,6 +64,17 @@ class Summary:
             print(f"bake_ao: error: the summary {str(self.path)!r} was not written: {exc}", file=sys.stderr)
             return False
         return True
+
+
+def file_stat(path):
+    """[size, modification time in ns] of a file the run wrote, as it left it (None where it cannot be
+    read): what tells a later run that a file carrying no metadata of the bake (a channel-packed copy of
+    another image keeps that image's attributes) is still the one this run wrote."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return [st.st_size, st.st_mtime_ns]
 
 
 def s2a_record(job, result=None):
