@@ -31,14 +31,15 @@ PARALLEL_EFFICIENCY = 0.9
 #: per ray of a chunk in flight.
 BYTES_PER_TEXEL, BYTES_PER_PROCESS, BYTES_PER_CHUNK_RAY = 26, 150 << 20, 200
 #: Bytes per triangle of a process that bakes tiles, at its peak beyond its idle size
-#: (bench.sections.memory, 2M-triangle grids on 2 workers, bench/results/memory.txt): a target's
-#: (its UV triangles, surface table, Embree scene, the positions and triangles it was sent: 415
-#: measured), an occluder's (two Embree scenes, occlusion and contact: 412) and a high-poly mesh's
-#: (one robust scene that matches and occludes: 193; 161 at 10M triangles), with some headroom.
-BYTES_PER_TRIANGLE, BYTES_PER_OCCLUDER_TRIANGLE, BYTES_PER_HIGHPOLY_TRIANGLE = 480, 450, 220
+#: (bench.sections.memory, 2M-triangle grids on 2 workers, bench/results/memory*.txt): a target's
+#: (its float32 UV triangles and surface table, Embree scene, the positions and triangles it was sent:
+#: 283 measured, memory-pss-float32.txt), an occluder's (two Embree scenes, occlusion and contact:
+#: 412) and a high-poly mesh's (one robust scene that matches and occludes: 193; 161 at 10M
+#: triangles), with some headroom.
+BYTES_PER_TRIANGLE, BYTES_PER_OCCLUDER_TRIANGLE, BYTES_PER_HIGHPOLY_TRIANGLE = 340, 450, 220
 #: Bytes per triangle the parent adds while worker processes bake (its UV triangles and tiles of the
-#: target: 112 measured; 30 for an occluder or a high-poly mesh), beyond the caller's own arrays.
-BYTES_PER_PARENT_TRIANGLE, BYTES_PER_PARENT_OTHER_TRIANGLE = 140, 40
+#: target: 90 measured; 30 for an occluder or a high-poly mesh), beyond the caller's own arrays.
+BYTES_PER_PARENT_TRIANGLE, BYTES_PER_PARENT_OTHER_TRIANGLE = 110, 40
 
 
 @dataclass(frozen=True)

@@ -84,7 +84,7 @@ class SeamLookups:
         """The lookups of the points ``which`` (a boolean mask or indices) alone."""
         fields = ("index", "weight", "length", "edge", "target", "triangle", "uv", "crease")
         return SeamLookups(shape=self.shape, edges=self.edges, tiles=self.tiles, wrap=self.wrap,
-                           **{f: getattr(self, f)[which] for f in fields})
+                           **{f: None if getattr(self, f) is None else getattr(self, f)[which] for f in fields})
 
     def difference(self, planes):
         """Lookup A - lookup B at every point (K,) float64, of ``planes`` ((N, H, W), or (H, W) for
@@ -173,7 +173,7 @@ def _bilinear(uv, width, height, wrap):
     return rows, cols, w
 
 
-def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel=POINTS_PER_TEXEL):
+def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel=POINTS_PER_TEXEL, keep_points=True):
     """The seam points of ``meshes`` (one core.Mesh or a list: the targets of one image) and their
     two bilinear lookups in a ``resolution`` image.
 
@@ -184,6 +184,7 @@ def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel
     tiles : None: one image, UVs looked up as they are (wrapping outside [0, 1]); or UDIM tile
         numbers: one plane per tile in this order, each point looked up in its own tile.
     wrap : 'repeat' (the Image Texture node's default Extension) or 'extend'.
+    keep_points : False: no ``triangle`` and ``uv`` (None; what the fix does not need, 48 bytes a point).
 
     Returns
     -------
@@ -225,7 +226,8 @@ def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel
     total = sum(int(m[-1].sum()) for m in per_mesh)
     out = dict(index=np.empty((total, 8), itype), weight=np.empty((total, 8)), length=np.empty(total),
                edge=np.empty(total, np.int64), target=np.empty(total, np.int32),
-               triangle=np.empty((total, 2), np.int64), uv=np.empty((total, 2, 2)), crease=np.empty(total, bool))
+               triangle=np.empty((total, 2), np.int64) if keep_points else None,
+               uv=np.empty((total, 2, 2)) if keep_points else None, crease=np.empty(total, bool))
     at = edges = 0
     for m_i, (a0, a1, b0, b1, cA, cB, tris, crease, length, n) in enumerate(per_mesh):
         # Edges in slices of about CHUNK points: the temporaries stay small whatever the image.
@@ -255,17 +257,19 @@ def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel
             for j, (p, idx, bw) in enumerate(sides):
                 out["index"][dst, 4 * j:4 * j + 4] = idx[keep]
                 out["weight"][dst, 4 * j:4 * j + 4] = bw[keep]
-                out["uv"][dst, j] = p[keep]
+                if keep_points:
+                    out["uv"][dst, j] = p[keep]
             out["length"][dst] = (length / n)[e][keep]
             out["edge"][dst] = (e + edges)[keep]
             out["target"][dst] = m_i
-            out["triangle"][dst] = tris[e][keep]
+            if keep_points:
+                out["triangle"][dst] = tris[e][keep]
             out["crease"][dst] = crease[e][keep]
             at += k
             lo = hi
         edges += len(n)
     if at < total:  # points in no listed tile
-        out = {key: v[:at].copy() for key, v in out.items()}
+        out = {key: None if v is None else v[:at].copy() for key, v in out.items()}
     return SeamLookups(shape=(n_planes, h, w), edges=edges, tiles=tiles, wrap=wrap, **out)
 
 

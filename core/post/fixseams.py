@@ -41,7 +41,7 @@ class SeamFix:
     """What :func:`fix_seams` did: texels (flat indices it changed the values of), iterations,
     residual (the preconditioned residual's norm over the initial one), before and after (the
     mismatch of the lookups at smooth seams, those it makes agree), unknowns (texels it solved
-    for)."""
+    for), rounds (solves, each holding texels at a bound), points (the smooth seams' points)."""
 
     texels: np.ndarray
     iterations: int
@@ -50,6 +50,7 @@ class SeamFix:
     after: float
     unknowns: int
     rounds: int = 1
+    points: int = 0
 
 
 class _System:
@@ -183,7 +184,7 @@ def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.
     if lookups.crease is not None and lookups.crease.any():
         lookups = lookups.subset(~lookups.crease)
     before = lookups.mismatch(values)
-    none = SeamFix(np.zeros(0, np.int64), 0, 0.0, before, before, 0)
+    none = SeamFix(np.zeros(0, np.int64), 0, 0.0, before, before, 0, 0, lookups.points)
     if not lookups.points:
         return out, se_out, none
     flat = values.reshape(-1), stderr.reshape(-1), np.asarray(mask).reshape(-1)
@@ -224,7 +225,20 @@ def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.
     d = new[cov].astype(np.float64) - y0[solvable][cov]
     se_out.reshape(-1)[texels[cov]] = np.sqrt(s0 ** 2 + d * d).astype(se_out.dtype)
     after = lookups.mismatch(out)
-    return out, se_out, SeamFix(texels, total, res, before, after, int(solvable.sum()), round_ + 1)
+    return out, se_out, SeamFix(texels, total, res, before, after, int(solvable.sum()), round_ + 1, lookups.points)
 
 
-__all__ = ["fix_seams", "SeamFix", "SEAM_WEIGHT", "MARGIN_WEIGHT", "TOLERANCE", "MAX_ITERATIONS", "BOUND_ROUNDS"]
+def fix_baked(target, ao, stderr, mask, tiles=None, owner=None):
+    """Fix the seams of a baked map in place: :func:`fix_seams` over the lookups of ``target``'s seams
+    (:func:`core.geometry.seams.seam_lookups`, Blender's defaults: Linear, Repeat) in ``ao`` ((H, W), or
+    (N, H, W) UDIM tiles in the order of ``tiles``), ``stderr`` and ``mask`` the same shape. Returns
+    the :class:`SeamFix`."""
+    from ..geometry.seams import seam_lookups
+
+    h, w = ao.shape[-2:]
+    lookups = seam_lookups(target, (w, h), tiles=tiles, keep_points=False)
+    _, _, info = fix_seams(ao, stderr, mask, lookups, owner=owner, out=ao, stderr_out=stderr)
+    return info
+
+
+__all__ = ["fix_seams", "fix_baked", "SeamFix", "SEAM_WEIGHT", "MARGIN_WEIGHT", "TOLERANCE", "MAX_ITERATIONS", "BOUND_ROUNDS"]
