@@ -725,7 +725,12 @@ def write_channel(path, channel, values, *, source=None):
             v = (np.rint(np.clip(column, 0.0, 1.0) * top) / top).astype(np.float32)
         new[:, :, index] = v
     out_spec = oiio.ImageSpec(spec)
-    out_spec.attribute("oiio:UnassociatedAlpha", 1)  # alpha is written as stored, as it was read
+    # Alpha is written as stored, as it was read, and keeps its kind: a TIFF whose alpha is associated
+    # (premultiplied: no tiff:UnassociatedAlpha) stays so; the others are written unassociated.
+    if src.lower().endswith((".tif", ".tiff")) and not spec.get_int_attribute("tiff:UnassociatedAlpha", 0):
+        out_spec.erase_attribute("oiio:UnassociatedAlpha")
+    else:
+        out_spec.attribute("oiio:UnassociatedAlpha", 1)
 
     def write(temp):
         _write_spec(oiio, temp, out_spec, new)
