@@ -26,9 +26,11 @@ PROPERTY = "mc_ao_bake"
 #: Bytes of pixels kept for file images (each bake's, for undo), at most.
 KEEP_BYTES = 1 << 30
 
-_shown = {}  # image name -> the token whose pixels its buffer holds
-_in_file = {}  # image name -> the token whose pixels its file holds
-_kept = collections.OrderedDict()  # (image name, token) -> pixels (H, W, C) float32
+# Keyed by the image's session_uid, which undo and redo keep for the same datablock and a new image (one
+# made after a baked image was deleted, under its name) does not share.
+_shown = {}  # image -> the token whose pixels its buffer holds
+_in_file = {}  # image -> the token whose pixels its file holds
+_kept = collections.OrderedDict()  # (image, token) -> pixels (H, W, C) float32
 
 
 def _loads_from_file(image):
@@ -39,11 +41,12 @@ def record(image):
     """Tag ``image`` as baked now (after its pixels are stored, packed or saved and linked)."""
     token = uuid.uuid4().hex[:16]
     image[PROPERTY] = token
-    _shown[image.name] = token
+    uid = image.session_uid
+    _shown[uid] = token
     if _loads_from_file(image):
-        _in_file[image.name] = token
+        _in_file[uid] = token
         pixels = _images.pixels_of(image)
-        _kept[(image.name, token)] = pixels
+        _kept[(uid, token)] = pixels
         while sum(p.nbytes for p in _kept.values()) > KEEP_BYTES and len(_kept) > 1:
             _kept.popitem(last=False)
 
@@ -51,24 +54,32 @@ def record(image):
 def after_undo():
     """undo_post / redo_post: every image whose restored token is not its pixels' is read again."""
     for image in bpy.data.images:
+        uid = image.session_uid
         token = image.get(PROPERTY)
-        shown = _shown.get(image.name)
-        if token == shown or (token is None and shown is None):
+        shown = _shown.get(uid)
+        if token == shown or shown is None:  # as baked, or never baked in this session
             continue
-        kept = _kept.get((image.name, token)) if token is not None else None
-        if (_loads_from_file(image) and kept is not None and _in_file.get(image.name) != token
-                and kept.shape[:2] == (image.size[1], image.size[0])):
-            _images.set_pixels(image, kept)  # the file holds another bake: these pixels are only here
+        if token is None:  # back to before its first bake here
+            _shown.pop(uid, None)
+            if image.source == "GENERATED" and image.packed_file is None:
+                continue  # its pixels then were never stored anywhere: the bake's stay
+            image.buffers_free()  # its packed data or its file, as they were
         else:
+            _shown[uid] = token
+            kept = _kept.get((uid, token))
+            if (_loads_from_file(image) and kept is not None and _in_file.get(uid) != token
+                    and kept.shape[:2] == (image.size[1], image.size[0])):
+                _images.set_pixels(image, kept)  # the file holds another bake: these pixels are only here
+                continue
             image.buffers_free()  # read again from its packed data, its file, or regenerated
-            image.update_tag()  # the 3D Viewport's texture follows a depsgraph tag (mc_ao.images.set_pixels)
-            for window in bpy.context.window_manager.windows:
-                for area in window.screen.areas:
-                    area.tag_redraw()
-        if token is None:
-            _shown.pop(image.name, None)
-        else:
-            _shown[image.name] = token
+        _redraw(image)
+
+
+def _redraw(image):
+    image.update_tag()  # the 3D Viewport's texture follows a depsgraph tag (mc_ao.images.set_pixels)
+    for window in bpy.context.window_manager.windows:
+        for area in window.screen.areas:
+            area.tag_redraw()
 
 
 def forget():

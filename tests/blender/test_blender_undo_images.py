@@ -69,3 +69,38 @@ def test_a_file_image_gets_the_pixels_of_the_bake_the_undo_came_to(bpy, addon, t
     undo_images.after_undo()
     assert np.array_equal(red(image), b)
     bpy.data.images.remove(image)
+
+
+def test_a_new_image_under_a_baked_ones_name_keeps_its_pixels(bpy, addon):
+    """A baked image deleted, another made under its name and painted: an undo does not touch it (its
+    pixels are in no file; the handler once took it for the baked one and freed them)."""
+    from mc_ao import undo_images
+
+    undo_images.forget()
+    image = bpy.data.images.new("undo reused name", 8, 8)
+    fill(bpy, image, 0.25)
+    image.pack()
+    undo_images.record(image)
+    bpy.data.images.remove(image)
+    fresh = bpy.data.images.new("undo reused name", 8, 8)
+    fill(bpy, fresh, 0.6)  # painted, not packed, no file
+    painted = red(fresh)
+    undo_images.after_undo()
+    assert np.array_equal(red(fresh), painted) and painted.min() > 0.5
+    bpy.data.images.remove(fresh)
+
+
+def test_undone_to_before_the_first_bake_a_generated_image_keeps_the_bakes_pixels(bpy, addon):
+    """Its pixels before the bake were never stored (a painted generated image): freeing its buffer
+    would give a blank image, not those pixels; it keeps the bake's."""
+    from mc_ao import undo_images
+
+    undo_images.forget()
+    image = bpy.data.images.new("undo generated", 8, 8)
+    fill(bpy, image, 0.3)
+    baked = red(image)
+    undo_images.record(image)  # (as if baked and left unpacked)
+    del image[undo_images.PROPERTY]
+    undo_images.after_undo()
+    assert np.array_equal(red(image), baked) and baked.min() > 0.25
+    bpy.data.images.remove(image)
