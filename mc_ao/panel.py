@@ -136,8 +136,7 @@ class VIEW3D_PT_mc_ao(_McAoPanel, bpy.types.Panel):
         layout.operator(preview.OBJECT_OT_mc_ao_preview.bl_idname, icon="HIDE_ON" if shown else "SHADING_TEXTURE",
                         text="Remove AO Preview" if shown else "Preview on Object", depress=shown)
         if is_running():
-            fixed_label(layout, context, "Baking, Esc cancels", WHAT_LINES, icon="TIME")
-            fixed_label(layout, context, "", ESTIMATE_LINES + NOTE_LINES)
+            draw_lines(layout, context, ("Baking, Esc cancels", "TIME"))
         else:
             draw_targets(layout, context)
         outcome = operators.last_outcome
@@ -154,8 +153,7 @@ def draw_targets(layout, context):
     choice, reason = operators.choice_of(context)
     note, note_icon = "", "NONE"
     if reason is not None:
-        fixed_label(layout, context, reason, WHAT_LINES, icon="INFO")
-        fixed_label(layout, context, "", ESTIMATE_LINES + NOTE_LINES)
+        draw_lines(layout, context, (reason, "INFO"))
         return
     if settings.use_selected_to_active:
         what, icon, targets, highpoly, cage = selected_to_active_text(context, settings)
@@ -169,11 +167,15 @@ def draw_targets(layout, context):
                      for obj in skipped[:MAX_SKIPPED_LINES]]
             more = f" and {len(skipped) - MAX_SKIPPED_LINES} more" if len(skipped) > MAX_SKIPPED_LINES else ""
             note, note_icon = f"Skipped: {', '.join(names)}{more}", "ERROR"
-    fixed_label(layout, context, what, WHAT_LINES, icon=icon)
     estimate, too_big = cost_text(context, settings, targets, highpoly, cage)
-    fixed_label(layout, context, estimate, ESTIMATE_LINES,
-                icon="ERROR" if too_big else "TIME" if estimate else "NONE")
-    fixed_label(layout, context, note, NOTE_LINES, icon=note_icon)
+    draw_lines(layout, context, (what, icon), (estimate, "ERROR" if too_big else "TIME"), (note, note_icon))
+
+
+def draw_lines(layout, context, what, estimate=("", "NONE"), note=("", "NONE")):
+    """The lines under the buttons, each ``(text, icon)``, in their fixed rows: always the same
+    labels in the same columns (a column more or less moves what is below by its spacing)."""
+    for (text, icon), lines in ((what, WHAT_LINES), (estimate, ESTIMATE_LINES), (note, NOTE_LINES)):
+        fixed_label(layout, context, text, lines, icon=icon if text else "NONE")
 
 
 def targets_text(settings, targets):
@@ -250,7 +252,7 @@ class VIEW3D_PT_mc_ao_target(_McAoPanel, bpy.types.Panel):
         if settings.target == "VERTEX_COLORS":
             col.prop(settings, "attribute_name", icon="GROUP_VCOL")
             col.prop(settings, "attribute_domain")
-            col.prop(settings, "float_buffer", text="Float Color")
+            col.column().prop(settings, "float_buffer", text="Float Color")  # the shape of Space's row below
             return
         col.prop(settings, "use_udim")
         col.prop(settings, "bent_normals")
@@ -379,9 +381,9 @@ def occluded_by(v):
         if v.exclude_collections:
             who += ", not in " + ", ".join(v.exclude_collections)
     if v.ground == "AUTO":
-        who += ", and the ground at each one's lowest point"
+        who += ", and the ground under each"
     elif v.ground == "HEIGHT":
-        who += f", and the ground at height {v.ground_height:g}"
+        who += f", and the ground at Z {v.ground_height:g}"
     if "thickness" in v.quantities:
         who += " (thickness: the object alone)"
     return f"Occluded by {who}"

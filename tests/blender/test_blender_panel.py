@@ -143,45 +143,50 @@ def test_the_poll_reads_no_file(bpy, scene, tmp_path):
 # -- the panel's rows stay the same --------------------------------------------------------------------
 
 class RowCounter:
-    """A layout that counts the rows a panel draws: each item in a column is a row, a row() of items
-    (a collection picker and its remove button) is one."""
+    """A layout that records the shape of what a panel draws: for each column (and the panel itself),
+    in the order they are made, how many rows it holds; an item in a column is a row, a row() of items
+    (a collection picker and its remove button) one. Two draws of the same shape take the same pixels:
+    a column more or less moves what is below it by its spacing, as a row does by its height."""
 
-    def __init__(self, counts, in_row=False):
-        object.__setattr__(self, "_counts", counts)
+    def __init__(self, shape, in_row=False):
+        object.__setattr__(self, "_shape", shape)
         object.__setattr__(self, "_in_row", in_row)
         object.__setattr__(self, "_counted", False)
+        object.__setattr__(self, "_index", len(shape))
+        if not in_row:
+            shape.append(0)
 
     def __setattr__(self, name, value):
         pass
 
     def _item(self, *args, **kwargs):
-        if not self._in_row:
-            self._counts[0] += 1
-        elif not self._counted:
-            self._counts[0] += 1
+        if not self._in_row or not self._counted:
+            self._shape[self._index if not self._in_row else self._parent] += 1
             object.__setattr__(self, "_counted", True)
         return types.SimpleNamespace()
 
     label = prop = operator = prop_search = _item
 
     def column(self, *args, **kwargs):
-        return RowCounter(self._counts, self._in_row) if not self._in_row else self
+        return self if self._in_row else RowCounter(self._shape)
 
     box = column
 
     def row(self, *args, **kwargs):
-        return self if self._in_row else RowCounter(self._counts, True)
+        if self._in_row:
+            return self
+        child = RowCounter(self._shape, True)
+        object.__setattr__(child, "_parent", self._index)
+        return child
 
     split = row
 
 
 def rows_of(bpy, cls):
-    from mc_ao import panel
-
-    counts = [0]
-    fake = types.SimpleNamespace(layout=RowCounter(counts), split_layout=lambda: fake.layout)
+    shape = []
+    fake = types.SimpleNamespace(layout=RowCounter(shape), split_layout=lambda: fake.layout)
     cls.draw(fake, bpy.context)
-    return counts[0]
+    return tuple(shape)
 
 
 SETTINGS_MATRIX = {
@@ -291,8 +296,8 @@ def test_the_image_fields_placeholder_is_the_token_it_takes(addon):
 @pytest.mark.parametrize("only_local, ground, words", [
     (False, "OFF", "Occluded by every rendered object"),
     (True, "OFF", "Occluded by each object alone"),
-    (True, "AUTO", "Occluded by each object alone, and the ground at each one's lowest point"),
-    (True, "HEIGHT", "Occluded by each object alone, and the ground at height 0.5"),
+    (True, "AUTO", "Occluded by each object alone, and the ground under each"),
+    (True, "HEIGHT", "Occluded by each object alone, and the ground at Z 0.5"),
 ])
 def test_the_occlusion_line_says_whether_the_ground_counts(addon, only_local, ground, words):
     from mc_ao import panel
