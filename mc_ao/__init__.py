@@ -65,7 +65,7 @@ def unregister():
 
     from . import corelink
 
-    workers = sys.modules.get(f"{corelink.CORE_NAME}.execution.workers")
+    workers = sys.modules.get(f"{corelink.CORE_NAME}.execution.pool")
     if workers is not None:
         workers.shutdown()
     del bpy.types.Scene.mc_ao

@@ -326,7 +326,7 @@ def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None
     ``selected`` and ``view_layer`` as :func:`plan` takes them), and for Selected to Active
     (``highpoly``: the high-poly objects, ``cage``: the cage object or None) the high-poly objects'
     and the cage's, with the occluders mc_ao.selected_to_active.plan takes. The processes and threads
-    are those the bake takes (core.execution.workers.processes_of; Processes 0 picks them from the cores, the
+    are those the bake takes (core.execution.executor.processes_of; Processes 0 picks them from the cores, the
     memory and these counts); ``threads``: the bake's (properties.resolve_threads), else the
     settings' (0: every core).
     """
@@ -339,10 +339,10 @@ def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None
 
         depsgraph = bpy.context.evaluated_depsgraph_get()
     cost = corelink.load("execution.cost")
-    workers = corelink.load("execution.workers")
+    workers = corelink.load("execution.executor")
     w, h = settings.size
     threads = threads or settings.threads or None
-    # core.execution.workers.processes_of reads the bake's thread count from its settings
+    # core.execution.executor.processes_of reads the bake's thread count from its settings
     core_settings = SimpleNamespace(threads=threads or workers.cpu_count())
     skip, high = set(), 0
     if highpoly:

@@ -211,7 +211,7 @@ def cost_text(context, settings, targets, highpoly=(), cage=None):
         cost = baking.bake_cost(settings, targets, context.evaluated_depsgraph_get(),
                                 selected=context.selected_objects, view_layer=context.view_layer,
                                 threads=resolve_threads(context, settings), highpoly=highpoly, cage=cage)
-        available = baking.corelink.load("execution.workers").memory_limit()
+        available = baking.corelink.load("execution.executor").memory_limit()
     except Exception:  # the core cannot load (no numpy, no embreex): the bake will say why
         return "", False
     text = f"Estimate: {cost.describe()}"

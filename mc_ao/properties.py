@@ -68,7 +68,7 @@ def _property(setting):
 
 
 #: Settings of the AO bake, stored with the scene: one property per mc_ao.schema setting, named as the
-#: mc_ao.settings.BakeSettings field. The core's limits (MAX_SAMPLES, ...) are read from core.engine.settings.
+#: mc_ao.settings.BakeSettings field. The core's limits (MAX_SAMPLES, ...) are read from core.base.request.
 McAoSettings = type("McAoSettings", (bpy.types.PropertyGroup,), {
     "__annotations__": {s.name: _property(s) for s in schema.SETTINGS},
     "__doc__": "Settings of the AO bake, stored with the scene",

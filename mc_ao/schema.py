@@ -7,7 +7,7 @@ mc_ao.settings.BakeSettings, scripts/bake_ao.py's options (mc_ao.cli.options) an
 manifest's keys (a manifest key is the option's name with '_' for '-': :func:`manifest_keys`), and
 the one check of every value before any work (:func:`problems`, with the rules between settings of
 mc_ao.rules). Limits that are the core's (``MAX_SAMPLES``, ``MAX_RESOLUTION``, ``MAX_SEED``) are named
-here and read from ``core.engine.settings`` where they are used.
+here and read from ``core.base.request`` where they are used.
 
 "No distance limit" has one meaning for every distance here: 0 or infinity (:func:`unlimited`).
 """
@@ -38,7 +38,7 @@ class Setting:
         (a set of an enum's identifiers: a tuple here, an enum-flag property on the scene).
     default, label (the UI's name), help (the UI's tooltip and the option's help).
     lo, hi : limits of an int or float (a float with ``lo`` None takes any finite number); ``hi`` may
-        name a core.engine.settings constant ("MAX_SAMPLES").
+        name a core.base.request constant ("MAX_SAMPLES").
     zero : what 0 means, said in messages ("every core").
     items : an enum's ``(identifier, UI name, description)``; the script's choice for an identifier is
         it in lower case with '-' for '_' (``VERTEX_COLORS`` -> ``vertex-colors``).
@@ -435,13 +435,13 @@ def unlimited(distance):
 
 
 def limit(setting):
-    """``setting.hi`` as a number (a core.engine.settings constant read from the core), or None."""
+    """``setting.hi`` as a number (a core.base.request constant read from the core), or None."""
     if isinstance(setting.hi, str):
         from . import corelink
 
         if setting.hi == "MAX_SEED":
-            return getattr(corelink.load("engine.settings"), "MAX_SEED", _SEED_FALLBACK)
-        return getattr(corelink.load("engine.settings"), setting.hi)
+            return getattr(corelink.load("base.request"), "MAX_SEED", _SEED_FALLBACK)
+        return getattr(corelink.load("base.request"), setting.hi)
     return setting.hi
 
 

@@ -203,7 +203,7 @@ class _BakeSettingsMethods:
             ignore_backfaces=self.ignore_backfaces,
             **({"bent_normals": True} if self.bent_normals and not self.vertex_colors else {}),
             replicates=self.replicates,
-            # 0: from the cores and the memory (core.execution.workers.auto_workers); the same bits for any count
+            # 0: from the cores and the memory (core.execution.executor.auto_workers); the same bits for any count
             workers="auto" if self.processes == 0 else self.processes,
             **({"denoise": True} if self.denoise else {}),
             # the ground only when on: a bake without one passes what it passed before
@@ -247,7 +247,7 @@ def from_options(args):
     both = SimpleNamespace(**{**options, **dataclasses.asdict(settings)})
     for field, message in schema.problems(both, schema.option_of, script=True):
         if field in ("resolution", "height"):  # both from --resolution, each at least 1 already
-            message = (f"--resolution must be at most {corelink.load('engine.settings').MAX_RESOLUTION} a side, not "
+            message = (f"--resolution must be at most {corelink.load('base.request').MAX_RESOLUTION} a side, not "
                        f"{width}x{height}")
             if message not in problems:
                 problems.append(message)

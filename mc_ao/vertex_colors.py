@@ -6,7 +6,7 @@ per face corner at the corner's vertex (a hair inside the first triangle holding
 corner's shading normal, and stores in the point domain the plain mean of a vertex's corners, in
 the corner domain each corner's own; float colours hold the linear value, byte colours its sRGB
 encoding (``linearrgb_to_srgb_uchar4``). The core does the estimating
-(:func:`core.targets.corners.bake_vertex_ao`); this module maps Blender's face corners to it and writes
+(:func:`core.bake_vertex_ao`); this module maps Blender's face corners to it and writes
 the attribute:
 
 - the face corners come from the evaluated mesh (modifiers applied); they must be the original
@@ -127,7 +127,7 @@ def values(result, data, domain):
 def _core_vertices():
     from . import corelink
 
-    return corelink.load("targets.corners")
+    return corelink.load("geometry.corners")
 
 
 def write_attribute(obj, settings, result, data):

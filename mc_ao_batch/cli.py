@@ -46,7 +46,7 @@ def batch_share(asked, cores=None, memory=None):
     Blender and its bake's worker processes within 80% of the memory (core.execution.cost's process model; what
     a scene adds on top is each bake's own to check, as it does for its processes)."""
     from core import cost
-    from core.execution.workers import cpu_count, memory_limit
+    from core.base.machine import cpu_count, memory_limit
 
     cores = cpu_count() if cores is None else cores
     memory = memory_limit() if memory is None else memory

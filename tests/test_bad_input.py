@@ -225,7 +225,7 @@ def test_too_many_samples_are_refused_before_any_work(samples):
 
 
 def test_the_memory_estimate_counts_samples_and_chunks():
-    from core.pipeline.bake import estimate_memory
+    from core.engine.settings import estimate_memory
 
     small = estimate_memory(1, 1, 2, 1, 1 << 16, samples=16)
     big = estimate_memory(1, 1, 2, 1, 1 << 16, samples=1 << 20)
@@ -234,12 +234,12 @@ def test_the_memory_estimate_counts_samples_and_chunks():
 
 def test_a_texel_with_many_samples_is_traced_in_bounded_pieces():
     """2^17 samples of one texel: chunks of at most 2^16 rays, and the same numbers as in one piece."""
-    from core.pipeline import bake as B
+    from core.engine.settings import SAMPLE_PIECE
 
     sizes = []
     r = bake_ao(plane(), [Mesh(LID_Q, F, name="lid")], resolution=1, samples=1 << 17, margin=0, threads=1,
                 on_rays=lambda batch: sizes.append(len(batch.origins)))
-    assert max(sizes) <= B.SAMPLE_PIECE and sum(sizes) == 1 << 17
+    assert max(sizes) <= SAMPLE_PIECE and sum(sizes) == 1 << 17
     assert r.samples[0, 0] == 1 << 17
 
 
@@ -286,6 +286,6 @@ def test_a_udim_bake_that_covers_nothing_is_refused():
 def test_huge_seeds_and_thread_counts_are_refused_by_name(kw, words):
     with pytest.raises(SettingsError, match=words):
         bake_ao(plane(), resolution=8, samples=4, **kw)
-    from core.engine.settings import MAX_SEED
+    from core.base.request import MAX_SEED
 
     assert bake_ao(plane(), resolution=8, samples=4, seed=MAX_SEED, threads=1).mask.any()

@@ -253,11 +253,11 @@ def test_automatic_tiles_of_a_dense_mesh_hold_at_most_tile_triangles():
 
 
 def test_fit_tiles_halves_the_longer_side_until_no_tile_holds_too_many_triangles():
+    from core.base.request import BakeRequest
     from core.engine.settings import TILE_MULTIPLE, TILE_TRIANGLES, BakeSettings
 
     def settings(tile_size=None, threads=1):
-        return BakeSettings.from_arguments(512, 16, 16, 0.0, math.inf, "cosine", "sobol", 0, 0, threads, False,
-                                           0.0, tile_size, 1 << 16)
+        return BakeSettings.of(BakeRequest(resolution=512, samples=16, margin=0, threads=threads, tile_size=tile_size))
 
     rng = np.random.default_rng(0)
     # Uniform over the image: a 256^2 tile holds 1/4 of them, 256 x 128 1/8, 128^2 1/16.

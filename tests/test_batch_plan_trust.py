@@ -63,7 +63,7 @@ def _fake_blender(folder):
 
 def test_a_huge_workers_count_is_clamped_and_said(tmp_path):
     """--workers 100000 started every task at once (363 processes, 6 GB in 14 s)."""
-    from core.execution.workers import cpu_count
+    from core.base.machine import cpu_count
 
     lib = tmp_path / "lib"
     lib.mkdir()

@@ -255,7 +255,7 @@ def test_udim_tiles_are_denoised_across_the_seam_between_them():
     # left tile's u = 0.5 and the right tile's far border. Denoised together, the texels either side
     # agree as within one image; denoised tile by tile, they do not (each side sees half a window).
     from core import bake_udim
-    from core.targets.udim import shifted
+    from core.geometry.uvtiles import shifted
 
     n = 32
     target = split_plane()
@@ -299,7 +299,7 @@ def test_vertex_ao_is_denoised_over_the_mesh_with_an_honest_error(name):
     # change of ~1e-4); vertices under the box are exactly 0 and must stay so with zero error.
     from core import bake_vertex_ao
     from core.montecarlo.analytic import box_on_plane_point_ao
-    from core.targets.corners import all_corners
+    from core.geometry.corners import all_corners
 
     target = grid(33)
     c = all_corners(target)

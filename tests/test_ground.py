@@ -10,7 +10,7 @@ from scipy import stats as sps
 
 from core import Mesh, SettingsError, bake_ao
 from core.montecarlo.stats import normal_quantile
-from core.targets.corners import bake_vertex_ao
+from core import bake_vertex_ao
 from chi2 import SUITE_ALPHA, sidak
 from scenes import QUAD, box, plane
 
@@ -209,7 +209,7 @@ def test_udim_tiles_bake_with_the_ground_of_the_whole_object():
     """The wall's UVs over two UDIM tiles (its lower half in 1001, its upper half in 1002): 'auto' is
     the whole object's lowest point in both, each tile the bits of bake_ao on its own shifted UVs."""
     from core import bake_udim
-    from core.targets.udim import shifted, tile_seed
+    from core.geometry.uvtiles import shifted, tile_seed
 
     t = wall(0.3, 1.3)
     P, F = t.positions, t.triangles

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from core import BakeCancelled, Mesh, MeshError, SettingsError, bake_ao, warps
-from core.pipeline.bake import interval_half_width
+from core.engine.estimators import interval_half_width
 from core.highpoly.match import DIRECTIONS_PER_POINT, PRECHECK_POINTS, directions_per_point
 from core.montecarlo.stats import normal_quantile
 from chi2 import SUITE_ALPHA, chi2_test, sidak

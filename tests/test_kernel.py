@@ -10,6 +10,7 @@ import pytest
 from core import Mesh, bake_ao, warps
 from core.engine.patterns import TexelPattern
 from core.engine.adaptive import replicate_samples
+from core.base.request import BakeRequest
 from core.engine.settings import BakeSettings, pattern_span
 from chi2 import SUITE_ALPHA, chi2_test, sidak
 from scenes import plane
@@ -65,8 +66,8 @@ def test_rays_are_the_patterns_points_through_the_warps(source, distribution, sa
     rays, _ = record(plane(), resolution=W, samples=samples, source=source, distribution=distribution, seed=5)
     col, row = rays["texels"] % W, rays["texels"] // W
     simple = np.abs(col - row) > 1  # away from the plane's diagonal, where texels are split
-    s = BakeSettings.from_arguments(W, samples, 16, 0.0, float("inf"), distribution, source, 0, 5, 1, False, 0.0,
-                                    None, 1 << 16)
+    s = BakeSettings.of(BakeRequest(resolution=W, samples=samples, distribution=distribution, source=source, margin=0,
+                                    seed=5, threads=1))
     pattern = TexelPattern(source, 5, s.replicate_samples, pool_points=s.pool_points())
     t, i, rep = rays["texels"][simple][:4000], rays["samples"][simple][:4000], rays["replicate"][simple][:4000]
     assert set(np.unique(rep)) == {0, 1}  # two replicates by default, each its own randomisation

@@ -8,7 +8,7 @@ import pytest
 
 from core import (Mesh, SettingsError, bake_ao, bake_maps, bake_udim, bake_udim_maps, bake_vertex_ao,
                   bake_vertex_maps)
-from core.pipeline import bake as bake_module
+from core.targets import texels
 from core.engine import tilebaker
 from core.tracing import tracer as tracing
 from scenes import QUAD, box, plane
@@ -122,7 +122,7 @@ def test_the_set_up_is_taken_once(monkeypatch):
     as many for both maps as for one bake."""
     target = unwrapped_box()
     tiles = counting(monkeypatch, tilebaker, "rasterize_tile")
-    prepared = counting(monkeypatch, bake_module, "prepare")
+    prepared = counting(monkeypatch, texels, "prepare")
     scenes = counting(monkeypatch, tracing, "embree_scene")
     args = dict(BASE, threads=1, tile_size=16)
     bake_ao(target, **args)
@@ -241,7 +241,7 @@ def test_the_add_on_bakes_an_objects_ao_and_thickness_in_one_bake(monkeypatch, e
     from mc_ao.settings import BakeSettings
 
     if extra.get("target"):
-        from core.targets.corners import all_corners
+        from core.geometry.corners import all_corners
 
         target = arrays(unwrapped_box(), "crate")
         target.extra = {"corners": all_corners(unwrapped_box())}

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao
-from core.engine.settings import MAX_RESOLUTION, MAX_SAMPLES
+from core.base.request import MAX_RESOLUTION, MAX_SAMPLES
 from mc_ao import bakerun, filewriter, schema
 from mc_ao.settings import BakeSettings
 

@@ -17,9 +17,9 @@ import pytest
 from core import Mesh, bake_ao, bake_udim, cost
 from core.geometry import mesh as mesh_mod
 from core.geometry import raster, surface
-from core.execution import workers as W
+from core.execution import executor, memory, messages
 from core.geometry.mesh import corner_positions, face_geometry
-from core.targets.corners import bake_vertex_ao
+from core import bake_vertex_ao
 
 
 def wavy(n=12, normals=True, seed=0):
@@ -166,23 +166,23 @@ def test_messages_carry_arrays_out_of_band_unchanged():
     a = np.arange(24.0).reshape(4, 6)
     msg = ("setup", 3, dict(p=a, t=a[:, ::2], i=np.arange(5, dtype=np.int32), empty=np.zeros((0, 3)), s="x"))
     buf = io.BytesIO()
-    W.send(buf, msg)
-    W.send(buf, ("finish", 4))
+    messages.send(buf, msg)
+    messages.send(buf, ("finish", 4))
     buf.seek(0)
-    kind, n, job = W.receive(buf)
+    kind, n, job = messages.receive(buf)
     assert (kind, n, job["s"]) == ("setup", 3, "x")
     for k in ("p", "t", "i", "empty"):
         assert np.array_equal(job[k], msg[2][k]) and job[k].dtype == msg[2][k].dtype
     job["p"][0, 0] = -1.0  # the received arrays are the message's own, writable
-    assert W.receive(buf) == ("finish", 4) and W.receive(buf) is None
+    assert messages.receive(buf) == ("finish", 4) and messages.receive(buf) is None
 
 
 def test_held_bytes_counts_each_block_once():
     a = np.zeros(1000)
     holder = type("H", (), {})()
     holder.a, holder.view, holder.more = a, a[10:20], [a, {"b": np.zeros(10, np.int32)}]
-    assert W.held_bytes(holder) == a.nbytes + 40
-    assert W.held_bytes(None) == 0
+    assert memory.held_bytes(holder) == a.nbytes + 40
+    assert memory.held_bytes(None) == 0
 
 
 LINUX = os.path.exists("/proc/self/status")
@@ -219,15 +219,15 @@ def test_auto_starts_no_more_workers_than_the_memory_holds():
     parent = cost.parent_bytes(T)
     for room in (1, 2, 3):
         memory = (parent + room * one + one // 2) / 0.8
-        w, t = W.auto_workers(T, cores=8, memory=memory)
+        w, t = executor.auto_workers(T, cores=8, memory=memory)
         assert w == room and w * t <= 8 and t == 8 // room
         assert w * one + parent <= 0.8 * memory
     # Too little for even one: still one, with every core's threads.
-    assert W.auto_workers(T, cores=8, memory=one // 10) == (1, 8)
+    assert executor.auto_workers(T, cores=8, memory=one // 10) == (1, 8)
     # High-poly triangles cost a worker less than a target's: more workers fit.
     memory = (cost.parent_bytes(2, T) + 2 * cost.process_bytes(2, 0, T)) / 0.8
-    assert W.auto_workers((2, 0, T), cores=8, memory=memory)[0] == 2
-    assert W.auto_workers(T, cores=8, memory=memory)[0] < 2
+    assert executor.auto_workers((2, 0, T), cores=8, memory=memory)[0] == 2
+    assert executor.auto_workers(T, cores=8, memory=memory)[0] < 2
 
 
 def test_the_memory_estimate_prices_the_parent_and_each_worker():

@@ -28,7 +28,7 @@ def test_every_named_stage_is_in_the_core_and_the_table_adds_up():
 
 
 def test_a_function_imported_by_name_is_timed_where_it_is_called():
-    import core.pipeline.bake  # noqa: F401  (every module of a bake loaded)
+    import core.pipeline.run  # noqa: F401  (every module of a bake loaded)
 
     hits = resolve("rasterize_tile")
     assert hits and len({id(f) for _, _, f in hits}) == 1

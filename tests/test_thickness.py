@@ -9,7 +9,7 @@ import pytest
 
 from core import Mesh, SettingsError, bake_ao, warps
 from core.montecarlo.stats import normal_quantile
-from core.targets.corners import bake_vertex_ao
+from core import bake_vertex_ao
 from chi2 import SUITE_ALPHA, chi2_test, sidak
 from scenes import box, plane
 

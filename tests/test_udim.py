@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao
-from core.targets.udim import bake_udim, covered_tiles, tile_origin
+from core import bake_udim
+from core.geometry.uvtiles import covered_tiles, tile_origin
 from core.montecarlo.stats import normal_quantile
 from scenes import polygon_form_factor, texel_mean
 

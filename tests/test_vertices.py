@@ -8,7 +8,8 @@ import pytest
 
 from core import BakeCancelled, Mesh, MeshError
 from core.montecarlo.analytic import polygon_form_factor
-from core.targets.corners import all_corners, bake_vertex_ao, sample_points, vertex_means
+from core import bake_vertex_ao
+from core.geometry.corners import all_corners, sample_points, vertex_means
 
 LID = np.array([[-0.3, -0.3, 0.4], [0.3, -0.3, 0.4], [0.3, 0.3, 0.4], [-0.3, 0.3, 0.4]])
 

@@ -1,4 +1,4 @@
-"""Tiles baked in worker processes (core.execution.workers): the same bits as in this process for any workers x
+"""Tiles baked in worker processes (core.execution.pool): the same bits as in this process for any workers x
 threads x tiling, errors by the core's own classes, cancel, a worker that dies, and no worker that
 outlives its parent. Driven by the bake's own events (progress), never by the clock."""
 
@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from core import BakeCancelled, Mesh, MeshError, bake_ao, bake_udim
-from core.execution import workers as W
+from core.base import machine
+from core.execution import executor, messages, pool
+from core.pipeline import remote
 from core.post.bent import TangentFrames  # noqa: F401  (bent_space stays in the parent)
 from scenes import QUAD, box, plane
 
@@ -111,17 +113,16 @@ def test_a_worker_that_dies_fails_the_bake_and_the_next_bake_gets_a_fresh_pool()
 
     def progress(f):
         if not killed and f > 0.0:
-            pool = W._POOL
-            victim = pool.workers[0].process
+            victim = pool._POOL.workers[0].process
             victim.kill()
             killed.append(victim.pid)
 
-    with pytest.raises(W.BakeWorkerError, match="ended before the bake did"):
+    with pytest.raises(messages.BakeWorkerError, match="ended before the bake did"):
         bake_ao(target, occ, resolution=64, samples=256, workers=2, progress=progress)
     assert killed
     r = bake_ao(target, occ, resolution=32, samples=8, workers=2)
     assert r.mask.any()
-    assert all(w.process.pid != killed[0] for w in W._POOL.workers)
+    assert all(w.process.pid != killed[0] for w in pool._POOL.workers)
 
 
 def _alive(pid):
@@ -143,7 +144,7 @@ def test_no_worker_outlives_its_parent_killed():
         import sys; sys.path[:0] = [{ROOT!r}, {os.path.join(ROOT, 'tests')!r}]
         from test_workers import scene
         from core import bake_ao
-        from core.execution import workers
+        from core.execution import pool as workers
         t, o = scene()
         bake_ao(t, o, resolution=16, samples=4, workers=2)
         print(" ".join(str(w.process.pid) for w in workers._POOL.workers), flush=True)
@@ -168,7 +169,7 @@ def test_a_worker_keeps_the_last_scene_and_a_changed_mesh_is_built_anew(moved):
     def reused(r):
         return [e["scene_reused"] for e in r.report["worker_memory"][1:]]
 
-    W.shutdown()
+    pool.shutdown()
     first = bake_ao(target, occ, **args)
     assert reused(first) == [False, False]
     # Baked again with other samples and resolution: the workers trace in the scene they kept.
@@ -186,13 +187,13 @@ def test_a_worker_keeps_the_last_scene_and_a_changed_mesh_is_built_anew(moved):
     changed = bake_ao(target, occ, **args)
     assert reused(changed) == [False, False]
     assert not np.array_equal(changed.ao, first.ao)  # the vertex changes the bake
-    W.shutdown()  # a fresh pool's workers build every scene
+    pool.shutdown()  # a fresh pool's workers build every scene
     fresh = bake_ao(target, occ, **args)
     for name in FIELDS:
         assert np.array_equal(getattr(changed, name), getattr(fresh, name)), name
     assert changed.rays == fresh.rays
     # And the re-bake in the kept scene is the bits of a fresh pool's.
-    W.shutdown()
+    pool.shutdown()
     target, occ = scene()
     fresh = bake_ao(target, occ, **dict(args, samples=24, resolution=40))
     for name in FIELDS:
@@ -210,20 +211,20 @@ def test_as_many_tiles_as_workers_give_each_worker_one():
 def test_shutdown_ends_the_pool():
     target, occ = scene()
     bake_ao(target, occ, resolution=16, samples=4, workers=2)
-    procs = [w.process for w in W._POOL.workers]
-    W.shutdown()
-    assert W._POOL is None and all(p.poll() is not None for p in procs)
+    procs = [w.process for w in pool._POOL.workers]
+    pool.shutdown()
+    assert pool._POOL is None and all(p.poll() is not None for p in procs)
 
 
 def test_auto_workers_follow_cores_and_memory():
-    assert W.auto_workers(10_000, cores=16, memory=64 << 30) == (16, 1)
+    assert executor.auto_workers(10_000, cores=16, memory=64 << 30) == (16, 1)
     # 10M triangles: each worker holds gigabytes; 16 GB holds a few copies, whose threads use every core.
-    w, t = W.auto_workers(10_000_000, cores=16, memory=16 << 30)
+    w, t = executor.auto_workers(10_000_000, cores=16, memory=16 << 30)
     from core import cost
 
     assert w * cost.process_bytes(10_000_000) + cost.parent_bytes(10_000_000) \
         <= 0.8 * (16 << 30) and w * t <= 16 and t >= 16 // max(w, 1) and w < 16
-    assert W.auto_workers(10, cores=4, memory=None) == (4, 1)
+    assert executor.auto_workers(10, cores=4, memory=None) == (4, 1)
 
 
 @pytest.mark.parametrize("bad", [0, -1, 1.5, "two", True])
@@ -316,8 +317,8 @@ def test_a_script_without_a_main_guard_runs_once(tmp_path):
 def test_a_pool_whose_self_test_fails_falls_back_to_threads_and_says_why(monkeypatch):
     """Where worker processes bake differently (another platform's numpy or Embree) or cannot start,
     the bake runs on threads, with the same bits, and a warning that says why."""
-    W.shutdown()
-    monkeypatch.setattr(W, "self_test", lambda: "this process's digest")  # the workers' differ from it
+    pool.shutdown()
+    monkeypatch.setattr(remote, "self_test", lambda: "this process's digest")  # the workers' differ from it
     target, occ = scene()
     ref = bake_ao(target, occ, resolution=16, samples=8, threads=1)
     r = bake_ao(target, occ, resolution=16, samples=8, workers=2)
@@ -325,15 +326,16 @@ def test_a_pool_whose_self_test_fails_falls_back_to_threads_and_says_why(monkeyp
     (warning,) = r.report["warnings"]
     assert "not in worker processes" in warning and "self-test differently" in warning
     assert "warnings" not in ref.report
-    W.shutdown()
+    pool.shutdown()
 
 
 def test_auto_workers_with_threads_given_keep_within_the_cores():
+    from core.base.request import BakeRequest
     from core.engine.settings import BakeSettings
 
-    s = BakeSettings.from_arguments(8, 4, 4, 0.0, 1.0, "cosine", "sobol", 0, 0, 2, False, 0.0, None, 1 << 16)
-    processes, threads = W.processes_of("auto", 2, s, 1000)
-    assert threads == 2 and processes * threads <= max(2, W.cpu_count())
+    s = BakeSettings.of(BakeRequest(resolution=8, samples=4, min_samples=4, max_distance=1.0, margin=0, threads=2))
+    processes, threads = executor.processes_of("auto", 2, s, 1000)
+    assert threads == 2 and processes * threads <= max(2, machine.cpu_count())
 
 
 def test_a_cancel_from_a_tile_ends_the_bake_whatever_each_worker_is_doing():

@@ -74,8 +74,8 @@ def synthetic_rays(target, n, chunk, distance=DISTANCE):
 
 
 def normalized(target, occluders):
-    """The bake's own frame (core.pipeline.bake._normalized_scene), so that replayed rays hit the same scene."""
-    from core.pipeline.bake import _normalized_scene
+    """The bake's own frame (core.pipeline.prologue.normalized_scene), so that replayed rays hit the same scene."""
+    from core.pipeline.prologue import normalized_scene
 
-    t, occ, _ = _normalized_scene(target, list(occluders))
+    t, occ, _ = normalized_scene(target, list(occluders))
     return [t] + occ

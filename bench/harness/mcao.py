@@ -87,7 +87,7 @@ def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=1
 
 
 #: With ``python -m bench --workers``: core bakes on that many worker processes of one thread each
-#: instead of ``threads`` threads of this process (the same bits; see core.execution.workers).
+#: instead of ``threads`` threads of this process (the same bits; see core.execution.pool).
 WORKERS = 1
 
 

@@ -18,6 +18,8 @@ from contextlib import contextmanager
 
 
 def _core_modules():
+    import core.pipeline.api  # noqa: F401  (the core loads its modules when first used: every module of a bake)
+
     return [m for name, m in list(sys.modules.items()) if m is not None and (name == "core" or name.startswith("core."))]
 
 

@@ -119,7 +119,7 @@ def numexpr_kernel_class(blocks=tuple(BLOCKS)):
 
 
 def _bake(scene, res, spp, kernel_cls):
-    import core.pipeline.bake as B
+    import core.targets.texels as B
     from core import bake_ao
 
     target, occ, distance = scene

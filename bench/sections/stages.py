@@ -73,14 +73,16 @@ TILE_STAGES = [
     ("estimates: add", "TexelEstimates.add"),
     ("error model", "ErrorModel.stderr"),
     ("tile: the rest (result rows)", "TexelBake.tile"),
-    ("image store", "_Images.store"),
+    ("image store", "ImageStore.store"),
     ("margin", "dilate"),
 ]
 
 #: The steps of a bake around its rays, (label, core function or method).
 FIXED_STEPS = [
-    ("settings", "BakeSettings.from_arguments"),
-    ("prologue (checks, frame)", "Prologue.__init__"),
+    ("request (options checked)", "_Request.__post_init__"),
+    ("settings", "BakeSettings.of"),
+    ("checks (meshes)", "check"),
+    ("prologue (frame)", "Prologue.__init__"),
     ("UV triangles", "prepare"),
     ("tiles: fit and bins", "bin_triangles"),
     ("surface table", "SurfaceTable.build"),
@@ -94,9 +96,9 @@ FIXED_STEPS = [
     ("kernel", "Kernel.run"),
     ("Embree (occlusion calls)", "Tracer.occluded"),
     ("error model", "ErrorModel.stderr"),
-    ("image store", "_Images.store"),
+    ("image store", "ImageStore.store"),
     ("margin", "dilate"),
-    ("result and report", "_finish"),
+    ("result and report", "finish"),
 ]
 
 #: Which floor.txt stage a kernel stage is held against (the turn and the products of long pieces
@@ -218,7 +220,7 @@ def _fixed_once(scene, res, spp, fresh):
 
 def _capture_job(scene, res, spp, workers):
     """The job dict a worker receives for this bake (the parent's ``job()``), and the bake's wall time."""
-    import core.execution.workers as W
+    import core.execution.pool as W
 
     got = {}
     original = W.bake_tiles
@@ -241,7 +243,7 @@ def _capture_job(scene, res, spp, workers):
 
 def fixed_costs(scene, res=128, spp=1, repeats=7, workers=2):
     """Steps of a small bake, in this process and on ``workers`` warm worker processes."""
-    import core.execution.workers as W
+    import core.execution.pool as W
 
     out = {"resolution": res, "samples": spp, "load": [load_average()]}
     # In this process, one thread: a kept scene (the same mesh again) and a fresh one, interleaved.
@@ -277,7 +279,7 @@ def fixed_costs(scene, res=128, spp=1, repeats=7, workers=2):
     out["in_process_wall_ms"] = 1e3 * statistics.median(local)
     # What each worker does with its job, timed here on the same job: its set-up steps.
     if job is not None:
-        # As the pool sends it (core.execution.workers.Pool.run): progress counted in quanta, one thread.
+        # As the pool sends it (core.execution.pool.Pool.run): progress counted in quanta, one thread.
         job = dict(job, quantum=1 << 62, settings=dict(job["settings"], threads=1, auto_tiles=False))
         steps = [("worker set-up: the rest", "_setup")] + FIXED_STEPS
         runs = []
@@ -357,7 +359,7 @@ def main(argv=None):
     if not a.no_save:
         (RESULTS / f"{a.stem}.json").write_text(json.dumps(out, indent=1, default=float))
         (RESULTS / f"{a.stem}.txt").write_text("".join(lines))
-    from core.execution.workers import shutdown
+    from core.execution.pool import shutdown
 
     shutdown()
     return out

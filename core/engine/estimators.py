@@ -265,7 +265,7 @@ def window_sums(values, x, y):
     ``y`` None: ``x`` is an object whose ``sums(values)`` gives the sums over each point's
     neighbourhood: a :class:`TexelWindows` built once for texels summed over many times, or, for
     sample points that are not texels (mesh vertices, :mod:`core.targets.corners`), a
-    :class:`core.targets.corners.Neighbours` (a vertex and the vertices that share an edge with it)."""
+    :class:`core.geometry.corners.Neighbours` (a vertex and the vertices that share an edge with it)."""
     values = np.asarray(values, dtype=np.float64)
     if y is None:
         return x.sums(values)

@@ -1,37 +1,22 @@
-"""A bake's settings, checked once: the limits, the validated values, and what they imply (memory, tiles).
+"""A bake's settings as the engine reads them: the request's checked options and what they imply.
 
-:func:`BakeSettings.from_arguments` turns the arguments of :func:`core.bake_ao` into a frozen
-:class:`BakeSettings`, refusing bad input with a :class:`~core.base.errors.SettingsError` that names the
-setting and the problem, before any heavy work. Everything downstream reads this object.
+:meth:`BakeSettings.of` derives them from a :class:`core.base.request.BakeRequest` (checked when it was
+made: nothing is checked here again): the image's size, the threads (every core when not given), the
+tiles (:func:`auto_tile_shape` when not given) and the replicates a sample count allows.
+Everything downstream reads this object.
 """
 
 import dataclasses
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..base.errors import SettingsError
-from ..tracing.ground import check_ground
-from .thickness import check_quantity
-from .patterns import POOL_POINTS, SOURCE_NAMES
+from ..base.machine import cpu_count
+from .patterns import POOL_POINTS
 
-DISTRIBUTIONS = ("cosine", "uniform")
-#: Largest image side the baker accepts (the same as Blender's image size limit).
-MAX_RESOLUTION = 65536
-#: Most samples per texel. Chunks stay bounded for any count (a texel's samples are traced in
-#: pieces), but the sample pool grows with it: 2^20 keeps it to tens of MiB, and a reference bake
-#: rarely needs a tenth of it.
-MAX_SAMPLES = 1 << 20
-#: The largest seed: seeds are hashed as unsigned 64-bit integers.
-MAX_SEED = (1 << 64) - 1
-#: Most threads a bake (or one worker process) takes.
-MAX_THREADS = 1024
 #: Samples of one texel traced in one piece; more are traced in pieces of this many.
 SAMPLE_PIECE = 1 << 16
-#: Most independent randomisations (replicates) a texel's samples may be split into.
-MAX_REPLICATES = 16
 #: Tiles are multiples of this side, so that the blocks error estimates are pooled in
 #: (core.engine.estimators.POOL_BLOCK) never straddle two tiles.
 TILE_MULTIPLE = 16
@@ -47,32 +32,6 @@ LARGE_TILE_SAMPLES, LARGE_TILES_PER_THREAD = 16, 8
 #: 128^2 (62k) 4.51-5.23 (median 4.75 against 5.30); 100k triangles (25k a tile) and 10k: no gain
 #: from smaller tiles (1.50-1.72 against 1.60-1.65 s; 1.21-1.33 against 1.05-1.21).
 TILE_TRIANGLES = 1 << 16
-
-
-def _positive_int(value, what, lo=1):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise SettingsError(f"{what} must be an integer, got {value!r}")
-    if value < lo:
-        raise SettingsError(f"{what} must be at least {lo}, got {value}")
-    return int(value)
-
-
-def _resolution(resolution):
-    if isinstance(resolution, (int, np.integer)) and not isinstance(resolution, bool):
-        resolution = (resolution, resolution)
-    try:
-        w, h = resolution
-    except (TypeError, ValueError):
-        raise SettingsError(f"resolution must be an integer or a (width, height) pair, got {resolution!r}") from None
-    w = _positive_int(w, "resolution width")
-    h = _positive_int(h, "resolution height")
-    if w > MAX_RESOLUTION or h > MAX_RESOLUTION:
-        raise SettingsError(f"resolution {w} x {h} exceeds the largest supported side, {MAX_RESOLUTION}")
-    return w, h
-
-
-def _cpu_count():
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 @dataclass(frozen=True)
@@ -117,67 +76,27 @@ class BakeSettings:
         return x0, y0, min(x0 + tw, self.width), min(y0 + th, self.height)
 
     @classmethod
-    def from_arguments(cls, resolution, samples, min_samples, target_error, max_distance, distribution, source,
-                       margin, seed, threads, ignore_backfaces, falloff, tile_size, chunk_rays, replicates=2, *,
-                       ground=None, quantity="ao"):
-        w, h = _resolution(resolution)
-        samples = _positive_int(samples, "samples")
-        if samples > MAX_SAMPLES:
-            raise SettingsError(f"samples must be at most {MAX_SAMPLES} per texel, got {samples}")
-        min_samples = _positive_int(min_samples, "min_samples")
-        try:
-            target_error = float(target_error)
-            max_distance = float(max_distance)
-            falloff = float(falloff)
-        except (TypeError, ValueError):
-            raise SettingsError("target_error, max_distance and falloff must be numbers") from None
-        if not (math.isfinite(target_error) and target_error >= 0):
-            raise SettingsError(f"target_error must be a finite number >= 0 (0 turns adaptive sampling off), "
-                                f"got {target_error}")
-        if not (max_distance > 0):  # also refuses NaN
-            raise SettingsError(f"max_distance must be positive (inf for unlimited), got {max_distance}")
-        if not (math.isfinite(falloff) and falloff >= 0):
-            raise SettingsError(f"falloff must be a finite number >= 0, got {falloff}")
-        if falloff > 0 and not math.isfinite(max_distance):
-            raise SettingsError("a distance falloff needs a finite max_distance to fall off over")
-        if distribution not in DISTRIBUTIONS:
-            raise SettingsError(f"unknown distribution {distribution!r}; choose one of {', '.join(DISTRIBUTIONS)}")
-        if source not in SOURCE_NAMES:
-            raise SettingsError(f"unknown sample source {source!r}; choose one of {', '.join(SOURCE_NAMES)}")
-        margin = _positive_int(margin, "margin", lo=0)
-        seed = _positive_int(seed, "seed", lo=0)
-        if seed > MAX_SEED:
-            raise SettingsError(f"seed must be at most 2**64 - 1 ({MAX_SEED}), got {seed}")
-        threads = _cpu_count() if threads is None else _positive_int(threads, "threads")
-        if threads > MAX_THREADS:
-            raise SettingsError(f"threads must be at most {MAX_THREADS}, got {threads}")
-        chunk_rays = _positive_int(chunk_rays, "chunk_rays")
-        auto_tiles = tile_size is None
-        if auto_tiles:
-            tile_size = auto_tile_shape(w, h, threads, samples)
-        if isinstance(tile_size, (tuple, list)) and len(tile_size) == 2:
-            tile_size, tile_height = (_positive_int(t, "tile_size") for t in tile_size)
+    def of(cls, request, quantity=None):
+        """The settings of a bake of ``request`` (a checked :class:`core.base.request.BakeRequest`) and
+        ``quantity`` (None: the request's base quantity). A bake of mesh corners is a 1 x 1 image
+        without margin: its points are units of their own."""
+        r = request
+        w, h = (1, 1) if r.kind == "corners" else r.resolution
+        samples = r.samples
+        threads = cpu_count() if r.threads is None else r.threads
+        auto_tiles = r.tile_size is None
+        tile_size = auto_tile_shape(w, h, threads, samples) if auto_tiles else r.tile_size
+        if isinstance(tile_size, (tuple, list)):
+            tile_size, tile_height = tile_size
         else:
-            tile_size = tile_height = _positive_int(tile_size, "tile_size")
-        tile_size, tile_height = _tile_side(tile_size), _tile_side(tile_height)
-        replicates = _positive_int(replicates, "replicates")
-        if replicates > MAX_REPLICATES:
-            raise SettingsError(f"replicates must be at most {MAX_REPLICATES}, got {replicates}")
-        replicates = min(replicates, samples)  # a replicate needs a sample
-        quantity = check_quantity(quantity)
-        ground = check_ground(ground)
-        if quantity == "thickness":
-            if ground is not None:
-                raise SettingsError(f"ground={ground!r} does not apply to a thickness map, which only the object itself "
-                                    "occludes; leave ground None for quantity='thickness'")
-            if ignore_backfaces:
-                raise SettingsError("ignore_backfaces does not apply to a thickness map: its rays meet the far side "
-                                    "from behind, so nothing would count; leave it off for quantity='thickness'")
-        return cls(width=w, height=h, samples=samples, min_samples=min(min_samples, samples),
-                   target_error=target_error, max_distance=max_distance, distribution=distribution, source=source,
-                   margin=margin, seed=seed, threads=threads, ignore_backfaces=bool(ignore_backfaces),
-                   falloff=falloff, tile_size=tile_size, chunk_rays=chunk_rays, replicates=replicates,
-                   tile_height=tile_height, auto_tiles=auto_tiles, ground=ground, quantity=quantity)
+            tile_height = tile_size
+        return cls(width=w, height=h, samples=samples, min_samples=min(r.min_samples, samples),
+                   target_error=r.target_error, max_distance=r.max_distance, distribution=r.distribution,
+                   source=r.source, margin=0 if r.kind == "corners" else r.margin, seed=r.seed, threads=threads,
+                   ignore_backfaces=r.ignore_backfaces, falloff=r.falloff, tile_size=_tile_side(tile_size),
+                   chunk_rays=r.chunk_rays, replicates=min(r.replicates, samples), tile_height=_tile_side(tile_height),
+                   auto_tiles=auto_tiles, constant_answer=r.constant_answer, ground=r.ground,
+                   quantity=r.base_quantity if quantity is None else quantity)
 
     def fit_tiles(self, centres):
         """These settings with automatic tiles shrunk until no tile holds more than TILE_TRIANGLES
@@ -241,21 +160,6 @@ def pattern_span(source, samples):
         return 2 * samples
     length = 1 << max(0, (samples - 1).bit_length())
     return 2 * length if source == "stratified" else length
-
-
-def available_memory():
-    """Bytes of memory available to a new allocation (MemAvailable on Linux), or None if unknown."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, source="sobol", replicates=1,
@@ -334,5 +238,4 @@ def _tile_side(v):
     return max(TILE_MULTIPLE, -(-int(math.ceil(v)) // TILE_MULTIPLE) * TILE_MULTIPLE)
 
 
-__all__ = ["BakeSettings", "DISTRIBUTIONS", "MAX_RESOLUTION", "MAX_SAMPLES", "MAX_REPLICATES", "SAMPLE_PIECE", "available_memory",
-           "estimate_memory", "auto_tile_shape", "pattern_span"]
+__all__ = ["BakeSettings", "SAMPLE_PIECE", "estimate_memory", "auto_tile_shape", "pattern_span"]

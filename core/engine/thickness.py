@@ -39,20 +39,22 @@ Rules, stated where the established bakers leave them open:
 - *Smooth-shading terminators*: a direction of the inverted shading hemisphere that points out
   through the geometric surface (possible where interpolated normals bend away from the face)
   counts as meeting the surface at distance 0 (V = 0, thin), without being traced: the mirror of AO's
-  rule for directions below the surface (:mod:`core.pipeline.bake`), and like it continuous across the
+  rule for directions below the surface (:mod:`core.pipeline.run`), and like it continuous across the
   terminator.
 """
 
-from ..base.errors import SettingsError
-
-QUANTITIES = ("ao", "thickness")
+import dataclasses
 
 
-def check_quantity(quantity):
-    """'ao' or 'thickness'; anything else raises SettingsError naming the setting."""
-    if not isinstance(quantity, str) or quantity not in QUANTITIES:
-        raise SettingsError(f"quantity must be one of {', '.join(repr(q) for q in QUANTITIES)}, got {quantity!r}")
-    return quantity
+def quantity_settings(s, quantity):
+    """The settings of the bake of ``quantity`` alone, from ``s`` (another quantity's of the same bake,
+    :class:`core.engine.settings.BakeSettings`): the AO-only settings (ground, back faces) left out of
+    a thickness map."""
+    if quantity == s.quantity:
+        return s
+    if quantity == "thickness":
+        return dataclasses.replace(s, quantity="thickness", ground=None, ignore_backfaces=False)
+    return dataclasses.replace(s, quantity=quantity)
 
 
-__all__ = ["QUANTITIES", "check_quantity"]
+__all__ = ["quantity_settings"]

@@ -62,6 +62,28 @@ class ChunkSums:
     extra: object = None
 
 
+@dataclass
+class TileOut:
+    """One tile's values, as the baker hands them to whoever assembles the images (this process or,
+    from a worker process, plain arrays). ``texels`` flat ids; ``lost`` the texels none of whose
+    sample points found a surface (selected to active: uncovered); ``sums``, ``tri``, ``weights``:
+    the bent-normal sums and where each texel's normal is interpolated (None without bent normals)."""
+
+    key: tuple
+    texels: np.ndarray
+    ao: np.ndarray
+    stderr: np.ndarray
+    samples: np.ndarray
+    lost: np.ndarray
+    overlapping: int = 0
+    sums: np.ndarray = None
+    tri: np.ndarray = None
+    weights: np.ndarray = None
+    bent: np.ndarray = None
+    maps: dict = None  # a bake of several quantities: the tile of each other quantity, as plain data
+    guide: tuple = None  # the denoiser's guide of the texels (:func:`core.post.denoise.tile_guide`); None without denoise
+
+
 class SurfaceStart:
     """Samples start on the target's surface: each at its point of the texel, with the target's
     interpolated normal. One sample per point; contact probed per texel (:func:`core.geometry.surface.contact_texels`).
@@ -276,4 +298,4 @@ class TileBaker:
         return done
 
 
-__all__ = ["TileBaker", "SurfaceStart", "ChunkSums", "allocation_seeds"]
+__all__ = ["TileBaker", "SurfaceStart", "ChunkSums", "TileOut", "allocation_seeds"]

@@ -242,7 +242,7 @@ def bin_triangles(tris, width, height, tile):
                                                                                + item[0][1])}
 
 
-def _clip(X, Y, count, a, b, c):
+def clip_polygons(X, Y, count, a, b, c):
     """Clip convex polygons by a*x + b*y + c >= 0 (vectorised); the polygons are columns: vertex k
     of polygon p at (X[k, p], Y[k, p]) (K, P), ``count`` (P,) vertices each.
 
@@ -641,7 +641,7 @@ def rasterize_tile(tris, tri_ids, width, height, x0, y0, x1, y1, locate=True):
 def _clip_pairs(xy, E, tri, px, py):
     """Clip texel squares (lower corners ``px``, ``py``) by the triangles ``xy[tri]``: fan
     sub-triangles (m, 3, 2), their areas, and the pair each came from (index into ``tri``).
-    Polygons are worked as columns (see :func:`_clip`)."""
+    Polygons are worked as columns (see :func:`clip_polygons`)."""
     n = len(tri)
     X, Y = np.zeros((7, n)), np.zeros((7, n))
     sq_x, sq_y = [px + d for d in (0.0, 1.0, 1.0, 0.0)], [py + d for d in (0.0, 0.0, 1.0, 1.0)]
@@ -667,7 +667,7 @@ def _clip_pairs(xy, E, tri, px, py):
         if not len(cuts):
             continue
         slots = int(cnt[cuts].max())
-        cx, cy, cnt[cuts] = _clip(X[:slots, cuts], Y[:slots, cuts], cnt[cuts], a_e[cuts], b_e[cuts], c_e[cuts])
+        cx, cy, cnt[cuts] = clip_polygons(X[:slots, cuts], Y[:slots, cuts], cnt[cuts], a_e[cuts], b_e[cuts], c_e[cuts])
         X[:slots + 1, cuts], Y[:slots + 1, cuts] = cx, cy
         X[slots + 1:, cuts] = 0.0
         Y[slots + 1:, cuts] = 0.0

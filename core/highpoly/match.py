@@ -35,7 +35,7 @@ init_from_bake.h``, ``shade_surface.h``: ``integrate_surface_ao``). The rules, e
    shades the hit as if seen from along that normal: a high-poly with flipped normals gets the AO of
    its other side). Rays leave from q pushed off along the high-poly's geometric normal on the
    shading normal's side; directions below the geometric surface count as occluded, as everywhere
-   in the baker (:mod:`core.pipeline.bake`).
+   in the baker (:mod:`core.pipeline.run`).
 
 5. **Occluders**: the high-poly meshes and the ``occluders`` given (Cycles: every other visible
    object of the view layer); never the low-poly target or the cage, even when passed among the
@@ -85,7 +85,7 @@ single texels (a box resting on the high-poly, its footprint's edge cutting texe
 the position part dominates and the pooled ``stderr`` is about 1.7 times too small, and 2-3 times
 too large on the texels around them; measured, not tested).
 
-Everything here runs in the bake's normalised frame (:func:`core.pipeline.bake._normalized_scene`): the
+Everything here runs in the bake's normalised frame (:func:`core.pipeline.prologue.normalized_scene`): the
 extrusion and the distance scale with it. A sample point draws its position from its index in the
 texel's pattern and its directions from the indices of its block, so bakes stay bit-identical for
 any thread count, tile size and chunk size.
@@ -133,7 +133,7 @@ def directions_per_point(samples, min_samples, adaptive, replicates=1):
     return g
 
 
-def _as_list(highpoly):
+def as_list(highpoly):
     if isinstance(highpoly, Mesh):
         return [highpoly]
     try:
@@ -172,7 +172,7 @@ class SelectedToActive:
     @classmethod
     def check(cls, target, highpoly, extrusion, max_ray_distance, cage):
         """Refuse bad input with an error naming the meshes and saying what to change."""
-        highs = _as_list(highpoly)
+        highs = as_list(highpoly)
         for h in highs:
             if not isinstance(h, Mesh):
                 raise SettingsError(f"high-poly meshes must be core.Mesh objects, got {type(h).__name__}")
@@ -219,7 +219,7 @@ class SelectedToActive:
         """The same input in the bake's frame: positions (p - centre) / unit, distances / unit.
 
         A high-poly mesh or cage reaching ``max_span`` target sizes or farther is refused (single
-        precision rays cannot hold both), as :func:`core.pipeline.bake._normalized_scene` refuses occluders.
+        precision rays cannot hold both), as :func:`core.pipeline.prologue.normalized_scene` refuses occluders.
         """
         highs = [h.transformed(centre, unit) for h in self.highs]
         cage = None if self.cage is None else self.cage.transformed(centre, unit)
@@ -913,5 +913,5 @@ class HighPolyStage:
         return out["tfar"][out["primID"] >= 0].astype(np.float64)
 
 
-__all__ = ["SelectedToActive", "HighPolyStage", "HighPolyStart", "HighPolyScene", "DIRECTIONS_PER_POINT",
+__all__ = ["SelectedToActive", "as_list", "HighPolyStage", "HighPolyStart", "HighPolyScene", "DIRECTIONS_PER_POINT",
            "directions_per_point", "finish_report"]

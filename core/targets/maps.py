@@ -18,49 +18,9 @@ map only (a thickness map is occluded by the object alone, :mod:`core.engine.thi
 ``quantities`` they are refused, as :func:`core.bake_ao` refuses them with ``quantity='thickness'``.
 """
 
-import dataclasses
 import threading
 
-from ..base.errors import SettingsError
-from ..engine.thickness import QUANTITIES, check_quantity
-
-#: What :func:`core.bake_maps` bakes unless told otherwise.
-DEFAULT_QUANTITIES = ("ao", "thickness")
-
-
-def check_quantities(quantities):
-    """The quantities as a tuple of distinct names from :data:`core.engine.thickness.QUANTITIES` (one name
-    alone is taken as a tuple of it); anything else raises SettingsError naming the setting."""
-    if isinstance(quantities, str):
-        quantities = (quantities,)
-    try:
-        given = list(quantities)
-    except TypeError:
-        raise SettingsError(f"quantities must be a list of {', '.join(repr(q) for q in QUANTITIES)}, "
-                            f"got {quantities!r}") from None
-    if not given:
-        raise SettingsError(f"quantities is empty: name at least one of {', '.join(repr(q) for q in QUANTITIES)}")
-    out = tuple(check_quantity(q) for q in given)
-    twice = sorted({q for q in out if out.count(q) > 1})
-    if twice:
-        raise SettingsError(f"quantities names {', '.join(repr(q) for q in twice)} more than once: {list(given)!r}")
-    return out
-
-
-def base_quantity(quantities):
-    """The quantity whose settings are checked and laid out first: 'ao' where it is baked (its
-    settings are the larger set), else the first."""
-    return "ao" if "ao" in quantities else quantities[0]
-
-
-def lane_settings(s, quantity):
-    """The settings of the bake of ``quantity`` alone, from ``s`` (the base quantity's, checked): the
-    AO-only settings (ground, back faces) left out of a thickness map."""
-    if quantity == s.quantity:
-        return s
-    if quantity == "thickness":
-        return dataclasses.replace(s, quantity="thickness", ground=None, ignore_backfaces=False)
-    return dataclasses.replace(s, quantity=quantity)
+from ..engine.tilebaker import TileOut
 
 
 class LaneCounts:
@@ -99,12 +59,12 @@ class _Starts:
 
 
 class MapsBake:
-    """The bakes of several quantities over one layout, as one bake for :func:`core.execution.workers.bake_tiles`
+    """The bakes of several quantities over one layout, as one bake for :func:`core.execution.executor.bake_tiles`
     (in this process, in worker processes, on a Dask cluster).
 
-    ``lanes``: {quantity: bake}, :class:`core.pipeline.bake.TexelBake` or :class:`core.targets.corners.VertexBake`
+    ``lanes``: {quantity: bake}, :class:`core.targets.texels.TexelBake` or :class:`core.targets.corners.VertexBake`
     objects made by ``lane`` from one of them (they share its layout). A tile is laid out once
-    (``layout``) and baked by every lane; its :class:`core.pipeline.bake.TileOut` is the first quantity's,
+    (``layout``) and baked by every lane; its :class:`core.engine.tilebaker.TileOut` is the first quantity's,
     with the others' in ``maps`` as plain data. ``start.counters()`` are the lanes' by quantity.
     """
 
@@ -138,11 +98,9 @@ class MapsBake:
 
     def outs(self, out):
         """{quantity: TileOut} of a tile that :meth:`tile` (here or in a worker) returned."""
-        from ..pipeline.bake import TileOut
-
         more = out.maps or {}
         out.maps = None
         return {q: out if q == self.quantities[0] else TileOut(**more[q]) for q in self.quantities}
 
 
-__all__ = ["DEFAULT_QUANTITIES", "MapsBake", "LaneCounts", "check_quantities", "base_quantity", "lane_settings"]
+__all__ = ["MapsBake", "LaneCounts"]

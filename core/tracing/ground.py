@@ -17,35 +17,14 @@ size (which sets the rays' offsets off the surface):
 
 The height: ``'auto'`` is the lowest point of the baked surface (the target's; with selected to
 active, the high-poly meshes', whose AO is baked), so each object of a batch gets its own contact;
-a number is a world height. The bake moves the scene into its own frame (:func:`core.pipeline.bake._frame`:
+a number is a world height. The bake moves the scene into its own frame (:func:`core.pipeline.prologue.frame_of`:
 a translation and a uniform scale, so the plane stays horizontal); :func:`frame_height` takes the
 height there.
 """
 
-import math
 
 import numpy as np
 
-from ..base.errors import SettingsError
-
-
-def check_ground(value):
-    """``None``, ``'auto'`` or a finite world height (float); anything else raises SettingsError
-    naming the setting."""
-    if value is None:
-        return None
-    if isinstance(value, str):
-        if value == "auto":
-            return "auto"
-        raise SettingsError(f"ground must be None, 'auto' (the baked object's lowest point) or a height, "
-                            f"got the string {value!r}")
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise SettingsError(f"ground must be None, 'auto' or a height (a number), got {type(value).__name__} "
-                            f"{value!r}")
-    h = float(value)
-    if not math.isfinite(h):
-        raise SettingsError(f"the ground height must be a finite number, got {h}")
-    return h
 
 
 def world_height(ground, lowest):
@@ -100,4 +79,4 @@ def touching(pz, nz, lengths, h):
     return np.abs(pz - h) <= reach
 
 
-__all__ = ["check_ground", "world_height", "frame_height", "crossing", "distance", "touching"]
+__all__ = ["world_height", "frame_height", "crossing", "distance", "touching"]

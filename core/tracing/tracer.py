@@ -183,6 +183,11 @@ class Tracer:
         out.ground = None if ground is None else float(ground)
         return out
 
+    def hold(self, meshes):
+        """Hold ``meshes`` (the same bits as the ones this tracer was built from) instead of those: a
+        worker that keeps this tracer for its next bake lets the last bake's meshes go."""
+        self._meshes = list(meshes)
+
     @functools.cached_property
     def face_normals(self):
         """(T, 3) unit face normals of every triangle of the scene (asked for by back-face culling only)."""

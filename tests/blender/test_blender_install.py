@@ -60,7 +60,7 @@ def test_own_zip_writer_matches_blenders_builder(bpy, tmp_path):
         assert sorted(a.namelist()) == sorted(b.namelist())
         assert a.read("blender_manifest.toml") == b.read("blender_manifest.toml")
         names = a.namelist()
-    assert "core/pipeline/bake.py" in names and "mc_ao/operators.py" in names and "mc_ao/outputs/maps.py" in names
+    assert "core/pipeline/run.py" in names and "mc_ao/operators.py" in names and "mc_ao/outputs/maps.py" in names
     assert_allow_list(names)
 
 
@@ -133,7 +133,7 @@ def test_install_from_disk_enable_bake_uninstall(bpy, built_zip, user_repo):
     assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
     ao, _ = image_ao(bpy.data.images["Ground_AO"])
     assert ao.shape == (16, 16) and ao.min() < 0.5 < ao.max()
-    assert f"{ADDON}.core.pipeline.bake" in sys.modules
+    assert f"{ADDON}.core.pipeline.run" in sys.modules
     # Worker processes from the installed extension: they import its core from the repository's folder
     # (not bl_ext, which a new interpreter cannot import) and the wheels' embreex; the same bits.
     core = sys.modules[f"{ADDON}.core"]
@@ -146,9 +146,9 @@ def test_install_from_disk_enable_bake_uninstall(bpy, built_zip, user_repo):
     one = core.bake_ao(plane, [lid], resolution=16, samples=8, threads=1)
     two = core.bake_ao(plane, [lid], resolution=16, samples=8, workers=2)
     assert np.array_equal(one.ao, two.ao) and np.array_equal(one.stderr, two.stderr)
-    pool = sys.modules[f"{ADDON}.core.execution.workers"]._POOL
+    pool = sys.modules[f"{ADDON}.core.execution.pool"]._POOL
     assert pool is not None and all(w.alive for w in pool.workers)
-    sys.modules[f"{ADDON}.core.execution.workers"].shutdown()
+    sys.modules[f"{ADDON}.core.execution.pool"].shutdown()
 
     index = list(bpy.context.preferences.extensions.repos).index(user_repo)
     assert bpy.ops.extensions.package_uninstall(repo_index=index, pkg_id="mc_ao") == {"FINISHED"}

@@ -63,7 +63,7 @@ def test_the_operator_bakes_the_same_image_in_processes(bpy, scene_file):
         assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
         images[processes], _ = image_ao(bpy.data.images["Ground_AO"])
     assert np.array_equal(images[1], images[2])
-    import core.execution.workers as W  # the checkout's core, which the add-on uses here
+    import core.execution.pool as W  # the checkout's core, which the add-on uses here
 
     assert W._POOL is not None and len(W._POOL.workers) == 2
 
@@ -85,7 +85,7 @@ def test_the_batch_fingerprint_does_not_depend_on_the_processes(tmp_path):
 
 
 def test_disabling_the_add_on_ends_its_worker_processes(bpy, scene_file):
-    import core.execution.workers as W
+    import core.execution.pool as W
 
     settings = bpy.context.scene.mc_ao
     settings.resolution, settings.samples, settings.processes = 16, 4, 2

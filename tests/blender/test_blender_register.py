@@ -111,15 +111,15 @@ def test_manifest_is_valid_and_lists_wheels_for_every_platform():
 
 
 def test_the_properties_limits_are_the_cores(bpy, addon):
-    """Samples and size stop where the core's refusal starts: read from core.engine.settings, not copied."""
-    import core.engine.settings
+    """Samples and size stop where the core's refusal starts: read from core.base.request, not copied."""
+    import core.base.request
 
     from mc_ao import properties
 
     assert not hasattr(properties, "MAX_SAMPLES") and not hasattr(properties, "MAX_RESOLUTION")
     rna = bpy.types.Scene.bl_rna.properties["mc_ao"].fixed_type.properties
-    assert rna["samples"].hard_max == rna["min_samples"].hard_max == core.engine.settings.MAX_SAMPLES
-    assert rna["resolution"].hard_max == rna["height"].hard_max == core.engine.settings.MAX_RESOLUTION
+    assert rna["samples"].hard_max == rna["min_samples"].hard_max == core.base.request.MAX_SAMPLES
+    assert rna["resolution"].hard_max == rna["height"].hard_max == core.base.request.MAX_RESOLUTION
 
 
 def test_every_schema_setting_is_a_property_with_its_default(bpy, addon):

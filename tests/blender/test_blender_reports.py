@@ -260,7 +260,7 @@ def test_the_panel_shows_what_the_bake_will_cost_and_warns_before_it_does_not_fi
                                                    threads=threads, processes=processes)
     assert estimate == f"Estimate: {cost.describe()}"
     assert not any(icon == "ERROR" for _, icon in labels)
-    monkeypatch.setattr(corelink.load("execution.workers"), "memory_limit", lambda: 1 << 20)  # 1 MiB free
+    monkeypatch.setattr(corelink.load("execution.executor"), "memory_limit", lambda: 1 << 20)  # 1 MiB free
     labels = draw_main_panel(bpy, SIDEBAR)
     warned = [text for text, icon in labels if icon == "ERROR"]
     assert warned and warned[0].startswith("Estimate: ") and len(labels) == ROWS
@@ -366,7 +366,7 @@ def test_the_estimate_prices_the_occluders_the_bake_will_use_apart(bpy, scene):
     assert shown_estimate(bpy) == f"Estimate: {fewer.describe()}"
     assert estimate_and_plan() == (fewer, 2 * 12)
 
-    # Processes 0: as many as the bake picks for these counts (core.execution.workers.auto_workers).
+    # Processes 0: as many as the bake picks for these counts (core.execution.executor.auto_workers).
     s.processes = 0
     auto, occluders = estimate_and_plan()
     assert auto == expected(occluders)
@@ -404,7 +404,7 @@ def bake_processes(scene, triangles):
     bake of ``triangles`` (target, occluders, high-poly)."""
     from mc_ao import corelink
 
-    workers = corelink.load("execution.workers")
+    workers = corelink.load("execution.executor")
     threads = scene.mc_ao.threads or None
     return workers.processes_of("auto" if scene.mc_ao.processes == 0 else scene.mc_ao.processes, threads,
                                 types.SimpleNamespace(threads=threads or workers.cpu_count()), triangles)

@@ -130,11 +130,11 @@ def test_a_tiled_image_of_another_size_or_a_plain_image_is_refused_by_name(bpy, 
 def test_esc_leaves_no_tiled_image_behind(bpy, udim_scene, monkeypatch):
     import threading
 
-    import core.targets.udim
+    import core.pipeline.run
 
     ground_over_two_tiles(bpy)
     held = threading.Event()
-    real = core.targets.udim.bake_ao
+    real = core.pipeline.run.run
 
     def holding(*args, progress=None, cancel=None, **kwargs):
         def step(fraction):
@@ -143,7 +143,7 @@ def test_esc_leaves_no_tiled_image_behind(bpy, udim_scene, monkeypatch):
             progress(fraction)
         return real(*args, progress=step, cancel=cancel, **kwargs)
 
-    monkeypatch.setattr(core.targets.udim, "bake_ao", holding)
+    monkeypatch.setattr(core.pipeline.run, "run", holding)
     session, reports = new_session()
     assert session.start(bpy.context, live=True)
     tick_until(bpy, session, held.is_set)

@@ -165,7 +165,7 @@ def cpu_of(pid):
 
 
 def pool_state():
-    pool = core().workers._POOL
+    pool = core().execution.pool._POOL
     if pool is None:
         return None
     return {"workers": [w.process.pid for w in pool.workers], "alive": [bool(w.alive) for w in pool.workers],
@@ -229,7 +229,7 @@ def patch_core():
         nice = state.get("nice")
         if nice and state["inject_workers"]:
             # The pool the bake will use (threads=None: one thread a worker), its workers made nice.
-            pool = c.workers.pool_for(WORKERS, 1 if kw.get("threads") is None else kw["threads"])
+            pool = c.pipeline.remote.pool(WORKERS, 1 if kw.get("threads") is None else kw["threads"])
             for w in pool.workers:
                 os.setpriority(os.PRIO_PROCESS, w.process.pid, nice)
         elif nice:
@@ -248,7 +248,7 @@ def patch_core():
         finally:
             if nice:
                 os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 0)
-                pool = c.workers._POOL
+                pool = c.execution.pool._POOL
                 for w in (pool.workers if pool is not None else ()):
                     os.setpriority(os.PRIO_PROCESS, w.process.pid, 0)
         cpu1 = resource.getrusage(resource.RUSAGE_SELF)
@@ -314,7 +314,7 @@ def direct_check():
         out["error"] = traceback.format_exc()
         out["ok"] = False
     # The operator's first workers bake then starts its own pool (cold).
-    c.workers.shutdown()
+    c.execution.pool.shutdown()
     log("direct workers check:", json.dumps(out, default=str))
     return out
 
@@ -458,7 +458,7 @@ def next_mode():
             bpy.data.images.remove(image)
     state["bakes_before"] = len(state["bakes"])
     if mode.startswith("workers"):
-        state["mode"]["pool"] = "warm" if core().workers._POOL is not None else "cold"
+        state["mode"]["pool"] = "warm" if core().execution.pool._POOL is not None else "cold"
     start_recording()
     state["t0"] = time.perf_counter()
     if mode in ("idle-redraw", "burn-redraw"):
@@ -595,7 +595,7 @@ def finish():
 
 
 def quit_blender():
-    core().workers.shutdown()
+    core().execution.pool.shutdown()
     bpy.ops.wm.quit_blender()
 
 

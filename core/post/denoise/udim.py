@@ -14,7 +14,7 @@ def udim_canvas(tiles):
     column and row and how many tile columns and rows the tiles span. Tiles keep their places in
     UDIM space, so texels of neighbouring tiles stay neighbours and triangles that cross a tile's
     border are whole."""
-    from ...targets.udim import tile_origin
+    from ...geometry.uvtiles import tile_origin
 
     origins = np.array([tile_origin(t) for t in tiles])
     u0, v0 = origins.min(axis=0)
@@ -50,7 +50,7 @@ def denoise_udim(tile_maps, guide, margin=0, **kw):
     {tile: (ao, stderr, info)} as :func:`denoise` returns them, one per tile.
     """
     from ...geometry.margin import dilate
-    from ...targets.udim import tile_origin
+    from ...geometry.uvtiles import tile_origin
 
     tiles = sorted(tile_maps)
     u0, v0, nu, nv = udim_canvas(tiles)

@@ -42,7 +42,7 @@ def denoise_vertices(mesh, ao, stderr, unit, corners=None, *, bandwidths=VERTEX_
     -------
     (ao, stderr, info) per corner (float32), info a :class:`DenoiseInfo` per corner.
     """
-    from ...targets.corners import all_corners, unit_pairs
+    from ...geometry.corners import all_corners, unit_pairs
 
     corners = all_corners(mesh) if corners is None else np.asarray(corners, np.int64)
     unit = np.asarray(unit, np.int64)

@@ -1,0 +1,53 @@
+"""One bake across machines: its tiles as tasks on a Dask cluster (``workers=`` a ``distributed.Client``).
+
+The job goes to every Dask worker once; each sets the bake up once per process and bakes the tiles
+it is given, as plain data (a lost worker's tiles are redone elsewhere: the tasks are pure). The
+same bits as one process, on machines whose CPUs take the same instruction paths.
+"""
+
+from ..base.errors import BakeCancelled, McAoError
+from ..engine.scheduler import is_cancelled
+from ..engine.tilebaker import TileOut
+from .messages import error_of, sum_counters
+
+
+def run_dask(client, task, job, keys, planned, store, progress, cancel, threads=1):
+    """Bake ``keys`` of ``job`` as tasks on the Dask cluster of ``client``: ``task(token, job, key)``
+    (the layer above's, :func:`core.pipeline.remote.dask_tile`) returns (the tile's values, the
+    process, its totals so far); ``store`` each tile as it comes back. The job goes to every worker
+    once; a worker lost mid-bake has its tiles redone elsewhere (the tasks are pure). Returns what
+    :meth:`core.execution.pool.Pool.run` returns."""
+    import uuid
+
+    from distributed import as_completed
+
+    token = uuid.uuid4().hex
+    job = dict(job, threads=int(threads), quantum=1 << 62)
+    [shared_job] = client.scatter([job], broadcast=True, hash=False)
+    futures = [client.submit(task, token, shared_job, key, key=f"mc_ao-tile-{token}-{i}", retries=3,
+                             pure=False) for i, key in enumerate(keys)]
+    totals, done = {}, 0
+    try:
+        for fut in as_completed(futures):
+            if is_cancelled(cancel):
+                raise BakeCancelled("the bake was cancelled; nothing was written")
+            try:
+                out, process, total = fut.result()
+            except BaseException as e:
+                name = type(e).__name__
+                raise error_of(name, str(e)) if isinstance(e, McAoError) else e
+            store(TileOut(**out))
+            totals[process] = total  # each process's latest totals: a redone tile counts once
+            done += 1
+            if progress is not None:
+                progress(min(done / max(len(keys), 1), 1.0))
+    except BaseException:
+        client.cancel(futures)
+        raise
+    parts = list(totals.values())
+    counters = sum_counters(parts)
+    return (sum(p["rays"] for p in parts), sum(p["trace_seconds"] for p in parts),
+            sum(p["trace_cpu_seconds"] for p in parts), counters)
+
+
+__all__ = ["run_dask"]

@@ -1,0 +1,114 @@
+"""The executor: who bakes a bake's tiles (this process's threads, worker processes, a Dask cluster).
+
+It knows no bake kinds: it is given a bake set up after its prologue, the keys of its tiles, what a
+worker rebuilds the bake from (the job, plain data) and where each tile's values go, and it bakes
+the tiles here (:func:`core.engine.scheduler.run_all`), on the pool of worker processes
+(:mod:`core.execution.pool`) or on a Dask cluster (:mod:`core.execution.dask`). How many processes
+and threads: :func:`processes_of` (``workers='auto'``: :func:`auto_workers`, from the cores and the
+memory model of :mod:`core.execution.cost`).
+"""
+
+import numpy as np
+
+from ..base.errors import SettingsError
+from ..base.machine import cpu_count, memory_limit
+from ..base.request import is_dask_client
+from ..engine.scheduler import Scheduler, run_all
+from . import cost as cost_mod
+from .dask import run_dask
+from .memory import memory_entry
+from .pool import pool_for
+
+
+def auto_workers(triangles, cores=None, memory=None):
+    """(workers, threads each) for a bake of ``triangles``: a count (every mesh, costed as the
+    target's) or (target, occluder, high-poly) triangles. One worker a core, fewer with more threads
+    each where memory holds fewer copies of the scene (threads share one): the workers and what the
+    parent adds while they bake within 80% of ``memory`` (None: :func:`memory_limit`, the machine's
+    available memory or what its container's cgroup has left, whichever is less)."""
+    cores = cpu_count() if cores is None else cores
+    memory = memory_limit() if memory is None else memory
+    target, occluders, highpoly = (int(triangles), 0, 0) if np.ndim(triangles) == 0 else map(int, triangles)
+    # core.execution.cost's measured figures: each worker's peak (its tables and Embree scenes, its interpreter
+    # and sample pool), and the parent's share while they bake.
+    per_worker = cost_mod.process_bytes(target, occluders, highpoly)
+    parent = cost_mod.parent_bytes(target, occluders + highpoly)
+    workers = cores if memory is None else max(1, min(cores, int((memory * 0.8 - parent) // per_worker)))
+    return workers, max(1, cores // workers)
+
+
+def processes_of(workers, threads, settings, triangles):
+    """(processes, threads each) of a bake given ``workers`` (1, N or 'auto', checked) and the
+    ``threads`` argument: with workers, ``threads`` counts each worker's threads (None: one each, or
+    what 'auto' picks); workers=1 is this process with ``settings.threads``."""
+    if is_dask_client(workers):
+        return workers, 1 if threads is None else settings.threads
+    if workers == 1:
+        return 1, settings.threads
+    if workers == "auto":
+        processes, per_worker = auto_workers(triangles)
+        if threads is None:
+            return processes, per_worker
+        # Threads asked for each: as many workers as the cores hold at that many threads each.
+        return max(1, min(processes, cpu_count() // settings.threads)), settings.threads
+    return workers, 1 if threads is None else settings.threads
+
+
+def in_process(processes):
+    """Whether a bake of :func:`processes_of`'s ``processes`` runs in this process."""
+    return not is_dask_client(processes) and processes == 1
+
+
+def worker_count(processes):
+    """How many processes bake the tiles (a Dask cluster's workers now)."""
+    if is_dask_client(processes):
+        return max(1, len(processes.scheduler_info().get("workers", {})))
+    return processes
+
+
+def run_tiles(remote, processes, threads, job, keys, planned, store, progress, cancel):
+    """Bake ``keys`` of ``job`` on the local pool or a Dask cluster (:func:`core.execution.dask.run_dask`)."""
+    if is_dask_client(processes):
+        return run_dask(processes, remote.dask_tile, job, keys, planned, store, progress, cancel, threads)
+    return pool_for(processes, threads, remote).run(job, keys, planned, store, progress, cancel)
+
+
+def bake_tiles(remote, bake, keys, processes, threads, job, store, progress, cancel, on_rays=None):
+    """Bake ``keys`` of ``bake`` (any bake set up after its prologue: ``planned``, ``s.threads``,
+    ``trace_setup``, ``tile``, ``start.counters()``) in this process on ``bake.s.threads`` threads, or on
+    ``processes`` worker processes of ``threads`` threads (or a Dask cluster) that run ``remote``
+    (:mod:`core.pipeline.remote`); ``store`` each tile's :class:`core.engine.tilebaker.TileOut`.
+    ``job()`` makes the plain data workers rebuild the bake from (only when they bake). Where a local
+    pool cannot be used (its self-test failed), this process bakes.
+
+    Returns (rays, trace seconds, trace CPU seconds, the start stage's counters, the reason the pool
+    was not used or None). The counters hold ``worker_memory``: a :func:`memory_entry` of this
+    process, then one of each worker process that baked."""
+    fallback = usable_pool(remote, processes, threads)
+    if fallback is None and not in_process(processes):
+        if on_rays is not None:
+            raise SettingsError("on_rays sees the rays of this process only: bake with workers=1 to record them")
+        rays, seconds, cpu, counters = run_tiles(remote, processes, threads, job(), keys, bake.planned, store, progress,
+                                                 cancel)
+        counters["worker_memory"] = [memory_entry("parent", (bake,))] + counters.get("worker_memory", [])
+        return rays, seconds, cpu, counters, None
+    shared = Scheduler(bake.planned, progress, cancel)
+    bake.trace_setup(shared, cancel, on_rays)
+    run_all(lambda key: store(bake.tile(key)), keys, bake.s.threads, shared, progress)
+    counters = bake.start.counters()
+    counters["worker_memory"] = [memory_entry("parent", (bake,))]
+    return shared.rays, shared.trace_seconds, shared.trace_cpu_seconds, counters, fallback
+
+
+def usable_pool(remote, processes, threads):
+    """None when the local pool of ``processes`` started and passed its self-test (or the tiles go to
+    a Dask cluster), else the reason it cannot be used (the bake then runs on threads)."""
+    if in_process(processes) or is_dask_client(processes):
+        return None
+    try:
+        return pool_for(processes, threads, remote).failed
+    except OSError as e:  # the interpreter could not be started at all
+        return f"worker processes could not be started ({e})"
+
+
+__all__ = ["auto_workers", "processes_of", "in_process", "worker_count", "run_tiles", "bake_tiles", "usable_pool"]

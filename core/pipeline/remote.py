@@ -1,0 +1,157 @@
+"""A bake in another process: the job (plain data) a worker rebuilds a bake from, and the worker's side.
+
+The executor (:mod:`core.execution`) knows no bake kinds: it boots a worker process into
+:func:`main`, hands each job to :func:`build` and each Dask task to :func:`dask_tile`, and checks a
+new pool against :func:`self_test`. A job is the request as plain data
+(:meth:`core.base.request.BakeRequest.to_dict`, with the tiles and the extrusion the parent chose) and
+the meshes as arrays (:func:`mesh_data`); the executor adds ``threads`` (each worker's) and
+``quantum`` (samples per progress message).
+
+A worker keeps the last bake's occlusion scenes (Embree's, and the tracer's arrays) and traces in
+them when the next bake sends the same meshes (:func:`scene_key`): an artist baking again after
+changing the samples, the resolution or the distance does not wait for them. One scene at a time:
+a bake of other meshes drops it before building its own (:func:`forget`), so a worker's peak does
+not grow. Selected-to-active bakes keep none.
+"""
+
+import hashlib
+import os
+import sys
+import threading
+
+import numpy as np
+
+from ..base.request import BakeRequest
+from ..engine.scheduler import run_all
+from ..engine.settings import BakeSettings
+from ..execution import worker as worker_mod
+from ..execution.pool import pool_for
+from ..execution.worker import CountingScheduler
+from ..geometry.mesh import Mesh
+from ..targets.corners import vertex_bake
+from ..targets.texels import texel_bake
+from .prologue import Prologue, check
+
+
+def mesh_data(mesh):
+    """A :class:`core.Mesh` as plain data for a worker (its corner normals as given: the worker
+    computes the unit ones, the same bits; none for a flat-shaded mesh)."""
+    return dict(positions=mesh.positions, triangles=mesh.triangles, uvs=mesh.uvs, normals=mesh.given_normals(),
+                name=mesh.name)
+
+
+def _mesh(data):
+    return None if data is None else Mesh(**data)
+
+
+#: The last bake's occlusion scenes in this worker: ``key`` (:func:`scene_key`), ``count`` (the meshes
+#: its tracer holds: the target alone, or with its occluders) and ``tracer``.
+_SCENE = {}
+
+
+def scene_key(job):
+    """A digest of what a bake's occlusion scenes are built from: the target's and the occluders'
+    positions and triangles as sent (their dtypes and shapes too). The same key, the same scenes:
+    the meshes are moved into the bake's frame by the same arithmetic on the same bits."""
+    h = hashlib.blake2b(digest_size=20)
+    for m in [job["target"]] + list(job["occluders"]):
+        for name in ("positions", "triangles"):
+            a = np.ascontiguousarray(m[name])
+            h.update(f"{name}{a.dtype.str}{a.shape};".encode())
+            h.update(memoryview(a).cast("B"))
+    return h.hexdigest()
+
+
+def forget(job):
+    """Drop the scenes kept from the last bake unless ``job`` bakes the same meshes (before its own
+    are built: a worker never holds two). Notes the job's :func:`scene_key` in it."""
+    job["scene"] = scene_key(job)
+    if _SCENE.get("key") != job["scene"]:
+        _SCENE.clear()
+
+
+def build(job, cancel, progress):
+    """The bake of ``job`` in this process: (bake, its scheduler, threads). A job that :func:`forget`
+    saw traces in the last bake's scenes where the meshes are the same, and keeps its own for the
+    next bake; another (a Dask task's) keeps none."""
+    key = job.get("scene")
+    request = BakeRequest.from_dict(job["request"]).replace(threads=job["threads"])
+    highpoly = job.get("highpoly")
+    # Popped: the job holds nothing of the target past its use (its UVs go once the bake has its UV triangles).
+    checked = check(request, _mesh(job.pop("target")), [_mesh(o) for o in job["occluders"]],
+                    highpoly=None if highpoly is None else [_mesh(m) for m in highpoly], cage=_mesh(job.get("cage")),
+                    corners=job.get("corners"))
+    pro = Prologue(checked, request, cancel)
+    kept = _SCENE.get("tracer") if key is not None and pro.s2a is None and _SCENE.get("key") == key else None
+    if kept is not None:
+        pro.share(_SCENE["count"], kept)
+    s = BakeSettings.of(request)
+    if request.kind == "corners":
+        bake = vertex_bake(pro, s, pro.corners, request.all_quantities, request.merge, request.bent_normals,
+                           job["block"])
+    else:
+        bake = texel_bake(pro, s, request.all_quantities, request.bent_normals, guide=job.get("guide", False))
+        # The UVs served the UV triangles the bake now holds; a worker bakes tiles from those alone and
+        # lets the UVs go (48 bytes a triangle; the parent keeps them for the images and the denoiser).
+        pro.target.uvs = None
+    shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
+    bake.trace_setup(shared, cancel)
+    bake.scene_reused = kept is not None and pro.shared_tracer is not None and pro.shared_tracer[1] is kept
+    if key is not None:
+        # Keep the tracer this bake traced in as the last scene (one scene at a time: memory does not grow).
+        _SCENE.clear()
+        if pro.s2a is None and pro.shared_tracer is not None:
+            meshes, tracer = pro.shared_tracer
+            tracer.hold(meshes)  # this bake's meshes (the same bits): the last bake's go
+            _SCENE.update(key=key, count=len(meshes), tracer=tracer)
+    return bake, shared, s.threads
+
+
+def self_test():
+    """A digest of a tiny bake (a plane under a lid, 16^2 x 8, one thread): what every worker and the
+    parent must agree on before a pool is used (the same numpy, Embree and instruction paths)."""
+    from .api import bake_ao
+
+    p = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    lid = Mesh(p * [0.6, 0.6, 0] + [0.2, 0.2, 0.3], f, name="lid")
+    r = bake_ao(Mesh(p, f, uvs=p[f][:, :, :2], name="plane"), [lid], resolution=16, samples=8, threads=1)
+    return hashlib.sha256(r.ao.tobytes() + r.stderr.tobytes()).hexdigest()
+
+
+def pool(workers, threads):
+    """The persistent pool of ``workers`` worker processes of ``threads`` threads each that bakes run on
+    (:func:`core.execution.pool.pool_for`), started now if it is not running."""
+    return pool_for(workers, threads, sys.modules[__name__])
+
+
+def main():
+    """A worker process (see :mod:`core.execution.pool`): bakes jobs built here until its parent is gone."""
+    worker_mod.main(sys.modules[__name__])
+
+
+#: The bakes a Dask worker process has set up, by token (a bake's tiles reuse its scene); the last few.
+_DASK_BAKES = {}
+_DASK_KEEP = 2
+
+
+def dask_tile(token, job, key):
+    """One tile of the bake ``job`` on a Dask worker: (the tile's values, this process, its totals so
+    far), as plain data. The bake is set up once per process and token; a task that is run again (its
+    worker was lost) gives the same values."""
+    entry = _DASK_BAKES.get(token)
+    if entry is None:
+        bake, shared, threads = build(dict(job), threading.Event(), lambda work: None)
+        entry = _DASK_BAKES[token] = (bake, shared, threads, threading.Lock())
+        while len(_DASK_BAKES) > _DASK_KEEP:
+            _DASK_BAKES.pop(next(iter(_DASK_BAKES)))
+    bake, shared, threads, lock = entry
+    with lock:  # one tile of a bake at a time in a process (its threads share the tile's chunks)
+        outs = []
+        run_all(lambda k: outs.append(bake.tile(k, directions=False)), [key], threads, shared, None)
+        totals = dict(rays=shared.rays, trace_seconds=shared.trace_seconds,
+                      trace_cpu_seconds=shared.trace_cpu_seconds, counters=bake.start.counters())
+    return vars(outs[0]), (os.getpid(), id(entry)), totals
+
+
+__all__ = ["mesh_data", "scene_key", "forget", "build", "self_test", "pool", "main", "dask_tile"]
