@@ -162,7 +162,7 @@ class Job:
             if kw.get("bent_normals"):
                 kw["bent_space"] = (self.target.extra or {}).get("bent_space")
             if self.highpoly and not (settings.use_udim or settings.bent_normals):
-                # Extrusion 0 (the default) is measured from the meshes (core.highpoly.match's automatic
+                # Extrusion 0 (the default) is measured from the meshes (core.highpoly's automatic
                 # extrusion: how far the high-poly lies outside the low-poly), never Cycles' trap of none.
                 extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
                 kw.update(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
@@ -501,7 +501,7 @@ def channel_problem(settings, images=None):
             return f"Into: there is no image named {settings.into!r} to write the AO into"
         # a file (the script's --into PATH): core.files.imageio checks it, naming it and what it has
         try:
-            corelink.load("files.imageio").check_channel(settings.into, settings.channel, settings.size)
+            corelink.load("files.channels").check_channel(settings.into, settings.channel, settings.size)
         except corelink.load().SettingsError as exc:
             return str(exc)
         return None
@@ -584,7 +584,7 @@ def miss_summary(result):
 
 
 def miss_notes(result):
-    """Warnings of a Selected to Active bake (core.highpoly.match's report), as sentences; [] for another bake."""
+    """Warnings of a Selected to Active bake (core.highpoly's report), as sentences; [] for another bake."""
     report = getattr(result, "report", None) or {}
     n = report.get("missed_texels", 0)
     if not n:

@@ -5,7 +5,7 @@ The same settings as Cycles' Bake panel (``scene.mc_ao.use_selected_to_active``,
 low-poly target (a mesh with a UV map), every other selected object with a surface (meshes, curves,
 text, metaballs, evaluated with their modifiers) is a high-poly source. Its image is
 ``<active>_AO`` (the Image setting applies as for any bake). The core's rules are in
-:mod:`core.highpoly.match`; this module picks the objects, reads their geometry and checks them, and needs
+:mod:`core.highpoly`; this module picks the objects, reads their geometry and checks them, and needs
 no bpy at import.
 
 How Blender's objects become the core's input, as Cycles does it (``object_bake_api.cc``):

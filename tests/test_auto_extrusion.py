@@ -1,4 +1,4 @@
-"""Selected to active without the extrusion trap: the automatic extrusion (core.highpoly.match.auto_extrusion)
+"""Selected to active without the extrusion trap: the automatic extrusion (core.highpoly.extrusion.auto_extrusion)
 against hand-set ones on a bumpy high-poly over a coarse low-poly and in a narrow slot whose far wall
 is also 'outside', and the warning when matching rays meet the high-poly from behind. (The same on
 sample_scenes/rock.blend: tests/blender/test_auto_extrusion_rock.py.)"""
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from core import Mesh, SettingsError, bake_ao
-from core.highpoly.match import auto_extrusion
+from core.highpoly.extrusion import auto_extrusion
 from scenes import QUAD, plane
 
 A = 0.05    # how far the high-poly bulges out of (and sinks into) the low-poly
@@ -103,10 +103,10 @@ def test_in_a_slot_the_far_wall_does_not_push_the_extrusion_out():
 
 def test_the_measure_serves_each_point_between_its_need_and_its_limit():
     low, highs = slot()
-    from core.highpoly.match import _concatenate
+    from core.highpoly.scene import concatenate
     from core.tracing.tracer import embree_scene
 
-    high = _concatenate(highs, "high")
+    high = concatenate(highs, "high")
     m = auto_extrusion(low, embree_scene([high])[0], high.face_normals, count=1024)
     assert np.all(m.need >= 0) and np.all(m.need <= A * 1.001)
     inside = m.need == 0  # the points where the high-poly lies below the wall

@@ -11,7 +11,7 @@ import pytest
 
 from core.files import imageio
 from core.base.errors import ChannelError, ImageWriteError
-from core.files.imageio import check_channel, pack_channel, write_channel
+from core.files.channels import check_channel, pack_channel, write_channel
 from tests.fullfs import fill, listing, small_filesystem
 
 oiio = pytest.importorskip("OpenImageIO")

@@ -122,7 +122,8 @@ def test_which_scenes_are_robust():
     """The bake's occlusion rays go to a scene without robust mode; its contact probes and the
     high-poly matching rays, which start on surfaces, to robust scenes (without robust mode a
     low-poly plane lying on the high-poly one finds nothing: tests/test_highpoly.py)."""
-    from core.highpoly.match import HighPolyScene, SelectedToActive
+    from core.highpoly.scene import HighPolyScene
+    from core.highpoly.input import SelectedToActive
     from core.tracing.tracer import Tracer
 
     positions, tris, uvs = _grid(4)

@@ -1,4 +1,4 @@
-"""Selected to active (core.highpoly.match): the AO of high-poly meshes baked into a low-poly's UVs.
+"""Selected to active (core.highpoly): the AO of high-poly meshes baked into a low-poly's UVs.
 
 Against analytic truth (a high plane under a hovering polygon, AO = 1 - F at the projected points),
 Cycles' rules for the matching rays (extrusion, cage, max ray distance, nearest hit, back faces,
@@ -15,7 +15,7 @@ import pytest
 
 from core import BakeCancelled, Mesh, MeshError, SettingsError, bake_ao, warps
 from core.engine.estimators import interval_half_width
-from core.highpoly.match import DIRECTIONS_PER_POINT, PRECHECK_POINTS, directions_per_point
+from core.highpoly.stage import DIRECTIONS_PER_POINT, PRECHECK_POINTS, directions_per_point
 from core.montecarlo.stats import normal_quantile
 from chi2 import SUITE_ALPHA, chi2_test, sidak
 from core.montecarlo.analytic import regular_polygon
@@ -55,7 +55,7 @@ def check_z(r, truth, what=""):
     A texel's estimate has two parts of variance: its n cosine-weighted directions (terms 0 or 1: the
     mean over its points of AO (1 - AO), over n) and the positions of its P sample points (the
     variance of AO over the texel's square, over P), both exact from the analytic field. The baker's
-    ``stderr`` estimates the first from the samples (core.highpoly.match: it does not see the second).
+    ``stderr`` estimates the first from the samples (core.highpoly: it does not see the second).
     The far-off check uses each texel's Agresti-Coull interval (core.engine.estimators) widened by the
     positions' part, at the Sidak level over all texels. The bakes it checks take one replicate: with
     two or more, ``stderr`` is the replicates' spread and holds both parts

@@ -497,7 +497,7 @@ def _fake_oiio(mode):
                                               ("interrupt", KeyboardInterrupt, None)])
 def test_failed_oiio_write_leaves_target_and_no_temp(existing, monkeypatch, mode, raised, text):
     target, before = existing
-    monkeypatch.setattr(imageio, "_import_oiio", lambda error_class: _fake_oiio(mode))
+    monkeypatch.setattr(imageio, "import_oiio", lambda error_class: _fake_oiio(mode))
     with pytest.raises(raised) as info:
         imageio.write_image(target, np.ones((3, 3), np.float32))
     if text:
@@ -515,7 +515,7 @@ def test_oiio_error_on_open_is_reported(tmp_path, monkeypatch):
                 return None
         return types.SimpleNamespace(ImageOutput=ImageOutput, ImageSpec=OpenImageIO.ImageSpec,
                                      geterror=lambda: "could not find a format writer")
-    monkeypatch.setattr(imageio, "_import_oiio", no_writer)
+    monkeypatch.setattr(imageio, "import_oiio", no_writer)
     with pytest.raises(ImageWriteError, match="could not find a format writer"):
         imageio.write_image(tmp_path / "ao.exr", ramp())
     assert files_in(tmp_path) == []

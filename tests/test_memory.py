@@ -240,7 +240,7 @@ def test_the_memory_estimate_prices_the_parent_and_each_worker():
 
 
 def test_a_large_high_poly_alone_is_one_embree_scene_that_matches_and_occludes(monkeypatch):
-    from core.highpoly import match as highpoly
+    from core.highpoly import scene as highpoly
 
     P, F, UV, N = wavy(16)
     lowp = np.array([[10, 10, 9.8], [12, 10, 9.8], [12, 12, 9.8], [10, 12, 9.8]], float)

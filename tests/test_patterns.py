@@ -24,8 +24,11 @@ import pytest
 from scipy import stats
 
 from core.engine import patterns as P
-from core.engine.patterns import DIMS, SOURCE_NAMES, TexelPattern, hash64, hash_more
-from core.montecarlo.sources import SOURCES, Sobol, Stratified, owen_scramble_uint32, sobol_uint32
+from core.engine.patterns import DIMS, SOURCE_NAMES, TexelPattern
+from core.montecarlo.hashing import below, hash64, hash_more
+from core.montecarlo.sobol import Sobol, owen_scramble_uint32, sobol_uint32
+from core.montecarlo.sources import SOURCES
+from core.montecarlo.stratified import Stratified
 
 ALPHA = 1e-3
 #: The texels the statistical tests look at: a 64 x 64 block of a 64-texel-wide image, so that
@@ -231,7 +234,7 @@ def test_texel_keys_are_hashes_of_seed_texel_replicate_and_tag(replicate):
     t = np.arange(0, 40000, 3, dtype=np.uint64)
     k = p.keys(t, replicate)
     r = np.uint64(replicate)
-    pattern = (P._below(hash64(p.seed, t, np.uint64(0), P._TAG_PATTERN), p.patterns).astype(np.int64) + replicate)
+    pattern = (below(hash64(p.seed, t, np.uint64(0), P._TAG_PATTERN), p.patterns).astype(np.int64) + replicate)
     np.testing.assert_array_equal(k.pattern, pattern % p.patterns)
     np.testing.assert_array_equal(k.order, ((hash64(p.seed, t, r, P._TAG_ORDER) >> np.uint64(40))
                                             & np.uint64(p.length - 1)).astype(np.int64))

@@ -10,25 +10,12 @@ from scipy import stats
 from scipy.stats import qmc
 
 from core.base.errors import SettingsError
-from core.montecarlo.sources import (
-    SOBOL_MAX_DIM,
-    SOURCES,
-    GeneratorBits,
-    Halton,
-    Independent,
-    NoRandomizer,
-    OwenScrambler,
-    PermuteDigits,
-    Sobol,
-    Stratified,
-    _in_stratum,
-    _radical_fixed_point,
-    make_source,
-    owen_scramble_uint32,
-    reverse_bits_uint32,
-    sobol_uint32,
-    to_unit_float,
-)
+from core.montecarlo.halton import _radical_fixed_point, Halton, PermuteDigits
+from core.montecarlo.independent import Independent
+from core.montecarlo.pointset import GeneratorBits, NoRandomizer, to_unit_float
+from core.montecarlo.sobol import owen_scramble_uint32, OwenScrambler, reverse_bits_uint32, Sobol, SOBOL_MAX_DIM, sobol_uint32
+from core.montecarlo.sources import make_source, SOURCES
+from core.montecarlo.stratified import _in_stratum, Stratified
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -2,6 +2,7 @@
 threads x tiling, errors by the core's own classes, cancel, a worker that dies, and no worker that
 outlives its parent. Driven by the bake's own events (progress), never by the clock."""
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -16,7 +17,7 @@ import pytest
 from core import BakeCancelled, Mesh, MeshError, bake_ao, bake_udim
 from core.base import machine
 from core.execution import executor, messages, pool
-from core.pipeline import remote
+from core.pipeline import run as pipeline_run
 from core.post.bent import TangentFrames  # noqa: F401  (bent_space stays in the parent)
 from scenes import QUAD, box, plane
 
@@ -318,7 +319,9 @@ def test_a_pool_whose_self_test_fails_falls_back_to_threads_and_says_why(monkeyp
     """Where worker processes bake differently (another platform's numpy or Embree) or cannot start,
     the bake runs on threads, with the same bits, and a warning that says why."""
     pool.shutdown()
-    monkeypatch.setattr(remote, "self_test", lambda: "this process's digest")  # the workers' differ from it
+    # The workers' digests differ from this process's.
+    monkeypatch.setattr(pipeline_run, "REMOTE", dataclasses.replace(pipeline_run.REMOTE,
+                                                                    self_test=lambda: "this process's digest"))
     target, occ = scene()
     ref = bake_ao(target, occ, resolution=16, samples=8, threads=1)
     r = bake_ao(target, occ, resolution=16, samples=8, workers=2)

@@ -151,7 +151,7 @@ def child(case, triangles, workers, res, spp):
     sys.path.insert(0, str(ROOT))
     from core import Mesh, bake_ao
     from core.execution import pool as W
-    from core.pipeline import remote
+    from core.pipeline import run as pipeline_run
 
     out = {"case": case, "triangles": triangles, "workers": workers, "resolution": res, "spp": spp}
     base = status()
@@ -204,7 +204,7 @@ def child(case, triangles, workers, res, spp):
     out["parent_rss_start"] = base
     pids = []
     if workers > 1:
-        pool = remote.pool(workers, 1)
+        pool = pipeline_run.pool(workers, 1)
         pids = [w.process.pid for w in pool.workers]
         time.sleep(0.5)
         out["worker_rss_idle"] = [status(p) for p in pids]

@@ -51,13 +51,6 @@ POOL_BLOCK = 16
 POOL_RADIUS = 2
 
 
-def falloff_visibility(distance, max_distance, power):
-    """V of a ray that met an occluder at ``distance`` with a distance falloff of ``power`` > 0:
-    1 - (1 - t / max_distance)^power, so a near occluder blocks fully and one at ``max_distance``
-    not at all (a plain occluder, without falloff, gives V = 0)."""
-    return 1.0 - np.clip(1.0 - np.asarray(distance, np.float64) / max_distance, 0.0, 1.0) ** power
-
-
 def sample_terms(visibility, weight=None):
     """Each sample's AO term, float64: the estimator every path of the baker uses.
 
@@ -295,7 +288,7 @@ class ErrorModel:
     :meth:`variance`.
 
     ``grouped``: a texel's samples come in blocks that share a random position (selected to active,
-    :mod:`core.highpoly.match`), so they are not independent even from the independent source, and the
+    :mod:`core.highpoly`), so they are not independent even from the independent source, and the
     spread of the replicates (each of its own positions) is used for every source.
     """
 
@@ -319,7 +312,7 @@ class ErrorModel:
                 return v, dof
         else:
             # A texel with a replicate of no samples (selected to active: every point of that
-            # replicate missed the high-poly surface, core.highpoly.match) has no spread of its own: no
+            # replicate missed the high-poly surface, core.highpoly) has no spread of its own: no
             # degrees of freedom, so it takes its neighbours' variance and gives them none.
             n = est.n
             v, dof = est.replicate_variance(), np.where(np.all(est.rn > 0, axis=0), self.replicates - 1.0, 0.0)
@@ -383,5 +376,5 @@ def interval_half_width(n, mean, m2, z, binary, bound):
     return np.where(var > 0, sample, bound * agresti_coull(np.clip(mean / bound, 0.0, 1.0)))
 
 
-__all__ = ["sample_terms", "piece_sums", "falloff_visibility", "TexelEstimates", "ErrorModel", "pooled_variance", "window_sums", "t_quantile",
+__all__ = ["sample_terms", "piece_sums", "TexelEstimates", "ErrorModel", "pooled_variance", "window_sums", "t_quantile",
            "interval_half_width", "POOL_BLOCK", "POOL_RADIUS", "TexelWindows"]

@@ -179,7 +179,7 @@ class TileContext:
         self.units = units
         self.inward = bool(inward)
         # Per unit, True where something lies on its point (every sample occluded), or None: the
-        # contact a stage found itself (:mod:`core.highpoly.match`), beside the probes of ``contact``.
+        # contact a stage found itself (:mod:`core.highpoly`), beside the probes of ``contact``.
         self.blocked = blocked
         self.keys = keys
         self.texel_ids = texel_ids      # global flat texel index of each of the tile's texels
@@ -489,7 +489,7 @@ class Kernel:
     def positions(self, tile, unit, start, size, squares, replicates=None):
         """The texel-space positions (a, b), float64 (pieces, size), of samples ``start`` .. of each
         piece's unit, as :meth:`run` places them (not located units): what a stage that moves sample
-        points elsewhere (:mod:`core.highpoly.match`) starts from."""
+        points elsewhere (:mod:`core.highpoly`) starts from."""
         units, keys = tile.units, tile.keys
         g, k = len(unit), int(size)
         n = g * k

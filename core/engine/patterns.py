@@ -41,7 +41,9 @@ import numpy as np
 
 from ..montecarlo import warps
 from ..base.errors import SettingsError
-from ..montecarlo.sources import SOURCES, Stratified
+from ..montecarlo.hashing import GOLDEN, below, hash64, hash_more, mix_into
+from ..montecarlo.sources import SOURCES
+from ..montecarlo.stratified import Stratified
 
 SOURCE_NAMES = ("sobol", "stratified", "independent", "halton")
 DIMS = 4
@@ -49,82 +51,14 @@ DIMS = 4
 #: pool and its lifted features take about 10 MiB.
 POOL_POINTS = 1 << 18
 
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
 _TWO_M32 = 2.0 ** -32
 
 # Hash tags: one per independent quantity drawn from (seed, texel, replicate).
 _TAG_PATTERN, _TAG_ORDER, _TAG_SHIFT2, _TAG_SHIFT3, _TAG_TURN, _TAG_SCRAMBLE = 11, 12, 13, 14, 15, 16
 
 
-def _mix(x):
-    """splitmix64's finaliser: a bijection of uint64 with full avalanche (wrapping multiplies)."""
-    x = np.asarray(x, dtype=np.uint64)
-    x = x ^ (x >> np.uint64(30))
-    x = x * _M1
-    x = x ^ (x >> np.uint64(27))
-    x = x * _M2
-    return x ^ (x >> np.uint64(31))
-
-
-def hash64(*keys):
-    """Hash integer keys (arrays broadcast together) into uint64, one mixing round per key."""
-    return hash_more(np.array(0x2545F4914F6CDD1D, dtype=np.uint64), *keys)
-
-
-def hash_more(state, *keys):
-    """Continue :func:`hash64` from ``state`` (what it returned for the keys before these):
-    ``hash_more(hash64(a, b), c, d) == hash64(a, b, c, d)``, so hashes that share their first keys
-    mix those once."""
-    # 0-d arrays, not numpy scalars: array arithmetic wraps silently, scalar arithmetic warns.
-    h = np.asarray(state, dtype=np.uint64)
-    tmp = None
-    with np.errstate(over="ignore"):
-        for k in keys:
-            k = np.asarray(k)
-            k = k.astype(np.uint64) if k.dtype != np.uint64 else k
-            h = np.bitwise_xor(h, k)  # a new array: the keys and the state are never written
-            h += _GOLDEN
-            if h.ndim == 0:
-                h = _mix(h)
-            else:
-                if tmp is None or tmp.shape != h.shape:
-                    tmp = np.empty_like(h)
-                _mix_into(h, tmp)
-    return h
-
-
-def _mix_into(x, tmp):
-    """:func:`_mix` of the uint64 array ``x`` in place (``tmp``: scratch of its shape)."""
-    np.right_shift(x, np.uint64(30), out=tmp)
-    x ^= tmp
-    x *= _M1
-    np.right_shift(x, np.uint64(27), out=tmp)
-    x ^= tmp
-    x *= _M2
-    np.right_shift(x, np.uint64(31), out=tmp)
-    x ^= tmp
-    return x
-
-
-def hash_uniform(*keys):
-    """Uniform float64 in [0, 1) from the top 53 bits of :func:`hash64`."""
-    return _unit_float(hash64(*keys))
-
-
-def _unit_float(h):
-    """Uniform float64 in [0, 1) from the top 53 bits of the uint64 hashes ``h``."""
-    return (h >> np.uint64(11)).astype(np.float64) * (2.0 ** -53)
-
-
 def _seed_key(seed):
     return np.uint64(int(seed) % (1 << 64))
-
-
-def _below(x, n):
-    """Map uint64 hashes to integers in [0, n) (multiply-shift on the top 32 bits: unbiased to 2^-32)."""
-    return ((x >> np.uint64(32)) * np.uint64(n)) >> np.uint64(32)
 
 
 class TexelKeys:
@@ -192,11 +126,11 @@ class TexelPattern:
         # A texel's replicates take distinct patterns (consecutive ones from its first: each pattern
         # is an independent randomisation), so that replicates are independent of each other.
         first = str_ if replicate == 0 else hash_more(st, np.uint64(0))
-        pattern = _below(hash_more(first, _TAG_PATTERN), self.patterns).astype(np.int64)
+        pattern = below(hash_more(first, _TAG_PATTERN), self.patterns).astype(np.int64)
         if replicate:  # (below patterns already for replicate 0: an int64 remainder a texel saved)
             pattern = (pattern + int(replicate)) % self.patterns
         h = hash_more(str_, _TAG_ORDER)
-        order = (h >> np.uint64(40)) & np.uint64(self.length - 1) if self.xor else _below(h, self.length)
+        order = (h >> np.uint64(40)) & np.uint64(self.length - 1) if self.xor else below(h, self.length)
         shift = np.empty(t.shape + (2,), np.uint32)  # column by column: numpy is slow over an axis of 2
         for c, tag in enumerate((_TAG_SHIFT2, _TAG_SHIFT3)):
             np.bitwise_and((hash_more(str_, tag) >> np.uint64(32)).astype(np.uint32), self.shift_mask[c],
@@ -371,11 +305,11 @@ class _PatternBits:
             t = tmp[:h.size]
             h[:] = np.repeat(state, count)
             h ^= counters[:h.size]
-            h += _GOLDEN
-            _mix_into(h, t)
+            h += GOLDEN
+            mix_into(h, t)
             h ^= tag
-            h += _GOLDEN
-            _mix_into(h, t)
+            h += GOLDEN
+            mix_into(h, t)
         return out
 
 
@@ -402,4 +336,4 @@ def _build_pool(source, seed, patterns, span, length):
     return q
 
 
-__all__ = ["SOURCE_NAMES", "DIMS", "POOL_POINTS", "TexelPattern", "TexelKeys", "hash64", "hash_more", "hash_uniform"]
+__all__ = ["SOURCE_NAMES", "DIMS", "POOL_POINTS", "TexelPattern", "TexelKeys"]

@@ -12,7 +12,7 @@ What differs between targets is where a sample starts and which normal it uses, 
 
 - :class:`SurfaceStart`: on the target's own surface, at the sample's point of its texel, with the
   target's interpolated normal (the kernel's per-triangle matrices); one sample per point.
-- :class:`core.highpoly.match.HighPolyStart`: at the point of the high-poly surface that the sample point's
+- :class:`core.highpoly.stage.HighPolyStart`: at the point of the high-poly surface that the sample point's
   matching ray finds, with the high-poly's normal there; a block of directions per point.
 
 A stage has ``per_point`` (samples per sample point), ``grouped`` (the samples of a point are not
@@ -27,7 +27,7 @@ import numpy as np
 from .adaptive import SamplingPlan
 from .estimators import TexelEstimates, TexelWindows
 from .kernel import TileContext
-from .patterns import hash64
+from ..montecarlo.hashing import hash64
 from ..geometry.raster import rasterize_tile
 from ..geometry.surface import LOCATED, SQUARE, TRIANGLE, allocate, build_units, contact_texels
 
@@ -140,7 +140,7 @@ class TileBaker:
         :meth:`trace`); table : its :class:`core.geometry.surface.SurfaceTable`; kernel, tracer, pattern : the
         bake's; settings : :class:`core.engine.settings.BakeSettings`; shared : the bake's
         :class:`core.engine.scheduler.Scheduler`; start : the start stage (:class:`SurfaceStart` or
-        :class:`core.highpoly.match.HighPolyStart`); bent : also sum each texel's unoccluded directions
+        :class:`core.highpoly.stage.HighPolyStart`); bent : also sum each texel's unoccluded directions
         (bent normals, :mod:`core.post.bent`).
     """
 

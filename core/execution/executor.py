@@ -76,8 +76,8 @@ def run_tiles(remote, processes, threads, job, keys, planned, store, progress, c
 def bake_tiles(remote, bake, keys, processes, threads, job, store, progress, cancel, on_rays=None):
     """Bake ``keys`` of ``bake`` (any bake set up after its prologue: ``planned``, ``s.threads``,
     ``trace_setup``, ``tile``, ``start.counters()``) in this process on ``bake.s.threads`` threads, or on
-    ``processes`` worker processes of ``threads`` threads (or a Dask cluster) that run ``remote``
-    (:mod:`core.pipeline.remote`); ``store`` each tile's :class:`core.engine.tilebaker.TileOut`.
+    ``processes`` worker processes of ``threads`` threads (or a Dask cluster) that run ``remote`` (a
+    :class:`core.execution.contracts.Remote`); ``store`` each tile's :class:`core.engine.tilebaker.TileOut`.
     ``job()`` makes the plain data workers rebuild the bake from (only when they bake). Where a local
     pool cannot be used (its self-test failed), this process bakes.
 

@@ -1,8 +1,8 @@
 """The pool of worker processes: every core of the machine, none of them waiting on another's GIL.
 
 A bake with ``workers`` > 1 (:func:`core.bake_ao`) sends its input once to each worker of a
-persistent pool; each builds the same bake (:mod:`core.pipeline.remote`: the same tiles, its own
-Embree scene) and bakes the tiles it is dealt, one at a time as it frees up, ``threads`` threads
+persistent pool; each builds the same bake (the module a :class:`core.execution.contracts.Remote`
+names, :mod:`core.pipeline.entry`: the same tiles, its own Embree scene) and bakes the tiles it is dealt, one at a time as it frees up, ``threads`` threads
 each (they share a tile's chunks of rays, :mod:`core.engine.scheduler`). A tile's values come back as
 plain arrays and the parent assembles the images, the margin and the bent normals. Texels draw their
 samples by (seed, texel, index) alone and a tile's sums are added in one order, so the images, errors
@@ -41,7 +41,7 @@ How the processes are started and kept (each point is a trap met in Blender):
 - A worker that dies (killed, out of memory) fails the bake with :class:`BakeWorkerError`, nothing is
   written, and the next bake gets a fresh pool.
 - The self-test: a new pool's workers each bake a tiny scene first and must give this process's bits
-  (``self_test`` of :mod:`core.pipeline.remote`); where one cannot start or differs, bakes run on threads of this process with a
+  (the ``self_test`` of its :class:`core.execution.contracts.Remote`); where one cannot start or differs, bakes run on threads of this process with a
   warning saying why (``report['warnings']``), and the pool is not tried again in this session.
 
 What each OS needs (tested here on Linux only; the rest is what the code relies on): an interpreter at
@@ -75,14 +75,6 @@ PROGRESS_STEPS = 512
 def _core_root():
     """The folder that holds the core package (the repository, or the installed extension's folder)."""
     return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-
-def relative_name(module):
-    """``module``'s name inside the core package (``pipeline.remote``), whatever the core is called
-    here (``core``, or ``bl_ext.<repository>.mc_ao.core`` in Blender)."""
-    package = __name__.rsplit(".execution.", 1)[0]
-    assert module.__name__.startswith(package + "."), f"{module.__name__} is not a module of {package}"
-    return module.__name__[len(package) + 1:]
 
 
 def boot(entry):
@@ -133,15 +125,14 @@ class _Worker:
 
 
 class Pool:
-    """``workers`` worker processes of ``threads`` threads each, kept for later bakes. ``remote``: the
-    module of the layer above that a worker runs (its ``main()``) and whose ``self_test()`` every
-    worker must match (:mod:`core.pipeline.remote`)."""
+    """``workers`` worker processes of ``threads`` threads each, kept for later bakes. ``remote``: a
+    :class:`core.execution.contracts.Remote`, the module a worker boots into and the self-test every
+    worker must match."""
 
     def __init__(self, workers, threads, remote):
         self.workers_wanted, self.threads, self.remote = int(workers), int(threads), remote
         self.inbox = queue.Queue()
-        entry = relative_name(remote)
-        self.workers = [_Worker(self.threads, self.inbox, i, entry) for i in range(self.workers_wanted)]
+        self.workers = [_Worker(self.threads, self.inbox, i, remote.entry) for i in range(self.workers_wanted)]
         self.broken = False
         self.bake_id = 0
         self.lock = threading.Lock()  # one bake at a time
@@ -309,7 +300,7 @@ def pool_for(workers, threads, remote):
         if _POOL is not None and _POOL.failed and (_POOL.workers_wanted, _POOL.threads) == (workers, threads):
             return _POOL  # its self-test failed: not tried again in this session
         if _POOL is not None and (_POOL.broken or len(_POOL.workers) != workers or _POOL.threads != threads
-                                  or _POOL.remote is not remote or not all(w.alive for w in _POOL.workers)):
+                                  or _POOL.remote != remote or not all(w.alive for w in _POOL.workers)):
             _POOL.close()
             _POOL = None
         if _POOL is None:
@@ -329,4 +320,4 @@ def shutdown():
 atexit.register(shutdown)
 
 
-__all__ = ["Pool", "pool_for", "shutdown", "boot", "relative_name", "AHEAD", "PROGRESS_STEPS"]
+__all__ = ["Pool", "pool_for", "shutdown", "boot", "AHEAD", "PROGRESS_STEPS"]

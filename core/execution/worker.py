@@ -1,7 +1,7 @@
 """The worker process: bakes what its parent sends, tile by tile, until the parent is gone.
 
 It knows no bake kinds: the layer above hands it what builds a bake from a job
-(:mod:`core.pipeline.remote`), and it bakes the tiles it is dealt on its threads, sending each tile's
+(a :class:`core.execution.contracts.WorkerSide`, :mod:`core.pipeline.entry`), and it bakes the tiles it is dealt on its threads, sending each tile's
 values back as plain data, its progress as counts of samples, and its totals and memory at the end.
 """
 
@@ -21,7 +21,7 @@ from .messages import receive, send
 def main(remote):
     """A worker: bake what the parent sends until the parent is gone (see :mod:`core.execution.pool`).
 
-    ``remote`` is the layer above's side of a worker (:mod:`core.pipeline.remote`): ``self_test()``
+    ``remote`` is the layer above's side of a worker (a :class:`core.execution.contracts.WorkerSide`): ``self_test()``
     (the digest of a tiny bake), ``forget(job)`` (let go what the last bake kept that ``job`` will not
     use) and ``build(job, cancel, progress)`` (the bake of ``job``: (bake, scheduler, threads)). The
     bake has ``tile(key, directions=False)``, ``start.counters()`` and ``scene_reused``."""

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mesh import SLICE, corner_positions
-from ..engine.patterns import hash_uniform
+from ..montecarlo.hashing import hash_uniform
 
 SQUARE, TRIANGLE, LOCATED = 0, 1, 2
 #: Located texels with more candidates than this have their runs padded to a power of two.

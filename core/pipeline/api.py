@@ -58,7 +58,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, highp
 
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
     "Selected to Active"): each sample point of the target is moved to the high-poly surface by
-    Cycles' rules and AO is evaluated there (:mod:`core.highpoly.match` says exactly how).
+    Cycles' rules and AO is evaluated there (:mod:`core.highpoly` says exactly how).
 
     Every option (the keywords after ``samples``, and ``resolution`` and ``samples`` themselves) is an
     option of :data:`core.base.request.OPTIONS`, checked once into a
@@ -127,7 +127,7 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, highp
         target's surface along its interpolated normal, pointing back along it (Cycles' Extrusion);
         None or 'auto' (the default): measured from the meshes, the smallest distance that lets the
         matching rays start outside the high-poly where it bulges out of the target without
-        starting beyond another part of it in concave places (:func:`core.highpoly.match.auto_extrusion`).
+        starting beyond another part of it in concave places (:func:`core.highpoly.extrusion.auto_extrusion`).
         ``report['extrusion']`` and ``metadata['extrusion']`` give the distance used (world units),
         ``metadata['extrusion_auto']`` whether it was measured. Whatever the extrusion, more than 1%
         of the matching rays meeting the high-poly from behind (they start inside it: the bright or

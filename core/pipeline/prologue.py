@@ -18,7 +18,7 @@ from ..engine.scheduler import is_cancelled
 from ..engine.settings import estimate_memory
 from ..geometry.corners import all_corners, check_corners
 from ..geometry.mesh import Mesh, mesh_list
-from ..highpoly.match import SelectedToActive
+from ..highpoly.input import SelectedToActive
 from ..post import bent as bent_mod
 from ..tracing import ground as ground_mod
 from ..tracing.tracer import Tracer
@@ -111,7 +111,7 @@ class Prologue:
     cancellation, and build the occlusion tracer.
 
     Attributes: request, target, occluders (normalised), unit (world length of one unit of the frame),
-    s2a (the normalised :class:`core.highpoly.match.SelectedToActive` or None), bent_space (checked),
+    s2a (the normalised :class:`core.highpoly.input.SelectedToActive` or None), bent_space (checked),
     corners (a corner bake's), frame, name.
     """
 

@@ -1,8 +1,7 @@
 """A bake in another process: the job (plain data) a worker rebuilds a bake from, and the worker's side.
 
-The executor (:mod:`core.execution`) knows no bake kinds: it boots a worker process into
-:func:`main`, hands each job to :func:`build` and each Dask task to :func:`dask_tile`, and checks a
-new pool against :func:`self_test`. A job is the request as plain data
+The executor (:mod:`core.execution`) knows no bake kinds: a worker process boots into
+:mod:`core.pipeline.entry`, which hands each job to :func:`build`; a Dask worker runs :func:`dask_tile`. A job is the request as plain data
 (:meth:`core.base.request.BakeRequest.to_dict`, with the tiles and the extrusion the parent chose) and
 the meshes as arrays (:func:`mesh_data`); the executor adds ``threads`` (each worker's) and
 ``quantum`` (samples per progress message).
@@ -16,7 +15,6 @@ not grow. Selected-to-active bakes keep none.
 
 import hashlib
 import os
-import sys
 import threading
 
 import numpy as np
@@ -24,8 +22,6 @@ import numpy as np
 from ..base.request import BakeRequest
 from ..engine.scheduler import run_all
 from ..engine.settings import BakeSettings
-from ..execution import worker as worker_mod
-from ..execution.pool import pool_for
 from ..execution.worker import CountingScheduler
 from ..geometry.mesh import Mesh
 from ..targets.corners import vertex_bake
@@ -107,29 +103,6 @@ def build(job, cancel, progress):
     return bake, shared, s.threads
 
 
-def self_test():
-    """A digest of a tiny bake (a plane under a lid, 16^2 x 8, one thread): what every worker and the
-    parent must agree on before a pool is used (the same numpy, Embree and instruction paths)."""
-    from .api import bake_ao
-
-    p = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
-    f = np.array([[0, 1, 2], [0, 2, 3]])
-    lid = Mesh(p * [0.6, 0.6, 0] + [0.2, 0.2, 0.3], f, name="lid")
-    r = bake_ao(Mesh(p, f, uvs=p[f][:, :, :2], name="plane"), [lid], resolution=16, samples=8, threads=1)
-    return hashlib.sha256(r.ao.tobytes() + r.stderr.tobytes()).hexdigest()
-
-
-def pool(workers, threads):
-    """The persistent pool of ``workers`` worker processes of ``threads`` threads each that bakes run on
-    (:func:`core.execution.pool.pool_for`), started now if it is not running."""
-    return pool_for(workers, threads, sys.modules[__name__])
-
-
-def main():
-    """A worker process (see :mod:`core.execution.pool`): bakes jobs built here until its parent is gone."""
-    worker_mod.main(sys.modules[__name__])
-
-
 #: The bakes a Dask worker process has set up, by token (a bake's tiles reuse its scene); the last few.
 _DASK_BAKES = {}
 _DASK_KEEP = 2
@@ -154,4 +127,4 @@ def dask_tile(token, job, key):
     return vars(outs[0]), (os.getpid(), id(entry)), totals
 
 
-__all__ = ["mesh_data", "scene_key", "forget", "build", "self_test", "pool", "main", "dask_tile"]
+__all__ = ["mesh_data", "scene_key", "forget", "build", "dask_tile"]

@@ -23,7 +23,7 @@ class BakeResult:
     metadata : settings and version, for image files.
     miss : selected to active only (else None): bool, texels a UV triangle covers where no sample
         point's matching ray found the high-poly surface; they are not in ``mask`` (the margin
-        fills them). See :mod:`core.highpoly.match`.
+        fills them). See :mod:`core.highpoly`.
     missed : selected to active only: sample points whose matching ray missed (each point carries a
         block of samples, ``report['directions_per_point']``; none of them is traced).
     report : counts of what the input held: degenerate UV triangles skipped, triangles of zero area

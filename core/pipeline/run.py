@@ -20,6 +20,7 @@ UDIM tiles are images of their own, each through steps 2 to 5 with its own seed
 
 import dataclasses
 import functools
+import hashlib
 import time
 
 import numpy as np
@@ -27,11 +28,14 @@ import numpy as np
 from .._version import __version__
 from ..base.machine import cpu_count
 from ..engine.settings import BakeSettings, auto_tile_shape
+from ..base.request import BakeRequest
+from ..execution.contracts import Remote
 from ..execution.executor import bake_tiles, in_process, processes_of, worker_count
+from ..execution.pool import pool_for
 from ..geometry.margin import dilate
 from ..geometry.mesh import Mesh
 from ..geometry.uvtiles import covered_tiles, shifted, tile_seed
-from ..highpoly.match import finish_report
+from ..highpoly.stage import finish_report
 from ..post import bent as bent_mod
 from ..post import denoise as denoise_mod
 from ..base.errors import MeshError, SettingsError
@@ -57,7 +61,7 @@ def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=N
     made = (Corners if request.kind == "corners" else Texels)(pro, s, processes, per_worker, checked, on_tile)
     pro.check_memory(made.planned)
     pro.check_cancel()
-    rays, trace_s, trace_cpu, counters, fallback = bake_tiles(remote, made.bake, made.keys, processes, per_worker,
+    rays, trace_s, trace_cpu, counters, fallback = bake_tiles(REMOTE, made.bake, made.keys, processes, per_worker,
                                                               made.job, made.store, progress, cancel, on_rays)
     quantities = request.all_quantities
     if len(quantities) == 1:
@@ -244,6 +248,29 @@ def finish(made, q, counters, fallback, t_start):
     return r
 
 
+# -- other processes ---------------------------------------------------------------------------------------
+
+def self_test():
+    """A digest of a tiny bake (a plane under a lid, 16^2 x 8, one thread): what every worker and the
+    parent must agree on before a pool is used (the same numpy, Embree and instruction paths)."""
+    p = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    lid = Mesh(p * [0.6, 0.6, 0] + [0.2, 0.2, 0.3], f, name="lid")
+    r = run(BakeRequest(resolution=16, samples=8, threads=1), Mesh(p, f, uvs=p[f][:, :, :2], name="plane"), [lid])["ao"]
+    return hashlib.sha256(r.ao.tobytes() + r.stderr.tobytes()).hexdigest()
+
+
+#: What runs a bake's tiles in other processes: worker processes boot into :mod:`core.pipeline.entry`;
+#: a Dask worker runs :func:`core.pipeline.remote.dask_tile`.
+REMOTE = Remote(entry="pipeline.entry", self_test=self_test, dask_tile=remote.dask_tile)
+
+
+def pool(workers, threads):
+    """The persistent pool of ``workers`` worker processes of ``threads`` threads each that bakes run on
+    (:func:`core.execution.pool.pool_for`), started now if it is not running."""
+    return pool_for(workers, threads, REMOTE)
+
+
 # -- UDIM tiles -------------------------------------------------------------------------------------------
 
 def _udim(request, target, occluders, highpoly, cage, bent_space, progress, cancel, on_tile, on_rays):
@@ -340,4 +367,4 @@ def _assemble(target, resolution, results, todo, coverage, denoise, margin):
                       raw_stderr=stack("raw_stderr") if parts[0].raw_stderr is not None else None)
 
 
-__all__ = ["run", "finish", "Texels", "Corners"]
+__all__ = ["run", "finish", "Texels", "Corners", "self_test", "REMOTE", "pool"]

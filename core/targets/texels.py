@@ -22,7 +22,7 @@ from ..engine.tilebaker import SurfaceStart, TileBaker, TileOut
 from ..geometry import raster as R
 from ..geometry.raster import bin_triangles, prepare
 from ..geometry.surface import SurfaceTable
-from ..highpoly.match import HighPolyStage
+from ..highpoly.stage import HighPolyStage
 from ..post import bent as bent_mod
 from ..post.denoise import tile_guide
 from .maps import MapsBake

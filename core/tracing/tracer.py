@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import ground as _ground
-from ..engine.estimators import falloff_visibility
 from ..geometry.mesh import corner_positions
 
 #: Offsets off the surface: relative to the scene's bounding-box diagonal and to |position|.
@@ -27,6 +26,13 @@ EPS_SCENE = 1e-6
 EPS_POSITION = 2.0 ** -18
 #: Embree's largest useful ray length (float32).
 FAR = 1e37
+
+
+def falloff_visibility(distance, max_distance, power):
+    """V of a ray that met an occluder at ``distance`` with a distance falloff of ``power`` > 0:
+    1 - (1 - t / max_distance)^power, so a near occluder blocks fully and one at ``max_distance``
+    not at all (a plain occluder, without falloff, gives V = 0)."""
+    return 1.0 - np.clip(1.0 - np.asarray(distance, np.float64) / max_distance, 0.0, 1.0) ** power
 
 
 @dataclass(frozen=True)
@@ -340,4 +346,4 @@ class Clock:
         return False
 
 
-__all__ = ["RayBatch", "Tracer", "add_triangles", "embree_scene", "offset_points", "OCCLUSION_ROBUST", "EPS_SCENE", "EPS_POSITION", "FAR"]
+__all__ = ["RayBatch", "Tracer", "falloff_visibility", "add_triangles", "embree_scene", "offset_points", "OCCLUSION_ROBUST", "EPS_SCENE", "EPS_POSITION", "FAR"]

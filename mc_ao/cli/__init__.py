@@ -12,7 +12,7 @@ or by a Python that has the bpy module (then the .blend file is the first argume
 Writes <image>_AO.png (and/or .exr, .tif, per --format) for each object into the output folder
 and prints a summary.
 
-Selected to Active (as Cycles' bake, see core.highpoly.match for the exact rules): the AO of high-poly
+Selected to Active (as Cycles' bake, see core.highpoly for the exact rules): the AO of high-poly
 objects baked into a low-poly's UVs, into <low>_AO:
 
     ... --selected-to-active --active Chair_low --objects Chair_high Bolts --extrusion 0.05

@@ -5,11 +5,11 @@ occlusion in red).
 Which map: the object's AO job's own (the Channel setting takes Quantity AO alone, mc_ao.cli and
 mc_ao.baking refuse the rest); the map also goes into the object's own image as always. Where:
 
-- Into names a Blender image: its pixels get the map in that channel (core.files.imageio.pack_channel),
+- Into names a Blender image: its pixels get the map in that channel (core.files.channels.pack_channel),
   snapshot first and put back when the object does not finish; a generated image is then packed into
   the .blend file (else a save would lose it), a file image is left modified (save it to write it).
   With Save to File, a copy of the image's file (its own format, sample types and attributes) with
-  the channel replaced goes into the output folder under the file's name (core.files.imageio.write_channel);
+  the channel replaced goes into the output folder under the file's name (core.files.channels.write_channel);
   an image without a file there is written whole, in the bake's format.
 - Into is a file (the script's ``--into PATH``): the copy of that file with the channel replaced goes
   into the output folder under its name; the file itself is never changed (an input of the bake).
@@ -173,7 +173,7 @@ class ChannelOutput(OutputKind):
         image = run.image(image.name, w, h, image.is_float)  # snapshot (put back if the object does not finish)
         pixels = images.pixels_of(image)
         try:
-            packed = corelink.load("files.imageio").pack_channel(pixels, INDEX[self.settings.channel], plane)
+            packed = corelink.load("files.channels").pack_channel(pixels, INDEX[self.settings.channel], plane)
         except corelink.load().SettingsError as exc:
             raise images.ImageError(str(exc)) from None
         images.set_pixels(image, packed)
@@ -190,12 +190,12 @@ class ChannelOutput(OutputKind):
 
                 io = corelink.load("files.imageio")
                 if source is not None:
-                    io.write_channel(target, channel, plane, source=source)
+                    corelink.load("files.channels").write_channel(target, channel, plane, source=source)
                     return
                 # No file to keep the other channels of: the Blender image's pixels, the channel packed.
                 from .. import images
 
-                pixels = io.pack_channel(images.pixels_of(self.blender_image()), INDEX[channel], plane)
+                pixels = corelink.load("files.channels").pack_channel(images.pixels_of(self.blender_image()), INDEX[channel], plane)
                 io.write_image(target, pixels, bits=entry.bits, metadata=dict(metadata, content="packed",
                                                                               channel=channel))
 

@@ -1,4 +1,4 @@
-"""The automatic extrusion (core.highpoly.match.auto_extrusion) on sample_scenes/rock.blend: Rock_high onto
+"""The automatic extrusion (core.highpoly.extrusion.auto_extrusion) on sample_scenes/rock.blend: Rock_high onto
 Rock_low, read through the add-on's extraction, baked by the core at 128^2 x 64 with every default
 against the hand-set extrusion that fits the rock (0.1)."""
 

@@ -229,7 +229,7 @@ def patch_core():
         nice = state.get("nice")
         if nice and state["inject_workers"]:
             # The pool the bake will use (threads=None: one thread a worker), its workers made nice.
-            pool = c.pipeline.remote.pool(WORKERS, 1 if kw.get("threads") is None else kw["threads"])
+            pool = c.pipeline.run.pool(WORKERS, 1 if kw.get("threads") is None else kw["threads"])
             for w in pool.workers:
                 os.setpriority(os.PRIO_PROCESS, w.process.pid, nice)
         elif nice:
