@@ -55,9 +55,9 @@ class Option:
     """One option of a bake.
 
     name : the keyword of the public calls and the field of :class:`BakeRequest`.
-    kind : how its value is checked: 'int', 'float', 'distance' (>= 0, inf allowed), 'bool', 'choice' (one of ``choices``), or one of
-        the kinds of a value of its own shape: 'resolution', 'threads', 'workers', 'tile_size',
-        'ground', 'extrusion', 'quantities', 'tiles' (see :func:`_check`).
+    kind : how its value is checked: 'int', 'float', 'distance' (>= 0, inf allowed), 'bool', 'choice'
+        (one of ``choices``), or one of the kinds of a value of its own shape: 'resolution', 'threads',
+        'workers', 'tile_size', 'ground', 'extrusion', 'quantities', 'tiles' (see :func:`_check`).
     default : the value when not given.
     group : 'sampling', 'rays', 'target', 'selected_to_active', 'outputs' or 'execution'.
     meaning : what it does (the calls' docs say it at length).

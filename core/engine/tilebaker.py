@@ -15,12 +15,11 @@ What differs between targets is where a sample starts and which normal it uses, 
 - :class:`core.highpoly.stage.HighPolyStart`: at the point of the high-poly surface that the sample point's
   matching ray finds, with the high-poly's normal there; a block of directions per point.
 
-A stage has ``per_point`` (samples per sample point), ``grouped`` (the samples of a point are not
-independent: the error model and the plan use replicates), ``locate`` (the rasteriser locates
-texels covered by many small triangles), and the hooks below, which the tile baker calls.
+Every stage is a :class:`StartStage`: the attributes and hooks the tile baker calls by name.
 """
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -81,7 +80,46 @@ class TileOut:
     weights: np.ndarray = None
     bent: np.ndarray = None
     maps: dict = None  # a bake of several quantities: the tile of each other quantity, as plain data
-    guide: tuple = None  # the denoiser's guide of the texels (:func:`core.post.denoise.tile_guide`); None without denoise
+    guide: tuple = None  # the denoiser's guide of the texels (core.post.denoise.tile_guide); None without denoise
+
+
+class StartStage(Protocol):
+    """Where a sample starts and which normal it uses: what the tile baker asks of a start stage.
+
+    per_point : samples per sample point (a point's samples share its start); grouped : the samples of
+    a point are not independent (the error model and the plan use replicates); locate : the rasteriser
+    locates texels covered by many small triangles; located_curved : located samples take the
+    smooth-shaded matrix form (:class:`core.engine.kernel.TileContext`).
+    """
+
+    per_point: int
+    grouped: bool
+    locate: bool
+    located_curved: bool
+
+    def estimates(self, count, replicates) -> TexelEstimates:
+        """The estimates of ``count`` texels (the stage's own kind, with what it counts beside)."""
+
+    def contact(self, frag, width, samples) -> np.ndarray:
+        """Per texel of a tile's fragments, whether to probe its samples for contact."""
+
+    def curved(self, units, unit, located) -> np.ndarray:
+        """Per piece, whether its samples take the smooth-shaded form."""
+
+    def keep(self, est, texels):
+        """Which of ``texels`` take the next round (None: all)."""
+
+    def run(self, kernel, tile, curved, unit, first, k, squares, located, vectors, replicates) -> "ChunkSums":
+        """The sums of one chunk of pieces (rays traced through ``kernel``)."""
+
+    def commit(self, est, texel, k, extra, replicate) -> None:
+        """Add what :meth:`run` returned beside the sums (``extra``) to the estimates."""
+
+    def lost(self, est) -> np.ndarray:
+        """Per texel of a finished tile, whether none of its sample points found a surface."""
+
+    def counters(self) -> dict:
+        """What the stage counted over the bake (added up over worker processes)."""
 
 
 class SurfaceStart:
@@ -139,9 +177,9 @@ class TileBaker:
     uvtris : the target's UV triangles (:func:`core.geometry.raster.prepare`), or None (units given directly,
         :meth:`trace`); table : its :class:`core.geometry.surface.SurfaceTable`; kernel, tracer, pattern : the
         bake's; settings : :class:`core.engine.settings.BakeSettings`; shared : the bake's
-        :class:`core.engine.scheduler.Scheduler`; start : the start stage (:class:`SurfaceStart` or
-        :class:`core.highpoly.stage.HighPolyStart`); bent : also sum each texel's unoccluded directions
-        (bent normals, :mod:`core.post.bent`).
+        :class:`core.engine.scheduler.Scheduler`; start : the start stage (a :class:`StartStage`:
+        :class:`SurfaceStart` or :class:`core.highpoly.stage.HighPolyStart`); bent : also sum each texel's
+        unoccluded directions (bent normals, :mod:`core.post.bent`).
     """
 
     def __init__(self, uvtris, table, kernel, tracer, pattern, settings, shared, start, bent=False):
@@ -196,7 +234,7 @@ class TileBaker:
             stacked = memo["keys"] = TileContext.stacked_keys([self.pattern.keys(texel_ids, r)
                                                                for r in range(s.replicates)])
         tile = TileContext(self.table, units, stacked, texel_ids, contact, self.tracer.offset,
-                           located_curved=getattr(start, "located_curved", False), tris=tris,
+                           located_curved=start.located_curved, tris=tris,
                            inward=s.quantity == "thickness")
         if y is not None:  # the texels' windows, set up once for every round's pooling
             x, y = TexelWindows(x, y), None
@@ -298,4 +336,4 @@ class TileBaker:
         return done
 
 
-__all__ = ["TileBaker", "SurfaceStart", "ChunkSums", "TileOut", "allocation_seeds"]
+__all__ = ["TileBaker", "StartStage", "SurfaceStart", "ChunkSums", "TileOut", "allocation_seeds"]

@@ -1,9 +1,10 @@
 """The pool of worker processes: every core of the machine, none of them waiting on another's GIL.
 
 A bake with ``workers`` > 1 (:func:`core.bake_ao`) sends its input once to each worker of a
-persistent pool; each builds the same bake (the module a :class:`core.execution.contracts.Remote`
-names, :mod:`core.pipeline.entry`: the same tiles, its own Embree scene) and bakes the tiles it is dealt, one at a time as it frees up, ``threads`` threads
-each (they share a tile's chunks of rays, :mod:`core.engine.scheduler`). A tile's values come back as
+persistent pool; each builds the same bake (in the module a :class:`core.execution.contracts.Remote`
+names, :mod:`core.pipeline.entry`: the same tiles, its own Embree scene) and bakes the tiles it is
+dealt, one at a time as it frees up, ``threads`` threads each (they share a tile's chunks of rays,
+:mod:`core.engine.scheduler`). A tile's values come back as
 plain arrays and the parent assembles the images, the margin and the bent normals. Texels draw their
 samples by (seed, texel, index) alone and a tile's sums are added in one order, so the images, errors
 and sample counts are bit-identical for any workers x threads x tiling on one machine.
@@ -41,8 +42,9 @@ How the processes are started and kept (each point is a trap met in Blender):
 - A worker that dies (killed, out of memory) fails the bake with :class:`BakeWorkerError`, nothing is
   written, and the next bake gets a fresh pool.
 - The self-test: a new pool's workers each bake a tiny scene first and must give this process's bits
-  (the ``self_test`` of its :class:`core.execution.contracts.Remote`); where one cannot start or differs, bakes run on threads of this process with a
-  warning saying why (``report['warnings']``), and the pool is not tried again in this session.
+  (the ``self_test`` of its :class:`core.execution.contracts.Remote`); where one cannot start or
+  differs, bakes run on threads of this process with a warning saying why (``report['warnings']``),
+  and the pool is not tried again in this session.
 
 What each OS needs (tested here on Linux only; the rest is what the code relies on): an interpreter at
 ``sys.executable`` that can run ``-c`` (Blender sets it to its bundled Python on Linux, Windows and
@@ -92,8 +94,9 @@ class _Worker:
             env[name] = "1"
         root = _core_root()
         path = [root] + [p for p in sys.path if p and p != root]
-        self.process = subprocess.Popen([sys.executable, "-c", boot(entry), json.dumps(path), os.path.join(root, "core")],
-                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+        self.process = subprocess.Popen([sys.executable, "-c", boot(entry), json.dumps(path),
+                                         os.path.join(root, "core")], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        env=env)
         self.index, self.busy, self.ready, self.alive = index, [], False, True
         self.lock = threading.Lock()
         threading.Thread(target=self._read, args=(inbox,), name=f"mc_ao-worker-{index}", daemon=True).start()

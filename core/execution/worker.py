@@ -1,8 +1,9 @@
 """The worker process: bakes what its parent sends, tile by tile, until the parent is gone.
 
-It knows no bake kinds: the layer above hands it what builds a bake from a job
-(a :class:`core.execution.contracts.WorkerSide`, :mod:`core.pipeline.entry`), and it bakes the tiles it is dealt on its threads, sending each tile's
-values back as plain data, its progress as counts of samples, and its totals and memory at the end.
+It knows no bake kinds: the layer above hands it what builds a bake from a job (a
+:class:`core.execution.contracts.WorkerSide`, :mod:`core.pipeline.entry`), and it bakes the tiles it is
+dealt on its threads, sending each tile's values back as plain data, its progress as counts of
+samples, and its totals and memory at the end.
 """
 
 import os

@@ -147,3 +147,9 @@ def towards(origin, p):
     ln = np.linalg.norm(d, axis=1)
     usable = ln > 0
     return origin, d / np.where(usable, ln, 1.0)[:, None], usable
+
+
+__all__ = [
+    "EXTRUSION_POINTS", "EXTRUSION_SLACK", "EXTRUSION_STEPS", "AutoExtrusion", "surface_points", "auto_extrusion",
+    "extruded", "towards"
+]

@@ -140,3 +140,6 @@ class SelectedToActive:
                 "extrusion_auto": bool(world.auto and world.cage is None),
                 "max_ray_distance": world.max_ray_distance,
                 "cage": world.cage.name if world.cage is not None else ""}
+
+
+__all__ = ["as_list", "SelectedToActive"]

@@ -205,3 +205,6 @@ class LowPoints:
         if self.cage_table is None:
             return (p,) + extruded(p, other, self.table.take("FN", tri), self.s2a.extrusion)
         return (p,) + towards(other, p)
+
+
+__all__ = ["ONE_SCENE_TRIANGLES", "concatenate", "HighPolyScene", "LowPoints"]

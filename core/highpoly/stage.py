@@ -41,6 +41,16 @@ def directions_per_point(samples, min_samples, adaptive, replicates=1):
     return g
 
 
+class MatchedEstimates(TexelEstimates):
+    """A selected-to-active tile's estimates, with per texel the sample points its matching rays were
+    cast from (``points``, all replicates) and those that found no high-poly surface (``missed``)."""
+
+    def __init__(self, count, replicates=1):
+        super().__init__(count, replicates)
+        self.points = np.zeros(count, np.int64)
+        self.missed = np.zeros(count, np.int64)
+
+
 class HighPolyStart:
     """The start stage of a selected-to-active bake (see :mod:`core.engine.tilebaker`): each sample point of
     a texel on the low-poly surface casts its matching ray, and the ``per_point`` samples of a point
@@ -53,6 +63,7 @@ class HighPolyStart:
 
     grouped = True
     locate = False
+    located_curved = False  # no sample is located: the hits take the smooth form (curved())
 
     def __init__(self, stage, settings):
         self.stage, self.points, self.scene = stage, stage.points, stage.scene
@@ -68,10 +79,7 @@ class HighPolyStart:
         self.match_cpu_seconds = stage.check_cpu_seconds
 
     def estimates(self, count, replicates):
-        est = TexelEstimates(count, replicates)
-        est.points = np.zeros(count, np.int64)   # sample points cast per texel (all replicates)
-        est.missed = np.zeros(count, np.int64)   # of which found no high-poly surface
-        return est
+        return MatchedEstimates(count, replicates)
 
     def contact(self, frag, width, samples):
         return np.zeros(len(frag.texels), bool)  # contact is found per matched point (HighPolyScene)
@@ -343,3 +351,9 @@ class HighPolyStage:
                                          np.ascontiguousarray(directions, np.float32),
                                          dists=np.full(len(origins), FAR, np.float32), output=True)
         return out["tfar"][out["primID"] >= 0].astype(np.float64)
+
+
+__all__ = [
+    "DIRECTIONS_PER_POINT", "PRECHECK_POINTS", "directions_per_point", "MatchedEstimates", "HighPolyStart",
+    "BEHIND_WARNING", "finish_report", "HighPolyStage"
+]

@@ -1,9 +1,9 @@
 """A bake in another process: the job (plain data) a worker rebuilds a bake from, and the worker's side.
 
 The executor (:mod:`core.execution`) knows no bake kinds: a worker process boots into
-:mod:`core.pipeline.entry`, which hands each job to :func:`build`; a Dask worker runs :func:`dask_tile`. A job is the request as plain data
-(:meth:`core.base.request.BakeRequest.to_dict`, with the tiles and the extrusion the parent chose) and
-the meshes as arrays (:func:`mesh_data`); the executor adds ``threads`` (each worker's) and
+:mod:`core.pipeline.entry`, which hands each job to :func:`build`; a Dask worker runs
+:func:`dask_tile`. A job is the request as plain data (:meth:`core.base.request.BakeRequest.to_dict`,
+with the tiles and the extrusion the parent chose) and the meshes as arrays (:func:`mesh_data`); the executor adds ``threads`` (each worker's) and
 ``quantum`` (samples per progress message).
 
 A worker keeps the last bake's occlusion scenes (Embree's, and the tracer's arrays) and traces in

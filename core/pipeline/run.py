@@ -119,7 +119,8 @@ class Texels:
         root = self.lanes[self.base]
         plain = request.replace(tile_size=root.s.tile_shape, extrusion=request.extrusion if s2a is None
                                 else s2a.world.extrusion).to_dict()
-        return dict(request=plain, target=mesh_data(checked.target), occluders=[mesh_data(o) for o in checked.occluders],
+        return dict(request=plain, target=mesh_data(checked.target),
+                    occluders=[mesh_data(o) for o in checked.occluders],
                     highpoly=None if s2a is None else [mesh_data(m) for m in checked.s2a.highs],
                     cage=None if s2a is None or checked.s2a.cage is None else mesh_data(checked.s2a.cage),
                     guide=self.guide is not None)
@@ -196,7 +197,8 @@ class Corners:
         """What a worker rebuilds this bake from (plain data)."""
         root = self.lanes[self.base]
         return dict(request=self.request.to_dict(), target=mesh_data(self.checked.target),
-                    occluders=[mesh_data(o) for o in self.checked.occluders], corners=self.pro.corners, block=root.block)
+                    occluders=[mesh_data(o) for o in self.checked.occluders], corners=self.pro.corners,
+                    block=root.block)
 
     def checked_order(self, counters):
         return self.request.all_quantities

@@ -78,7 +78,8 @@ class TexelBake:
         self.pattern = pattern
         kernel = Kernel(pattern, tracer, s.distribution, on_rays=on_rays)
         # Located samples take one matrix form for the whole bake (see core.engine.kernel.TileContext).
-        self.start = (SurfaceStart(self.table, tracer, located_curved=bool(np.any(self.table.smooth[self.uvtris.valid])))
+        curved = bool(np.any(self.table.smooth[self.uvtris.valid]))
+        self.start = (SurfaceStart(self.table, tracer, located_curved=curved)
                       if stage is None else stage.start())
         self.baker = TileBaker(self.uvtris, self.table, kernel, tracer, pattern, s, shared, self.start,
                                bent=self.bent_normals)

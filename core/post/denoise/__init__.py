@@ -55,7 +55,8 @@ from .filter import (BAND_ROWS, BANDWIDTHS, BIAS_SCALE, NORMAL_SHARPNESS, PILOT_
 from .vertices import VERTEX_BANDWIDTHS, denoise_vertices
 from .udim import denoise_udim, udim_canvas, udim_guide
 
-__all__ = ["GUIDE_TILE", "RADIUS", "SurfaceGuide", "surface_guide", "tile_guide", "BAND_ROWS", "BANDWIDTHS", "BIAS_SCALE",
-           "NORMAL_SHARPNESS", "PILOT_BANDWIDTH", "PILOT_RADIUS", "RANGE_FLAT", "RANGE_SIGMAS", "SEGMENT_GAP",
-           "DenoiseInfo", "denoise", "VERTEX_BANDWIDTHS", "denoise_vertices", "denoise_udim", "udim_canvas",
-           "udim_guide"]
+__all__ = [
+    "GUIDE_TILE", "RADIUS", "SurfaceGuide", "surface_guide", "tile_guide", "BAND_ROWS", "BANDWIDTHS", "BIAS_SCALE",
+    "NORMAL_SHARPNESS", "PILOT_BANDWIDTH", "PILOT_RADIUS", "RANGE_FLAT", "RANGE_SIGMAS", "SEGMENT_GAP",
+    "DenoiseInfo", "denoise", "VERTEX_BANDWIDTHS", "denoise_vertices", "denoise_udim", "udim_canvas", "udim_guide"
+]

@@ -562,3 +562,9 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
                        variance=np.where(mask, varo, 0).astype(np.float32),
                        bias=np.where(mask, bias, 0).astype(np.float32), bandwidths=tuple(bws))
     return res, se, info
+
+
+__all__ = [
+    "BANDWIDTHS", "NORMAL_SHARPNESS", "RANGE_SIGMAS", "RANGE_FLAT", "PILOT_BANDWIDTH", "PILOT_RADIUS", "BIAS_SCALE",
+    "BAND_ROWS", "SEGMENT_GAP", "DenoiseInfo", "denoise"
+]

@@ -490,3 +490,6 @@ def _halo(xy, mesh, pairs, island_t, island, w, h, radius, weld):
     a, b = texel[sel][good], src[good]
     pair = np.unique(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1), axis=0)
     return halo, pair.reshape(-1, 2).astype(np.int64)
+
+
+__all__ = ["RADIUS", "SurfaceGuide", "resolution_pair", "GUIDE_TILE", "tile_guide", "surface_guide"]

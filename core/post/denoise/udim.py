@@ -78,3 +78,6 @@ def denoise_udim(tile_maps, guide, margin=0, **kw):
                            bandwidths=info.bandwidths)
         result[t] = (a, err[b].copy(), part)
     return result
+
+
+__all__ = ["udim_canvas", "udim_guide", "denoise_udim"]

@@ -115,3 +115,6 @@ def denoise_vertices(mesh, ao, stderr, unit, corners=None, *, bandwidths=VERTEX_
     info = DenoiseInfo(choice=choice[unit], variance=vo[unit].astype(np.float32), bias=bo[unit].astype(np.float32),
                        bandwidths=tuple(float(b) for b in bandwidths))
     return np.clip(out, 0.0, 1.0)[unit].astype(np.float32), se[unit].astype(np.float32), info
+
+
+__all__ = ["VERTEX_BANDWIDTHS", "denoise_vertices"]
