@@ -282,9 +282,10 @@ def digest(a):
 
 
 def plain(value):
-    """JSON-able plain data of ``value`` (dicts, lists, numbers, strings; a dataclass as its fields)."""
+    """JSON-able plain data of ``value`` (dicts, lists, numbers, strings; a dataclass as its fields that
+    are set, not None: the report, a dict before it had named fields, compares as it did)."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        value = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
+        value = {f.name: getattr(value, f.name) for f in dataclasses.fields(value) if getattr(value, f.name) is not None}
     if isinstance(value, dict):
         return {str(k): plain(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))
                 if k not in MACHINE_KEYS and not str(k).endswith("seconds")}

@@ -1,8 +1,101 @@
-"""What a bake returns: :class:`BakeResult`, one type for every target (images, UDIM tiles, face corners)."""
+"""What a bake returns: :class:`BakeResult` and its :class:`BakeReport`, one type each for every target."""
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
+
+
+@dataclass
+class BakeReport:
+    """What a bake's input held and what the bake met (counts, not times), as named fields; a field is
+    None where it does not apply to the bake (a corner bake has no texels, an image bake no corners).
+
+    Images (and each UDIM tile): ``covered_texels``; ``degenerate_uv_triangles`` and
+    ``degenerate_triangles`` (skipped: no area in the UV map, or in space); ``uv_outside_triangles``
+    (with UVs outside [0, 1]: only their part inside is baked); ``overlapping_texels`` (under more than
+    one UV island: averaged over all surfaces covering them).
+    UDIM tiles: the tiles' counts added up, ``uv_outside_udim_triangles`` in place of
+    ``uv_outside_triangles``, and ``tiles`` (the tile numbers baked).
+    Face corners: ``corners``, ``sample_points`` (corners of one vertex and one normal share one),
+    ``degenerate_corners`` (on a triangle of no area: their normal stands in for the face's).
+    Selected to active: ``extrusion`` (world units; 0 with a cage) and ``extrusion_served`` (the share of
+    points the automatic extrusion serves), ``matching_rays``, ``matching_rays_behind`` (met the
+    high-poly from behind), ``missed_matching_rays``, ``missed_texels``, ``partly_missed_texels``,
+    ``directions_per_point``, ``matching_seconds`` and ``matching_cpu_seconds`` (the matching's time).
+    Every bake: ``worker_memory`` (one entry per process that held the bake, :func:`core.execution.memory.memory_entry`:
+    ``process`` 'parent' or 'worker N', ``rss``, ``peak``, ``held`` bytes, a worker's ``start``, ``ready``,
+    ``tiles`` and ``scene_reused``) and ``warnings`` (sentences naming the object; None when there is none).
+
+    It also reads as a mapping of the fields that apply (``report["covered_texels"]``,
+    ``report.get("warnings", [])``, ``"warnings" in report``, ``dict(report.items())``), as the report
+    was before it had named fields.
+    """
+
+    covered_texels: int = None
+    degenerate_uv_triangles: int = None
+    degenerate_triangles: int = None
+    uv_outside_triangles: int = None
+    overlapping_texels: int = None
+    uv_outside_udim_triangles: int = None
+    tiles: list = None
+    corners: int = None
+    sample_points: int = None
+    degenerate_corners: int = None
+    extrusion: float = None
+    extrusion_served: float = None
+    matching_rays: int = None
+    matching_rays_behind: int = None
+    missed_matching_rays: int = None
+    missed_texels: int = None
+    partly_missed_texels: int = None
+    directions_per_point: int = None
+    matching_seconds: float = None
+    matching_cpu_seconds: float = None
+    worker_memory: list = None
+    warnings: list = None
+
+    def warn(self, *sentences):
+        """Add warnings (after any the bake has already)."""
+        self.warnings = (self.warnings or []) + list(sentences)
+
+    # -- read as a mapping of the fields that apply --------------------------------------------------------
+
+    def keys(self):
+        return [f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None]
+
+    def items(self):
+        return [(k, getattr(self, k)) for k in self.keys()]
+
+    def __contains__(self, key):
+        return key in _REPORT_FIELDS and getattr(self, key) is not None
+
+    def __getitem__(self, key):
+        if key not in self:
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def get(self, key, default=None):
+        return getattr(self, key) if key in self else default
+
+    def __iter__(self):
+        return iter(self.keys())
+
+    def __len__(self):
+        return len(self.keys())
+
+    def pop(self, key, *default):
+        """The field's value, then None (as a dict's pop)."""
+        if key not in self:
+            if default:
+                return default[0]
+            raise KeyError(key)
+        value = getattr(self, key)
+        setattr(self, key, None)
+        return value
+
+
+_REPORT_FIELDS = {f.name for f in dataclasses.fields(BakeReport)}
 
 
 @dataclass
@@ -26,18 +119,12 @@ class BakeResult:
         fills them). See :mod:`core.highpoly`.
     missed : selected to active only: sample points whose matching ray missed (each point carries a
         block of samples, ``report['directions_per_point']``; none of them is traced).
-    report : counts of what the input held: degenerate UV triangles skipped, triangles of zero area
-        in space skipped (they have no surface), triangles with UVs
-        outside [0, 1] (only their part inside the image is baked), texels covered by more than one
-        UV island (averaged over all surfaces covering them), covered texels. ``worker_memory``:
-        one dict per process that held the bake (this one, ``process`` 'parent', then each worker,
-        'worker N'): ``rss`` and ``peak`` resident bytes (VmRSS and VmHWM; a worker's peak is its
-        bake's own, from ``start``, its size before it built the scene; ``ready``, after), and
-        ``held``, the bytes of the arrays its bake holds (meshes, tables; Embree's scenes are not
-        arrays and are in ``ready - start``, unless the worker kept them from its last bake):
-        :func:`core.execution.memory.memory_entry`; a worker's also ``tiles`` (how many it baked) and
-        ``scene_reused`` (whether it traced in the Embree scenes it kept from its last bake of the
-        same meshes).
+    report : a :class:`BakeReport`: counts of what the input held (degenerate UV triangles skipped,
+        triangles of zero area in space skipped, triangles with UVs outside [0, 1], texels covered by
+        more than one UV island, covered texels), selected to active's figures, the memory of every
+        process that held the bake (``worker_memory``: a worker's peak is its bake's own, from
+        ``start``, its size before it built the scene; ``ready``, after; ``held``, the bytes of the
+        arrays its bake holds, Embree's scenes aside) and the warnings.
     bent : None, or with ``bent_normals``, (H, W, 3) float32 unit bent normals in the bake's
         ``bent_space`` (covered and margin texels; zero elsewhere), see :mod:`core.post.bent`.
 
@@ -61,7 +148,7 @@ class BakeResult:
     threads: int
     trace_cpu_seconds: float = 0.0
     metadata: dict = field(default_factory=dict)
-    report: dict = field(default_factory=dict)
+    report: BakeReport = field(default_factory=BakeReport)
     bent: np.ndarray = None
     miss: np.ndarray = None
     missed: int = 0
@@ -86,4 +173,4 @@ def empty_reason(no_area=0, no_uv_area=0, outside=0, outside_udim=0):
     return "; ".join(reasons) or "its UV triangles are too small to cover a texel centre at this resolution"
 
 
-__all__ = ["BakeResult", "empty_reason"]
+__all__ = ["BakeResult", "BakeReport", "empty_reason"]

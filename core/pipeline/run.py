@@ -44,7 +44,7 @@ from ..targets.texels import ImageStore, texel_bake
 from . import remote
 from .prologue import Prologue, check
 from .remote import mesh_data
-from .result import BakeResult, empty_reason
+from .result import BakeReport, BakeResult, empty_reason
 
 
 def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=None, corners=None, progress=None,
@@ -156,10 +156,10 @@ class Texels:
         seconds = time.perf_counter() - t_start
         rays = counters["rays"]
         metadata = dict(s.metadata(s.max_distance), version=__version__, rays=rays)
-        report = {"covered_texels": int(mask.sum()), "degenerate_uv_triangles": self.uvtris.degenerate,
-                  "degenerate_triangles": self.uvtris.degenerate_space,
-                  "uv_outside_triangles": self.uvtris.outside, "overlapping_texels": img.overlap}
-        report["worker_memory"] = counters.get("worker_memory", [])
+        report = BakeReport(covered_texels=int(mask.sum()), degenerate_uv_triangles=self.uvtris.degenerate,
+                            degenerate_triangles=self.uvtris.degenerate_space,
+                            uv_outside_triangles=self.uvtris.outside, overlapping_texels=img.overlap,
+                            worker_memory=counters.get("worker_memory", []))
         return BakeResult(ao=ao, mask=mask, stderr=se, samples=img.count, rays=rays, seconds=seconds,
                           trace_seconds=counters["trace_seconds"], threads=s.threads, metadata=metadata, report=report,
                           trace_cpu_seconds=counters["trace_cpu_seconds"], bent=bent, miss=img.miss,
@@ -212,8 +212,8 @@ class Corners:
         for key in ("margin", "resolution"):
             metadata.pop(key, None)
         metadata["sample_points"] = m
-        report = {"corners": len(pro.corners), "sample_points": m, "degenerate_corners": root.flat,
-                  "worker_memory": counters.get("worker_memory", [])}
+        report = BakeReport(corners=len(pro.corners), sample_points=m, degenerate_corners=root.flat,
+                            worker_memory=counters.get("worker_memory", []))
         out_ao, out_se, raw_ao, raw_se = v["ao"][unit], v["se"][unit], None, None
         if self.request.denoise:
             raw_ao, raw_se = out_ao, out_se
@@ -242,11 +242,10 @@ def finish(made, q, counters, fallback, t_start):
         r.metadata.update(pro.s2a.metadata())
         extra = dict(made.extra[q])
         warnings = extra.pop("warnings")
-        r.report.update(extra)
-        r.report.setdefault("warnings", []).extend(warnings)  # beside any other warning of the bake
+        r.report = dataclasses.replace(r.report, **extra)
+        r.report.warn(*warnings)  # beside any other warning of the bake (a list, empty when none)
     if fallback is not None:
-        r.report.setdefault("warnings", []).append(
-            f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
+        r.report.warn(f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
     return r
 
 
@@ -363,7 +362,7 @@ def _assemble(target, resolution, results, todo, coverage, denoise, margin):
                       rays=sum(r.rays for r in parts), seconds=sum(r.seconds for r in parts),
                       trace_seconds=sum(r.trace_seconds for r in parts), threads=parts[0].threads,
                       trace_cpu_seconds=sum(r.trace_cpu_seconds for r in parts), metadata=dict(parts[0].metadata),
-                      report=report, tiles=results,
+                      report=BakeReport(**report), tiles=results,
                       bent=stack("bent") if parts[0].bent is not None else None,
                       raw_ao=stack("raw_ao") if parts[0].raw_ao is not None else None,
                       raw_stderr=stack("raw_stderr") if parts[0].raw_stderr is not None else None)
