@@ -225,10 +225,10 @@ def test_too_many_samples_are_refused_before_any_work(samples):
 
 
 def test_the_memory_estimate_counts_samples_and_chunks():
-    from core.engine.settings import estimate_memory
+    from core.execution.cost import bake_bytes
 
-    small = estimate_memory(1, 1, 2, 1, 1 << 16, samples=16)
-    big = estimate_memory(1, 1, 2, 1, 1 << 16, samples=1 << 20)
+    small = bake_bytes(1, 1, 2, 1, 1 << 16, samples=16)
+    big = bake_bytes(1, 1, 2, 1, 1 << 16, samples=1 << 20)
     assert big - small > (1 << 20) * 40  # the sample tables
 
 

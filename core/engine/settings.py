@@ -162,27 +162,6 @@ def pattern_span(source, samples):
     return 2 * length if source == "stratified" else length
 
 
-def estimate_memory(width, height, triangles, threads, chunk_rays, samples=1, source="sobol", replicates=1,
-                    tile_texels=TILE_SIDE * TILE_SIDE):
-    """Peak bytes a bake needs: output planes, margin work, per-thread chunks, the sample pool, triangles.
-
-    A chunk holds at most ``max(chunk_rays, SAMPLE_PIECE)`` rays (a texel with more samples is
-    traced in pieces). The sample pool holds at least one pattern of the sample count (its 4D points
-    and two sets of lifted features: 40 bytes a point) and at most :data:`POOL_POINTS` points
-    otherwise; a tile's sample units hold their affine maps (about 600 bytes each, a few per texel).
-    """
-    texels = width * height
-    planes = texels * (4 + 4 + 4 + 1)          # ao, stderr, samples, mask
-    margin_work = texels * (4 + 4 + 1 + 1)      # dilation values, masks, frontier
-    per_ray = 200                               # feature rows, outputs, indices and results of a chunk
-    chunks = threads * max(chunk_rays, min(samples, SAMPLE_PIECE)) * per_ray
-    span = pattern_span(source, -(-samples // replicates))
-    pool = max(span * replicates, min(POOL_POINTS, texels * replicates * span)) * 64
-    units = threads * tile_texels * 4 * 600     # a tile's units, a few per texel
-    tris = triangles * 300                      # texel-space corners, affine maps, Embree buffers
-    return planes + margin_work + chunks + pool + min(units, texels * 4 * 600 * threads) + tris
-
-
 def auto_tile_shape(width, height, threads, samples=None):
     """(columns, rows) of a tile: at least one tile per thread, sides multiples of TILE_MULTIPLE and
     at most TILE_SIDE (LARGE_TILE_SIDE for bakes of few samples on large images), as large as that
@@ -238,4 +217,4 @@ def _tile_side(v):
     return max(TILE_MULTIPLE, -(-int(math.ceil(v)) // TILE_MULTIPLE) * TILE_MULTIPLE)
 
 
-__all__ = ["BakeSettings", "SAMPLE_PIECE", "estimate_memory", "auto_tile_shape", "pattern_span"]
+__all__ = ["BakeSettings", "SAMPLE_PIECE", "auto_tile_shape", "pattern_span"]

@@ -12,16 +12,23 @@ from that one (a faster core scales it all) and on scenes whose rays cost more (
 dense geometry): an estimate to show before a bake, not a promise. Adaptive sampling takes fewer samples than the most it may: the estimate is for the
 most.
 
-The memory: the result's planes and the margin's work per image texel, each process's copy of the
-scene per triangle (a target's, an occluder's and a high-poly mesh's triangles cost differently), what
-the parent keeps per triangle while worker processes bake, a process's fixed share (an interpreter
-with numpy, embreex and the sample pool), and the chunks of rays in flight per thread (the model the
-bench's peak memory rows check; the per-triangle figures are bench.sections.memory's).
+The memory, ONE model for every use: the result's planes and the margin's work per image texel, each
+process's copy of the scene per triangle (a target's, an occluder's and a high-poly mesh's triangles
+cost differently), what the parent keeps per triangle while worker processes bake, a process's fixed
+share (an interpreter with numpy, embreex and the sample pool), and the chunks of rays in flight per
+thread (the model the bench's peak memory rows check; the per-triangle figures are
+bench.sections.memory's). :func:`estimate` prices a bake before it is set up (the add-on's panel,
+:func:`core.execution.executor.auto_workers`); :func:`bake_bytes` is what a bake set up in this
+process adds, with its sample pool and its tiles' sample units, the figure a bake is refused on
+(:meth:`core.pipeline.prologue.Prologue.check_memory`).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..engine.patterns import POOL_POINTS
+from ..engine.settings import SAMPLE_PIECE, TILE_SIDE, pattern_span
 
 #: The time model (nanoseconds), fitted to the bench's bakes on 2 cores (see the module docstring).
 NS_PER_RAY, NS_PER_TEXEL, NS_PER_TRIANGLE, FIXED_SECONDS = 168.0, 520.0, 3570.0, 0.075
@@ -37,6 +44,9 @@ BYTES_PER_TEXEL, BYTES_PER_PROCESS, BYTES_PER_CHUNK_RAY = 26, 150 << 20, 200
 #: 412) and a high-poly mesh's (one robust scene that matches and occludes: 193; 161 at 10M
 #: triangles), with some headroom.
 BYTES_PER_TRIANGLE, BYTES_PER_OCCLUDER_TRIANGLE, BYTES_PER_HIGHPOLY_TRIANGLE = 340, 450, 220
+#: Bytes a point of the sample pool takes (its 4D point and two sets of lifted features), and a sample
+#: unit (its affine maps; a few per texel of a tile, UNITS_PER_TEXEL).
+BYTES_PER_POOL_POINT, BYTES_PER_UNIT, UNITS_PER_TEXEL = 64, 600, 4
 #: Bytes per triangle the parent adds while worker processes bake (its UV triangles and tiles of the
 #: target: 90 measured; 30 for an occluder or a high-poly mesh), beyond the caller's own arrays.
 BYTES_PER_PARENT_TRIANGLE, BYTES_PER_PARENT_OTHER_TRIANGLE = 110, 40
@@ -62,9 +72,38 @@ class Cost:
 def process_bytes(triangles, occluder_triangles=0, highpoly_triangles=0):
     """Peak bytes of one process that bakes tiles of a target of ``triangles`` with these occluder
     and high-poly triangles (its interpreter included)."""
-    return int(BYTES_PER_PROCESS + BYTES_PER_TRIANGLE * int(triangles)
-               + BYTES_PER_OCCLUDER_TRIANGLE * int(occluder_triangles)
+    return int(BYTES_PER_PROCESS + scene_bytes(triangles, occluder_triangles, highpoly_triangles))
+
+
+def scene_bytes(triangles, occluder_triangles=0, highpoly_triangles=0):
+    """Bytes of one process's copy of a bake's scene (tables and Embree scenes), its interpreter aside."""
+    return int(BYTES_PER_TRIANGLE * int(triangles) + BYTES_PER_OCCLUDER_TRIANGLE * int(occluder_triangles)
                + BYTES_PER_HIGHPOLY_TRIANGLE * int(highpoly_triangles))
+
+
+def chunk_bytes(threads, chunk_rays, rays):
+    """Bytes of the chunks of rays ``threads`` threads have in flight (at most ``rays`` rays each)."""
+    return int(threads) * min(int(chunk_rays), int(rays)) * BYTES_PER_CHUNK_RAY
+
+
+def bake_bytes(width, height, triangles, threads, chunk_rays, samples=1, source="sobol", replicates=1,
+               tile_texels=TILE_SIDE * TILE_SIDE):
+    """Peak bytes a bake set up in this process adds: the image's planes and margin work, the scene
+    (``triangles``: a count, costed as the target's, or (target, occluder, high-poly) triangles), the
+    chunks of rays in flight, the sample pool and the tiles' sample units.
+
+    A chunk holds at most ``max(chunk_rays, SAMPLE_PIECE)`` rays (a texel with more samples is traced
+    in pieces). The sample pool holds at least one pattern of the sample count and at most
+    :data:`core.engine.patterns.POOL_POINTS` points otherwise.
+    """
+    target, occluders, highpoly = (int(triangles), 0, 0) if np.ndim(triangles) == 0 else map(int, triangles)
+    texels = int(width) * int(height)
+    span = pattern_span(source, -(-samples // replicates))
+    pool = max(span * replicates, min(POOL_POINTS, texels * replicates * span)) * BYTES_PER_POOL_POINT
+    units = int(threads) * min(int(tile_texels), texels) * UNITS_PER_TEXEL * BYTES_PER_UNIT
+    return int(BYTES_PER_TEXEL * texels + scene_bytes(target, occluders, highpoly)
+               + chunk_bytes(threads, max(chunk_rays, min(samples, SAMPLE_PIECE)), max(chunk_rays, samples))
+               + pool + units)
 
 
 def parent_bytes(triangles, other_triangles=0):
@@ -88,7 +127,7 @@ def estimate(covered_texels, samples, triangles, image_texels=None, threads=1, p
     image = covered_texels if image_texels is None else int(image_texels)
     memory = (BYTES_PER_TEXEL * image + int(processes) * process_bytes(triangles, occluder_triangles, highpoly_triangles)
               + (parent_bytes(triangles, other) if int(processes) > 1 else 0)
-              + cores * min(int(chunk_rays), rays) * BYTES_PER_CHUNK_RAY)
+              + chunk_bytes(cores, chunk_rays, rays))
     return Cost(float(seconds), int(memory))
 
 
@@ -116,4 +155,5 @@ def estimate_bake(target, occluders=(), resolution=(1024, 1024), samples=256, th
                     highpoly_triangles=sum(m.triangle_count for m in highpoly))
 
 
-__all__ = ["Cost", "estimate", "estimate_bake", "covered_fraction", "process_bytes", "parent_bytes"]
+__all__ = ["Cost", "estimate", "estimate_bake", "bake_bytes", "covered_fraction", "process_bytes", "parent_bytes",
+           "scene_bytes", "chunk_bytes"]

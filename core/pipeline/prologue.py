@@ -15,7 +15,7 @@ import numpy as np
 from ..base.errors import BakeCancelled, BakeMemoryError, MeshError, SettingsError
 from ..base.machine import available_memory
 from ..engine.scheduler import is_cancelled
-from ..engine.settings import estimate_memory
+from ..execution.cost import bake_bytes
 from ..geometry.corners import all_corners, check_corners
 from ..geometry.mesh import Mesh, mesh_list
 from ..highpoly.input import SelectedToActive
@@ -140,10 +140,11 @@ class Prologue:
                 self.s2a.triangle_count if self.s2a else 0)
 
     def check_memory(self, s):
-        """Refuse a bake that would not fit in the memory available (BakeMemoryError)."""
+        """Refuse a bake that would not fit in the memory available (BakeMemoryError), by the one memory
+        model (:func:`core.execution.cost.bake_bytes`)."""
         tri_total = self.triangle_count
-        need = estimate_memory(s.width, s.height, tri_total, s.threads, s.chunk_rays, s.samples, s.source,
-                               s.replicates, s.tile_shape[0] * s.tile_shape[1])
+        need = bake_bytes(s.width, s.height, self.triangle_counts, s.threads, s.chunk_rays, s.samples, s.source,
+                          s.replicates, s.tile_shape[0] * s.tile_shape[1])
         avail = available_memory()
         if avail is not None and need > avail:
             raise BakeMemoryError(f"a {s.width} x {s.height} bake of {tri_total} triangles needs about "
