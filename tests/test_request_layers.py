@@ -51,6 +51,16 @@ def test_every_option_is_defined_once_with_a_kind_a_default_a_group_and_a_meanin
         assert OTHER[o.name] != o.default, o.name
 
 
+def test_the_sources_option_lists_the_point_sets_the_library_has():
+    from core.base.request import SOURCES
+    from core.montecarlo import sources
+
+    assert set(BY_NAME["source"].choices) == set(SOURCES) == set(sources.SOURCES)
+    for cls in sources.SOURCES.values():  # each point set says its own rules for the bake's pools
+        assert cls.reorder in ("xor", "offset") and cls.shift in ("xor", "add") and 0 < cls.error_rate <= 1
+        assert cls.pattern_span(100) in (cls.pattern_length(100), 2 * cls.pattern_length(100))
+
+
 @pytest.mark.parametrize("name", sorted(BY_NAME))
 def test_each_option_round_trips_through_plain_data(name):
     """What a worker process gets: plain data (JSON can hold it, infinity aside), the same request back."""

@@ -9,6 +9,7 @@ interval predicts. Each replicate takes its own share of the samples (:func:`rep
 import numpy as np
 
 from .estimators import ErrorModel
+from ..montecarlo.sources import SOURCES
 from .settings import SAMPLE_PIECE
 
 
@@ -46,7 +47,7 @@ class SamplingPlan:
         first = settings.min_samples if settings.adaptive else settings.samples
         self.first = max(1, -(-first // R))
         self.target = settings.target_error
-        self.rate = 0.5 if settings.source == "independent" else 0.75
+        self.rate = SOURCES[settings.source].error_rate  # the point set's error rate, n^-rate
         self.errors = ErrorModel(settings, confidence, grouped)
 
     def next_counts(self, est, texels, n, x, y):

@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 
-from .settings import SAMPLE_PIECE
+from ..montecarlo.sources import SOURCES
 from ..montecarlo.stats import RunningStats, normal_quantile, z_for_confidence
 
 #: Side of the image-aligned blocks within which variances are pooled (tiles are multiples of it).
@@ -294,7 +294,7 @@ class ErrorModel:
 
     def __init__(self, settings, confidence=0.95, grouped=False):
         self.replicates = settings.replicates
-        self.independent = settings.source == "independent" and not grouped
+        self.independent = SOURCES[settings.source].independent and not grouped
         self.binary, self.bound = settings.binary, settings.bound
         self.confidence = confidence
         self.z = z_for_confidence(confidence)

@@ -42,10 +42,9 @@ import numpy as np
 from ..montecarlo import warps
 from ..base.errors import SettingsError
 from ..montecarlo.hashing import GOLDEN, below, hash64, hash_more, mix_into
+from ..base.request import SOURCES as SOURCE_NAMES
 from ..montecarlo.sources import SOURCES
-from ..montecarlo.stratified import Stratified
 
-SOURCE_NAMES = ("sobol", "stratified", "independent", "halton")
 DIMS = 4
 #: Points in a pool (all patterns together). 2^18 points hold 4096 Sobol' sets of 64 points; the
 #: pool and its lifted features take about 10 MiB.
@@ -99,20 +98,16 @@ class TexelPattern:
         # i + o for Halton and for the stratified sets, which are stored twice in a row so that
         # (i + o) mod N needs no wrap. Either way, an aligned block of a texel's samples is a run of
         # consecutive pool rows.
-        self.xor = source in ("sobol", "independent")
-        self.length = max_samples if source == "halton" else 1 << max(0, (max_samples - 1).bit_length())
-        self.span = self.length if self.xor else 2 * self.length
+        cls = SOURCES[source]  # the point set's own rules (core.montecarlo.pointset.PointSet)
+        self.xor = cls.reorder == "xor"
+        self.length = cls.pattern_length(max_samples)
+        self.span = cls.pattern_span(max_samples)
         self.patterns = max(1, int(pool_points) // self.span)
         self._pool = _pool(source, self.seed, self.patterns, self.span, self.length)
         self.q = self._pool.q
         # Position shifts: digital (xor) or Cranley-Patterson (add, modulo 2^32), and which bits.
-        self.shift_add = source == "halton"
-        if source == "stratified":
-            nx, ny = Stratified.grid_shape(self.length)
-            self.shift_mask = np.array([(1 << (32 - (nx.bit_length() - 1))) - 1,
-                                        (1 << (32 - (ny.bit_length() - 1))) - 1], dtype=np.uint32)
-        else:
-            self.shift_mask = np.array([0xFFFFFFFF, 0xFFFFFFFF], dtype=np.uint32)
+        self.shift_add = cls.shift == "add"
+        self.shift_mask = np.array(cls.shift_masks(self.length), dtype=np.uint32)
 
     # -- per texel -----------------------------------------------------------------------------
 

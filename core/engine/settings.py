@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..base.machine import cpu_count
+from ..montecarlo.sources import SOURCES
 from .patterns import POOL_POINTS
 
 #: Samples of one texel traced in one piece; more are traced in pieces of this many.
@@ -148,7 +149,7 @@ class BakeSettings:
                 "max_distance": max_distance_world, "falloff": self.falloff,
                 "ignore_backfaces": self.ignore_backfaces, "margin": self.margin, "replicates": self.replicates,
                 "error_estimate": ("replicates" if self.replicates > 1
-                                   else "independent" if self.source == "independent" else "bound"),
+                                   else "independent" if SOURCES[self.source].independent else "bound"),
                 "resolution": f"{self.width}x{self.height}",
                 "quantity": self.quantity,
                 "ground": "none" if self.ground is None else "auto" if self.ground == "auto" else "height"}
@@ -156,10 +157,7 @@ class BakeSettings:
 
 def pattern_span(source, samples):
     """Points one pattern of ``source`` holds for ``samples`` samples per texel (see core.engine.patterns)."""
-    if source == "halton":
-        return 2 * samples
-    length = 1 << max(0, (samples - 1).bit_length())
-    return 2 * length if source == "stratified" else length
+    return SOURCES[source].pattern_span(samples)
 
 
 def auto_tile_shape(width, height, threads, samples=None):

@@ -214,6 +214,12 @@ class Halton(Sequence):
     """
 
     name = "halton"
+    shift = "add"
+
+    @classmethod
+    def pattern_length(cls, samples):
+        """Points of one set: exactly ``samples`` (every b^k consecutive points are stratified in base b)."""
+        return int(samples)
     _max_dim = 1000
 
     def __init__(self, d=2, *, scramble=True, randomizer=None, seed=None):

@@ -19,6 +19,9 @@ class Independent(PointSet):
     """
 
     name = "independent"
+    reorder = "xor"
+    independent = True
+    error_rate = 0.5
 
     @classmethod
     def randomizer_from(cls, bits, d, max_points=None):

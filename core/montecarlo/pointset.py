@@ -154,6 +154,36 @@ class PointSet:
     #: set themselves (all but the stratified sets, which are whole sets of n points).
     continues = True
 
+    # -- the set's rules when a bake reuses its randomised sets for every texel (core.engine.patterns) --
+
+    #: How a texel reorders a set's points keeping its structure: 'xor' (index i xor c maps every
+    #: aligned block of 2^m indices onto another: each power-of-two prefix stays a net), or 'offset'
+    #: (a window i + o of a set stored twice in a row).
+    reorder = "offset"
+    #: How a texel shifts the position coordinates: 'xor' (a digital shift, elementary intervals onto
+    #: elementary intervals) or 'add' (a Cranley-Patterson rotation, strata stay arcs of the circle).
+    shift = "xor"
+    #: Whether the points are independent: the independent-sample error formula is then exact.
+    independent = False
+    #: The rate r of the error of n samples, n^-r, that adaptive sampling grows a texel's count by.
+    error_rate = 0.75
+
+    @classmethod
+    def pattern_length(cls, samples):
+        """Points of one set for ``samples`` samples a texel: a power of two (a net, a grid)."""
+        return 1 << max(0, (int(samples) - 1).bit_length())
+
+    @classmethod
+    def pattern_span(cls, samples):
+        """Rows one set takes in a bake's pool: its length, twice over for a window ``i + o``."""
+        length = cls.pattern_length(samples)
+        return length if cls.reorder == "xor" else 2 * length
+
+    @classmethod
+    def shift_masks(cls, length):
+        """The bits of the (x, y) position coordinates a texel's shift may change (all of them)."""
+        return 0xFFFFFFFF, 0xFFFFFFFF
+
     def __init__(self, d=2, *, randomizer=None, seed=None):
         self.d = check_dim(d, self._max_dim, type(self).__name__)
         self.rng = np.random.default_rng(seed)

@@ -269,6 +269,7 @@ class Sobol(Sequence):
     """
 
     name = "sobol"
+    reorder = "xor"
     _max_dim = SOBOL_MAX_DIM
 
     def __init__(self, d=2, *, scramble=True, randomizer=None, seed=None):

@@ -54,6 +54,13 @@ class Stratified(PointSet):
     name = "stratified"
     continues = False
 
+    @classmethod
+    def shift_masks(cls, length):
+        """A digital shift below the strata: the bits under each axis's grid cells, so every point
+        stays in its stratum."""
+        nx, ny = cls.grid_shape(length)
+        return (1 << (32 - (nx.bit_length() - 1))) - 1, (1 << (32 - (ny.bit_length() - 1))) - 1
+
     @staticmethod
     def grid_shape(n):
         """Grid ``(nx, ny)`` used for ``n`` points in two dimensions.
