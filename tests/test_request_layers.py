@@ -156,5 +156,7 @@ def test_a_request_reaches_the_worker_processes_whole(monkeypatch):
     r = BakeRequest(workers=2, **options)
     out = bake(target, occ, r)["ao"]
     assert sent == [r.replace(tile_size=(16, 16))], "the bake did not go to worker processes whole"
+    for entry in out.report.worker_memory[1:]:  # each worker says what it baked with
+        assert BakeRequest.from_dict(entry["request"]) == r.replace(tile_size=(16, 16), threads=1)
     ref = bake_ao(target, occ, **options)
     assert np.array_equal(out.ao, ref.ao) and np.array_equal(out.stderr, ref.stderr)

@@ -32,8 +32,9 @@ class WorkerSide(Protocol):
         """Let go what the last bake kept that ``job`` will not use (before it is built)."""
 
     def build(self, job: dict, cancel, progress) -> tuple:
-        """(bake, its scheduler, threads) of ``job``: a :class:`TileBake` with ``start.counters()`` and
-        ``scene_reused``."""
+        """(bake, its scheduler, threads) of ``job``: a :class:`TileBake` with ``start.counters()``,
+        ``scene_reused`` (it traced in the scenes kept from the last bake) and ``request_data`` (plain
+        data the worker's line of the report carries back: the options it baked with)."""
 
 
 @dataclass(frozen=True)

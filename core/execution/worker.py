@@ -87,7 +87,8 @@ def main(remote):
                                              trace_cpu_seconds=shared.trace_cpu_seconds,
                                              counters=bake.start.counters(),
                                              memory=dict(memory_entry("worker", (bake,), start, ready),
-                                                         scene_reused=bake.scene_reused, tiles=tiles)))
+                                                         scene_reused=bake.scene_reused, tiles=tiles,
+                                                         request=bake.request_data)))
                 bake = shared = None
             elif kind == "exit":
                 return

@@ -93,6 +93,7 @@ def build(job, cancel, progress):
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)
     bake.scene_reused = kept is not None and pro.shared_tracer is not None and pro.shared_tracer[1] is kept
+    bake.request_data = request.to_dict()  # the options this worker baked with, back in the report
     if key is not None:
         # Keep the tracer this bake traced in as the last scene (one scene at a time: memory does not grow).
         _SCENE.clear()

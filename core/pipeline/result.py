@@ -23,9 +23,11 @@ class BakeReport:
     points the automatic extrusion serves), ``matching_rays``, ``matching_rays_behind`` (met the
     high-poly from behind), ``missed_matching_rays``, ``missed_texels``, ``partly_missed_texels``,
     ``directions_per_point``, ``matching_seconds`` and ``matching_cpu_seconds`` (the matching's time).
-    Every bake: ``worker_memory`` (one entry per process that held the bake, :func:`core.execution.memory.memory_entry`:
-    ``process`` 'parent' or 'worker N', ``rss``, ``peak``, ``held`` bytes, a worker's ``start``, ``ready``,
-    ``tiles`` and ``scene_reused``) and ``warnings`` (sentences naming the object; None when there is none).
+    Every bake: ``worker_memory`` (one entry per process that held the bake,
+    :func:`core.execution.memory.memory_entry`: ``process`` 'parent' or 'worker N', ``rss``, ``peak``,
+    ``held`` bytes, a worker's ``start``, ``ready``, ``tiles``, ``scene_reused`` and ``request``, the
+    options it baked with as plain data) and ``warnings`` (sentences naming the object; None when there
+    is none).
 
     It also reads as a mapping of the fields that apply (``report["covered_texels"]``,
     ``report.get("warnings", [])``, ``"warnings" in report``, ``dict(report.items())``), as the report
