@@ -8,7 +8,7 @@ import pytest
 
 OpenImageIO = pytest.importorskip("OpenImageIO")
 
-from core.files.imageio import write_channel  # noqa: E402
+from core.files.channels import write_channel  # noqa: E402
 
 
 def tiff(path, fmt, associated):
