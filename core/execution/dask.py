@@ -21,11 +21,14 @@ def run_dask(client, task, job, keys, planned, store, progress, cancel, threads=
 
     from distributed import as_completed
 
+    from .daskboot import submittable
+
     token = uuid.uuid4().hex
     job = dict(job, threads=int(threads), quantum=1 << 62)
     [shared_job] = client.scatter([job], broadcast=True, hash=False)
-    futures = [client.submit(task, token, shared_job, key, key=f"mc_ao-tile-{token}-{i}", retries=3,
-                             pure=False) for i, key in enumerate(keys)]
+    boot = submittable()  # imports the task on the worker, or fails the tile saying why (never a hang)
+    futures = [client.submit(boot, task.__module__, task.__name__, token, shared_job, key,
+                             key=f"mc_ao-tile-{token}-{i}", retries=3, pure=False) for i, key in enumerate(keys)]
     totals, done = {}, 0
     try:
         for fut in as_completed(futures):

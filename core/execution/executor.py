@@ -37,6 +37,28 @@ def auto_workers(triangles, cores=None, memory=None):
     return workers, max(1, cores // workers)
 
 
+def clamp_processes(asked, threads, triangles, cores=None, memory=None):
+    """(processes, why fewer than ``asked`` or None): at most as many worker processes of ``threads``
+    threads as the cores hold, and as many as the memory holds by :mod:`core.execution.cost`'s model
+    (each worker's copy of the scene, the parent's share) within 80% of it; at least one."""
+    cores = cpu_count() if cores is None else cores
+    memory = memory_limit() if memory is None else memory
+    target, occluders, highpoly = (int(triangles), 0, 0) if np.ndim(triangles) == 0 else map(int, triangles)
+    by_cores = max(1, cores // max(1, int(threads)))
+    out, why = min(int(asked), by_cores), []
+    if out < asked:
+        why.append(f"{cores} cores at {int(threads)} thread{'s' if threads != 1 else ''} each")
+    if memory is not None:
+        per_worker = cost_mod.process_bytes(target, occluders, highpoly)
+        parent = cost_mod.parent_bytes(target, occluders + highpoly)
+        fit = max(1, int((memory * 0.8 - parent) // per_worker))
+        if fit < out:
+            out = fit
+            why.append(f"memory for {fit} ({memory / 2 ** 30:.1f} GiB available, about "
+                       f"{per_worker / 2 ** 20:.0f} MiB each)")
+    return out, ("; ".join(why) if out < asked else None)
+
+
 def processes_of(workers, threads, settings, triangles):
     """(processes, threads each) of a bake given ``workers`` (1, N or 'auto', checked) and the
     ``threads`` argument: with workers, ``threads`` counts each worker's threads (None: one each, or
@@ -51,7 +73,8 @@ def processes_of(workers, threads, settings, triangles):
             return processes, per_worker
         # Threads asked for each: as many workers as the cores hold at that many threads each.
         return max(1, min(processes, cpu_count() // settings.threads)), settings.threads
-    return workers, 1 if threads is None else settings.threads
+    each = 1 if threads is None else settings.threads
+    return clamp_processes(workers, each, triangles)[0], each
 
 
 def in_process(processes):
@@ -111,4 +134,4 @@ def usable_pool(remote, processes, threads):
         return f"worker processes could not be started ({e})"
 
 
-__all__ = ["auto_workers", "processes_of", "in_process", "worker_count", "run_tiles", "bake_tiles", "usable_pool"]
+__all__ = ["auto_workers", "clamp_processes", "processes_of", "in_process", "worker_count", "run_tiles", "bake_tiles", "usable_pool"]

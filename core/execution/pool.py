@@ -11,12 +11,19 @@ and sample counts are bit-identical for any workers x threads x tiling on one ma
 
 How the processes are started and kept (each point is a trap met in Blender):
 
-- Workers are new interpreters (``sys.executable -c``), on every OS: never fork (it would copy
+- Workers are new interpreters (``sys.executable -I -c``), on every OS: never fork (it would copy
   Blender's whole process), and not :mod:`multiprocessing` (its spawn re-runs a ``__main__`` that
   Blender gave a file name, and pickles functions by their module's name, which in the installed
   extension is ``bl_ext.<repository>.mc_ao.core``, a package Blender makes at run time that a new
-  interpreter cannot import). A worker gets the parent's ``sys.path`` and imports this package as
-  top-level ``core`` from the folder that holds it (:func:`boot`): numpy, embreex and the core, never bpy.
+  interpreter cannot import). A worker runs only the core and its dependencies, from where this
+  process found them (:func:`boot`): isolated (``-I``: no working folder, no PYTHONPATH, no user site
+  on its path: a ``json.py`` or ``numpy.py`` beside a user's .blend never runs in it), in the core's
+  own folder, with this process's ``sys.path`` (less its working folder) passed explicitly, the core's
+  enclosing packages made as empty packages of this process's folders (Blender's ``bl_ext`` exists only
+  in Blender), and the core imported under this process's name for it (``core``, pip's
+  ``mc_ao_core``, the extension's), checked to be this process's file: numpy, embreex and the core,
+  never bpy. A worker that ends at start-up fails the pool with what it wrote to its standard error
+  (which otherwise goes on to this process's).
 - Messages are pickles of plain data (arrays, numbers, strings, dicts) over the worker's stdin and a
   copy of its stdout (its own fd 1 is pointed at stderr, so that nothing a library prints can break a
   message); never a pickled core object. A worker's error comes back as its class name and message
@@ -74,17 +81,55 @@ AHEAD = 2
 PROGRESS_STEPS = 512
 
 
-def _core_root():
-    """The folder that holds the core package (the repository, or the installed extension's folder)."""
-    return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+def _core_package():
+    """The core package's full name in this process (``core`` in the repository, ``mc_ao_core`` installed
+    with pip, ``bl_ext.<repository>.mc_ao.core`` in Blender's extension) and its folder."""
+    name = __name__.rsplit(".", 2)[0]  # <core>.execution.pool
+    return name, os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+#: How much of a worker's standard error is kept for the message of a worker that fails at start.
+STDERR_TAIL = 4096
+
+#: The command a worker interpreter runs (``python -I -c BOOT ARGS``; see :func:`boot_args`). Isolated
+#: (-I: no working folder, no PYTHONPATH, no user site on the path) and in a neutral working folder, it
+#: imports nothing but the standard library's json, types and importlib before it sets the path it is
+#: given; then it makes the core's enclosing packages as empty packages of the folders the parent has
+#: them in (their __init__ does not run: Blender's ``bl_ext`` exists only in Blender), imports the
+#: entry under the core's full name, and checks it came from the parent's file.
+BOOT = ("import sys, json, types, importlib; a = json.loads(sys.argv[1]); sys.path[:] = a['path']\n"
+        "for n, p in a['packages']:\n"
+        "    m = types.ModuleType(n); m.__path__, m.__package__ = p, n; sys.modules[n] = m\n"
+        "w = importlib.import_module(a['module'])\n"
+        "if w.__file__ != a['file']:\n"
+        "    sys.exit(f\"mc_ao worker: {a['module']} came from {w.__file__}, not the parent's {a['file']}\")\n"
+        "w.main()")
+
+
+def boot_args(entry):
+    """The plain data a worker boots from (JSON in its argv[1]): ``path``, this process's ``sys.path``
+    (absolute, without its working folder, which is a user's folder: a ``json.py`` or ``numpy.py`` there
+    must not run in a worker) with the folder that holds the core first when the core is top-level;
+    ``packages``, the core's enclosing packages and their folders; ``module``, ``entry`` under the
+    core's full name; ``file``, where this process has that module."""
+    name, folder = _core_package()
+    cwd = os.getcwd()
+    path = [os.path.abspath(p) for p in sys.path if p and os.path.abspath(p) != cwd]
+    if "." not in name:
+        root = os.path.dirname(folder)
+        path = [root] + [p for p in path if p != root]
+    parts = name.split(".")
+    # (Blender's bl_ext is a plain module whose repositories are put in sys.modules: no __path__ of its own)
+    packages = [(".".join(parts[:k]), list(getattr(sys.modules[".".join(parts[:k])], "__path__", [])))
+                for k in range(1, len(parts))]
+    module = f"{name}.{entry}"
+    return {"path": list(dict.fromkeys(path)), "packages": packages, "module": module,
+            "file": os.path.join(folder, *entry.split(".")) + ".py"}
 
 
 def boot(entry):
-    """The command a worker interpreter runs: the parent's ``sys.path`` (``argv[1]``), then the core as
-    top-level ``core`` from the folder the parent's core is in (``argv[2]``), then ``core.<entry>.main()``."""
-    return ("import sys, json; sys.path[:0] = json.loads(sys.argv[1]); "
-            f"import core.{entry} as w; "
-            "assert w.__file__.startswith(sys.argv[2]), 'another core was imported'; w.main()")
+    """The command line of a worker that boots into ``entry`` (a module inside the core package)."""
+    return [sys.executable, "-I", "-c", BOOT, json.dumps(boot_args(entry))]
 
 
 class _Worker:
@@ -92,14 +137,45 @@ class _Worker:
         env = dict(os.environ)
         for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS"):
             env[name] = "1"
-        root = _core_root()
-        path = [root] + [p for p in sys.path if p and p != root]
-        self.process = subprocess.Popen([sys.executable, "-c", boot(entry), json.dumps(path),
-                                         os.path.join(root, "core")], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                        env=env)
+        # A neutral working folder: the core's own (a user's folder may hold a json.py or a numpy.py).
+        self.process = subprocess.Popen(boot(entry), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE, env=env, cwd=_core_package()[1])
         self.index, self.busy, self.ready, self.alive = index, [], False, True
         self.lock = threading.Lock()
+        self.stderr_tail = b""
         threading.Thread(target=self._read, args=(inbox,), name=f"mc_ao-worker-{index}", daemon=True).start()
+        self.stderr_reader = threading.Thread(target=self._stderr, name=f"mc_ao-worker-{index}-stderr", daemon=True)
+        self.stderr_reader.start()
+
+    def _stderr(self):
+        """What the worker writes to its standard error goes on to this process's, as it comes; the last
+        of it is kept for the message of a worker that ends at start-up."""
+        err = self.process.stderr
+        out = getattr(sys.stderr, "buffer", None)
+        while True:
+            chunk = err.read1(65536) if hasattr(err, "read1") else err.read(65536)
+            if not chunk:
+                return
+            self.stderr_tail = (self.stderr_tail + chunk)[-STDERR_TAIL:]
+            try:
+                if out is not None:
+                    out.write(chunk)
+                    out.flush()
+                else:
+                    sys.stderr.write(chunk.decode("utf-8", "replace"))
+            except (OSError, ValueError):
+                pass  # this process's stderr is gone: the tail is still kept
+
+    def startup_message(self):
+        """What the worker last wrote to its standard error (its own reason for ending), in a line or a few."""
+        try:
+            self.process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            pass
+        self.stderr_reader.join(timeout=5)  # its stderr read to its end
+        text = self.stderr_tail.decode("utf-8", "replace").strip()
+        lines = [line for line in text.splitlines() if line.strip()]
+        return " / ".join(lines[-6:])
 
     def _read(self, inbox):
         stdout = self.process.stdout
@@ -151,8 +227,9 @@ class Pool:
             w, msg = self.inbox.get()
             waiting.discard(w)
             if msg[0] == "died":
-                why = why or (f"worker process {w.index} ended at start-up (exit code {w.process.poll()}): "
-                              "see its message above")
+                said = w.startup_message()
+                why = why or (f"worker process {w.index} ended at start-up (exit code {w.process.poll()})"
+                              + (f": {said}" if said else ", saying nothing"))
             elif msg[0] == "hello" and msg[2] != want:
                 why = why or (msg[2] if msg[2].startswith("the self-test") else
                               f"worker process {w.index} baked the self-test differently from this process")

@@ -30,7 +30,7 @@ from ..base.machine import cpu_count
 from ..engine.settings import BakeSettings, auto_tile_shape
 from ..base.request import BakeRequest
 from ..execution.contracts import Remote
-from ..execution.executor import bake_tiles, in_process, processes_of, worker_count
+from ..execution.executor import bake_tiles, clamp_processes, in_process, processes_of, worker_count
 from ..execution.pool import pool_for
 from ..geometry.margin import dilate
 from ..geometry.mesh import Mesh
@@ -69,7 +69,21 @@ def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=N
     else:  # the processes' memory, once for the whole bake: each map's report has it
         memory = counters.pop("worker_memory", [])
         counters = {q: dict(counters[q], worker_memory=memory) for q in quantities}
-    return {q: finish(made, q, counters[q], fallback, t_start) for q in made.checked_order(counters)}
+    results = {q: finish(made, q, counters[q], fallback, t_start) for q in made.checked_order(counters)}
+    clamped = clamped_note(request, processes, per_worker, pro.triangle_counts)
+    if clamped is not None:
+        for r in results.values():
+            r.report.warn(clamped)
+    return results
+
+
+def clamped_note(request, processes, threads, triangles):
+    """The warning of a bake that asked for more worker processes than it takes, saying why; or None."""
+    asked = request.workers
+    if isinstance(asked, bool) or not isinstance(asked, int) or asked <= processes:
+        return None
+    _, why = clamp_processes(asked, threads, triangles)
+    return f"asked for {asked} worker processes, baked on {processes}: {why}"
 
 
 class Texels:
