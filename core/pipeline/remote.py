@@ -50,6 +50,9 @@ def scene_key(job):
     positions and triangles as sent (their dtypes and shapes too). The same key, the same scenes:
     the meshes are moved into the bake's frame by the same arithmetic on the same bits."""
     h = hashlib.blake2b(digest_size=20)
+    if job.get("kind") == "atlas":
+        h.update(b"atlas")
+        return h.hexdigest()
     for m in [job["target"]] + list(job["occluders"]):
         for name in ("positions", "triangles"):
             a = np.ascontiguousarray(m[name])
@@ -72,6 +75,14 @@ def build(job, cancel, progress):
     next bake; another (a Dask task's) keeps none."""
     key = job.get("scene")
     request = BakeRequest.from_dict(job["request"]).replace(threads=job["threads"])
+    if job.get("kind") == "atlas":  # several targets, each part set up when its first tile comes
+        from .atlas import build_remote
+
+        _SCENE.clear()
+        bake, s = build_remote(job, request, cancel, _mesh)
+        shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
+        bake.trace_setup(shared, cancel)
+        return bake, shared, s.threads
     highpoly = job.get("highpoly")
     # Popped: the job holds nothing of the target past its use (its UVs go once the bake has its UV triangles).
     checked = check(request, _mesh(job.pop("target")), [_mesh(o) for o in job["occluders"]],

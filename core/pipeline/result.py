@@ -132,6 +132,13 @@ class BakeResult:
 
     raw_ao, raw_stderr : with ``denoise``, the estimate and its error before the filter (``ao`` and
         ``stderr`` are then the denoised map and its error); None otherwise.
+    owner, targets, record : an atlas (a list of targets baked into one image) only, else None:
+        ``owner`` (H, W) int32, the index into ``targets`` of the target owning each covered and
+        margin texel, -1 elsewhere; ``targets`` the targets' names (the list's, then any target an
+        earlier bake held and this one kept); ``record`` the :class:`core.files.atlasrecord.AtlasRecord`
+        a rebake starts from (``keep=``). ``report['atlas']`` says which targets were baked and why,
+        which were kept, each target's reach; ``report['atlas_overlaps']`` the pairs of targets whose
+        UVs overlap, with their texel counts. See :mod:`core.pipeline.atlas`.
 
     The same type for every target. Mesh corners (:func:`core.bake_vertex_ao`): the arrays are per
     corner, (C,) (``bent`` (C, 3)), ``mask`` all true, and ``unit`` (C,) int64 names the sample point
@@ -158,6 +165,9 @@ class BakeResult:
     tiles: dict = None
     raw_ao: np.ndarray = None
     raw_stderr: np.ndarray = None
+    owner: np.ndarray = None
+    targets: tuple = None
+    record: object = None
 
     @property
     def rays_per_second(self):
