@@ -476,7 +476,8 @@ def check_image_names(images):
     for obj, name in images:
         if name in owners:
             raise ExtractError(f"{owners[name]} and {obj} would both bake into image {name!r}; "
-                               "put {object} into the image name")
+                               "put {object} into the image name, or set Images to One for All to bake them "
+                               "into one image together")
         owners[name] = obj
 
 

@@ -56,6 +56,10 @@ def plan(settings, jobs, folder=None, formats=None, check_blender=False):
             except images.ImageError as exc:
                 raise images.ImageError(f"{job.object_name}: {exc}") from None
     files = outputs.plan_files(kinds, folder, jobs, formats) if folder is not None else {}
+    if any(getattr(job, "atlas", False) for job in jobs):
+        from . import atlas
+
+        atlas.prepare(jobs, settings, files, in_blender=check_blender)
     return Plan(settings, jobs, kinds, folder, files)
 
 

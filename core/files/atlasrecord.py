@@ -135,6 +135,12 @@ class AtlasRecord:
         if problems:
             raise SettingsError(f"{what} is damaged: {'; '.join(problems)}; bake the whole atlas again")
 
+    def write_to(self, target):
+        """Write the record's bytes to ``target`` as they are (a caller that stages its files itself,
+        as the add-on's all-or-none save does)."""
+        with open(target, "wb") as f:
+            f.write(self.to_bytes())
+
     def write(self, path):
         """Write the record to ``path`` (atomically, read back before it replaces anything)."""
         data = self.to_bytes()
