@@ -134,7 +134,7 @@ def node_image(obj):
     found = []
     for slot in obj.material_slots:
         mat = slot.material
-        tree = getattr(mat, "node_tree", None) if mat is not None and getattr(mat, "use_nodes", True) else None
+        tree = getattr(mat, "node_tree", None) if mat is not None else None
         node = tree.nodes.active if tree is not None else None
         image = getattr(node, "image", None) if node is not None and node.type == "TEX_IMAGE" else None
         if image is not None and image.name not in found:
@@ -188,10 +188,10 @@ def record_of(image_name, quantity, folder=None, stem=None):
         else:
             import bpy
 
-            from .images import RECORD_PROPERTY
+            from .images import record_bytes
 
             image = bpy.data.images.get(image_name)
-            data = image.get(RECORD_PROPERTY) if image is not None else None
+            data = record_bytes(image) if image is not None else None
             record = None if data is None else rec.AtlasRecord.from_bytes(
                 bytes(data), f"the atlas record of image {image_name!r}")
     except core.SettingsError as exc:

@@ -289,10 +289,28 @@ RECORD_PROPERTY = "mc_ao_atlas"
 
 
 def keep_record(name, data):
-    """Keep an atlas's record (bytes) on the image ``name``, where its next bake finds it."""
+    """Keep an atlas's record (bytes) on the image ``name``, where its next bake finds it: as base64
+    text (Blender keeps ID property strings as C strings, and an undo step cut raw bytes at their
+    first zero byte)."""
+    import base64
+
     image = bpy.data.images.get(name)
     if image is not None:
-        image[RECORD_PROPERTY] = bytes(data)
+        image[RECORD_PROPERTY] = base64.b64encode(bytes(data)).decode("ascii")
+
+
+def record_bytes(image):
+    """The record bytes :func:`keep_record` kept on ``image``, or None."""
+    import base64
+    import binascii
+
+    text = image.get(RECORD_PROPERTY)
+    if text is None:
+        return None
+    try:
+        return base64.b64decode(text if isinstance(text, (str, bytes)) else str(text), validate=True)
+    except (binascii.Error, ValueError):
+        return b""  # not a record: the caller says so
 
 
 def pack(image):

@@ -180,6 +180,9 @@ def draw_lines(layout, context, what, estimate=("", "NONE"), note=("", "NONE")):
 
 def targets_text(settings, targets):
     """What the button bakes, in words: into which images (or colour attribute)."""
+    shared = atlas_line(settings, targets)
+    if shared is not None:
+        return shared
     if settings.vertex_colors:
         domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
         what = f"color attribute {settings.attribute_name} ({domain})"

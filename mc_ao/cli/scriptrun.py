@@ -64,6 +64,10 @@ class ScriptRun:
         result = outcome.result
         for note in outcome.notes:
             print(f"bake_ao: {name}: warning: {escape(note)}", file=sys.stderr)
+        if result is not None and getattr(job, "atlas", False):
+            from ..atlas import summary as atlas_summary
+
+            print(f"bake_ao: {name}: {escape(atlas_summary(job, result))}", file=sys.stderr)
         if result is not None and job.selected_to_active:
             print(f"bake_ao: {name}: from {', '.join(escape(h.name) for h in job.highpoly)}"
                   f"{baking.miss_summary(result)}", file=sys.stderr)

@@ -1,0 +1,200 @@
+"""Several objects into one image from Blender: Images set to One for All (Atlas), Material's Image (as
+Cycles bakes), a named image; the script's --atlas; what an existing image keeps."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from blender_helpers import ROOT, add_plane, image_ao, select_only
+
+pytestmark = pytest.mark.blender
+
+SCRIPT = str(ROOT / "scripts" / "bake_ao.py")
+
+
+def into_half(obj, right):
+    """Squeeze ``obj``'s UVs into the left or right half of the UV square."""
+    for loop in obj.data.uv_layers.active.data:
+        u, v = loop.uv
+        loop.uv = (0.5 * u + (0.5 if right else 0.0), v)
+
+
+def two_objects(bpy):
+    """A floor (UVs on the left half) under a lid facing down at 0.5 (UVs on the right half)."""
+    floor = add_plane(bpy, "Floor", size=4)
+    lid = add_plane(bpy, "Lid", size=2, location=(0, 0, 0.5), rotation=(np.pi, 0, 0))
+    into_half(floor, right=False)
+    into_half(lid, right=True)
+    return floor, lid
+
+
+def core_of(bpy, obj, others):
+    """core.bake_ao of ``obj`` alone with ``others`` as occluders, as the add-on reads them."""
+    import core
+    from mc_ao.extract import object_arrays
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+
+    def mesh(o, uvs=True):
+        a = object_arrays(o.evaluated_get(depsgraph), with_uvs=uvs, with_normals=True)
+        return core.Mesh(a.positions, a.triangles, a.uvs if uvs else None, a.normals, name=a.name)
+
+    s = bpy.context.scene.mc_ao
+    return core.bake_ao(mesh(obj), [mesh(o, False) for o in others], resolution=(s.resolution, s.resolution),
+                        samples=s.samples, margin=s.margin, threads=2, replicates=1, seed=s.seed)
+
+
+def test_one_for_all_bakes_the_selected_objects_into_one_image(bpy, scene, capfd):
+    floor, lid = two_objects(bpy)
+    scene.mc_ao.images = "ATLAS"
+    scene.mc_ao.atlas = "Kit"
+    select_only(bpy, floor, lid)
+    assert bpy.ops.object.mc_ao_bake() == {"FINISHED"}
+    image = bpy.data.images["Kit"]
+    assert "Floor_AO" not in bpy.data.images and "Lid_AO" not in bpy.data.images
+    assert tuple(image.size) == (24, 24) and image.is_float and image.colorspace_settings.name == "Non-Color"
+    ao, _ = image_ao(image)
+    alone = core_of(bpy, floor, [lid])
+    left = alone.mask
+    np.testing.assert_array_equal(ao[left], alone.ao[left])
+    lid_alone = core_of(bpy, lid, [floor])
+    np.testing.assert_array_equal(ao[lid_alone.mask], lid_alone.ao[lid_alone.mask])
+    assert ao[left].min() < 0.7 and ao[lid_alone.mask].mean() < 0.5  # each shades the other (the lid faces down)
+    assert "mc_ao_atlas" in image.keys()
+
+
+def test_the_panel_says_how_many_objects_go_into_one_image(bpy, scene):
+    from mc_ao import panel
+    from mc_ao.settings import BakeSettings
+
+    floor, lid = two_objects(bpy)
+    third = add_plane(bpy, "Third", size=1, location=(3, 0, 0))
+    scene.mc_ao.images = "ATLAS"
+    settings = BakeSettings.from_properties(scene.mc_ao)
+    assert panel.atlas_line(settings, [floor, lid, third]) == "3 objects into one image 'Atlas'"
+    scene.mc_ao.images = "OWN"
+    assert panel.atlas_line(BakeSettings.from_properties(scene.mc_ao), [floor, lid]) is None
+
+
+def srgb(x):
+    x = np.clip(np.asarray(x, np.float64), 0, 1)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+def test_an_existing_image_keeps_its_size_depth_colour_space_and_the_other_objects_texels(bpy, scene, capfd):
+    """An 8-bit sRGB image of 32 x 16 with a pattern in it: the bake goes in at its size, as the sRGB
+    encoding of the AO (as Cycles stores it), over the objects' texels only; baking one object again
+    keeps the other's texels."""
+    from blender_helpers import pattern_image, run_bake
+
+    floor, lid = two_objects(bpy)
+    pattern_image(bpy, "Atlas", 32, 16)
+    image = bpy.data.images["Atlas"]
+    image.colorspace_settings.name = "sRGB"
+    before = np.array(image.pixels[:]).reshape(16, 32, 4)
+    scene.mc_ao.images = "ATLAS"
+    select_only(bpy, floor, lid)
+    result, error, out = run_bake(bpy, capfd)
+    assert result == {"FINISHED"}, error
+    assert "image 'Atlas' kept its 32x16, 8-bit, sRGB" in out
+    image = bpy.data.images["Atlas"]
+    assert tuple(image.size) == (32, 16) and not image.is_float and image.colorspace_settings.name == "sRGB"
+    from mc_ao.images import record_bytes
+
+    record = __import__("core").AtlasRecord.from_bytes(record_bytes(image))
+    after = np.array(image.pixels[:]).reshape(16, 32, 4)
+    import core
+
+    owned = record.owner >= 0
+    # the objects' texels hold the sRGB encoding of the record's values, to the byte
+    cov = np.flatnonzero(owned.reshape(-1))
+    want = np.round(srgb(record.ao) * 255) / 255
+    np.testing.assert_allclose(after.reshape(-1, 4)[cov, 0], want, atol=0.5 / 255)
+    # texels no object reaches (not covered, beyond the margins) keep the pattern
+    changed = np.any(np.abs(after - before) > 1e-6, axis=2)
+    assert changed.sum() < changed.size
+    np.testing.assert_array_equal(after[~changed], before[~changed])
+    lid_texels = after.reshape(-1, 4)[np.flatnonzero((record.owner == record.names.index("Lid")).reshape(-1))].copy()
+
+    # The floor again, alone: the lid's texels, the size, depth and colour space stay.
+    floor.location.x += 0.1
+    select_only(bpy, floor)
+    result, error, out = run_bake(bpy, capfd)
+    assert result == {"FINISHED"}, error
+    assert "image 'Atlas' kept its 32x16, 8-bit, sRGB and the texels of Lid" in out
+    image = bpy.data.images["Atlas"]
+    assert tuple(image.size) == (32, 16) and not image.is_float and image.colorspace_settings.name == "sRGB"
+    again = np.array(image.pixels[:]).reshape(-1, 4)
+    rec2 = core.AtlasRecord.from_bytes(record_bytes(image))
+    assert rec2.names == ("Floor", "Lid")
+    np.testing.assert_array_equal(again[np.flatnonzero((rec2.owner == 1).reshape(-1))], lid_texels)
+
+
+def test_materials_image_bakes_objects_sharing_an_image_together(bpy, scene, capfd):
+    from blender_helpers import run_bake
+
+    floor, lid = two_objects(bpy)
+    shared = bpy.data.images.new("Shared", 24, 24, float_buffer=True, is_data=True)
+    mat = bpy.data.materials.new("Kit")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    node = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    node.image = shared
+    mat.node_tree.nodes.active = node
+    for obj in (floor, lid):
+        obj.data.materials.append(mat)
+    scene.mc_ao.images = "NODE"
+    select_only(bpy, floor, lid)
+    result, error, _ = run_bake(bpy, capfd)
+    assert result == {"FINISHED"}, error
+    ao, _ = image_ao(bpy.data.images["Shared"])
+    assert ao[:, :12].max() > 0 and ao[:, 12:].max() > 0
+    assert "Floor_AO" not in bpy.data.images
+    plain = add_plane(bpy, "Plain", size=1, location=(5, 0, 0))
+    select_only(bpy, floor, plain)
+    result, error, _ = run_bake(bpy, capfd)
+    assert result is None and "Plain has no material whose active node is an Image Texture with an image" in error
+
+
+def test_a_named_image_refuses_two_objects_and_says_how_to_bake_them_together(bpy, scene, capfd):
+    from blender_helpers import run_bake
+
+    floor, lid = two_objects(bpy)
+    scene.mc_ao.image_name = "Atlas"
+    select_only(bpy, floor, lid)
+    result, error, _ = run_bake(bpy, capfd)
+    assert result is None
+    assert "would both bake into image 'Atlas'" in error and "set Images to One for All" in error
+
+
+def test_script_atlas_writes_one_file_and_a_second_run_keeps_every_object(bpy, scene, tmp_path):
+    floor, lid = two_objects(bpy)
+    blend = tmp_path / "kit.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "out"
+    args = [sys.executable, SCRIPT, str(blend), "--objects", "Floor", "Lid", "--atlas", "Atlas", "--format", "exr",
+            "--resolution", "32", "--samples", "8", "--output", str(out), "--quiet",
+            "--summary-json", str(tmp_path / "s.json")]
+    first = subprocess.run(args, capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert first.returncode == 0, first.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["Atlas.atlas.npz", "Atlas.exr"]
+    import OpenImageIO as oiio
+
+    def pixels():
+        return oiio.ImageBuf(str(out / "Atlas.exr")).get_pixels(oiio.FLOAT)
+
+    before = pixels(), (out / "Atlas.atlas.npz").read_bytes()
+    import core
+
+    record = core.AtlasRecord.read(out / "Atlas.atlas.npz")
+    assert record.names == ("Floor", "Lid") and (record.width, record.height) == (32, 32)
+    second = subprocess.run(args, capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert second.returncode == 0, second.stderr
+    assert "kept Floor, Lid (unchanged)" in second.stdout + second.stderr
+    np.testing.assert_array_equal(pixels(), before[0])  # the texels, every one (the metadata says 0 rays now)
+    assert (out / "Atlas.atlas.npz").read_bytes() == before[1]
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["exit_code"] == 0
