@@ -4,7 +4,7 @@ An image is shared in one of three ways, each chosen explicitly (the Images sett
 
 - One Image for All (``ATLAS``): every object of the bake into the image the Atlas setting names
   (the script's ``--atlas NAME``, the manifest's ``atlas``);
-- Material's Image (``NODE``): each object into the image of its materials' active Image Texture node,
+- Node Image (``NODE``): each object into the image of its materials' active Image Texture node,
   as Cycles' bake finds its target; objects whose materials name the same image bake into it
   together. Never the default: it writes into whatever image the node holds;
 - an Image name without ``{object}`` (``OWN``): one object into a named image, which may already hold
@@ -119,11 +119,10 @@ class AtlasJob:
 # -- which objects share an image ---------------------------------------------------------------------
 
 def shared(settings):
-    """Whether the bake's images are shared (objects bake as atlases): One Image for All, the
-    materials' images, or an Image name without ``{object}``."""
-    if settings.vertex_colors:
-        return False
-    return settings.images != "OWN" or bool(settings.image_name) and "{object}" not in settings.image_name
+    """Whether the bake's objects bake into shared images (as atlases): One for All or the materials'
+    images. (An image named without ``{object}`` is shared where it holds other objects' texels:
+    :func:`prepare` finds out.)"""
+    return not settings.vertex_colors and settings.images != "OWN"
 
 
 def node_image(obj):
@@ -141,7 +140,7 @@ def node_image(obj):
             found.append(image.name)
     if not found:
         raise ExtractError(f"{obj.name} has no material whose active node is an Image Texture with an image: with "
-                           "Images set to Material's Image, select the Image Texture node to bake into in each of "
+                           "Images set to Node Image, select the Image Texture node to bake into in each of "
                            "its materials (as for Cycles' bake), or choose another Images setting")
     if len(found) > 1:
         raise ExtractError(f"{obj.name}'s materials' active Image Texture nodes hold {len(found)} images "
@@ -290,41 +289,70 @@ def notes(result):
     return out
 
 
-def prepare(jobs, settings, files, in_blender=False):
-    """Before a bake of shared images: each AtlasJob's size (in Blender, an existing image keeps its
-    own; files: the settings') and the records of the earlier bakes it starts from (the image's own
-    in Blender, else the one beside its first file), checked against the bake (ExtractError naming
-    the image where objects it holds would be lost)."""
+def prepare(jobs, settings, folder=None, formats=None, in_blender=False):
+    """Before a bake: the jobs, each AtlasJob with its size (in Blender, an existing image keeps its
+    own; files: the settings') and the records of the earlier bakes it starts from (the image's own in
+    Blender, else the one beside its first file in ``folder``), checked against the bake; and an
+    object's own job whose image holds other objects' texels (an Image name without ``{object}``)
+    turned into an AtlasJob of that one object, which keeps them. Raises ExtractError naming the
+    image where objects it holds would be lost."""
     import os
 
-    max_bytes = None
+    if settings.vertex_colors or settings.use_udim:
+        return jobs
     try:
         from .baking import id_name_max_bytes
 
         max_bytes = id_name_max_bytes()
     except ImportError:
-        pass
+        max_bytes = None
+    stems = {}
+    if folder is not None and not in_blender:
+        from . import filewriter
+
+        names = [n for job in jobs for q in settings.quantities
+                 for n in [_quantity_image(job, settings, q, max_bytes)]]
+        for name, entries in filewriter.output_files(folder, names, formats or [("PNG", None)]).items():
+            stems[name] = os.path.splitext(os.path.basename(os.fspath(entries[0].path)))[0]
+
+    def record(name, q):
+        if in_blender:
+            return record_of(name, q)
+        stem = stems.get(name)
+        return None if stem is None else record_of(name, q, folder, stem)
+
+    out = []
     for job in jobs:
         if not getattr(job, "atlas", False):
-            continue
+            held = record(job.image_name, job.quantity) if "{object}" not in (settings.image_name or "{object}") else None
+            if held is None or not [n for n in held.names if n != job.object_name]:
+                out.append(job)
+                continue
+            job = AtlasJob(job.image_name, job.image_name, [job.object_name], [job.target], [True], job.occluders,
+                           highpoly=[job.highpoly] if job.highpoly else None,
+                           cage=[job.cage] if job.highpoly else None, extrusion=job.extrusion,
+                           max_ray_distance=job.max_ray_distance, quantity=job.quantity, notes=job.notes)
         if in_blender:
             job.size = image_size(job.image_name, settings)
         size = tuple(job.size or settings.size)
         job.keep = {}
         for q in settings.quantities:
-            name = job.object_name if q == "ao" else settings.quantity_image_name_for(job.object_name, q, max_bytes,
-                                                                                     root=True)
-            entries = files.get(name) or []
-            folder = stem = None
-            if entries and not in_blender:
-                folder, file_name = os.path.split(os.fspath(entries[0].path))
-                stem = os.path.splitext(file_name)[0]
-            record = record_of(name, q, folder, stem) if (in_blender or stem) else None
-            if record is not None and (record.width, record.height) != size:
-                others = [n for n in record.names if n not in job.names]
+            name = _quantity_image(job, settings, q, max_bytes)
+            rec = record(name, q)
+            if rec is not None and (rec.width, rec.height) != size:
+                others = [n for n in rec.names if n not in job.names]
                 if others:
                     raise ExtractError(f"image {name!r} holds the texels of {', '.join(others)} at "
-                                       f"{record.width}x{record.height}, and this bake is {size[0]}x{size[1]}: bake "
+                                       f"{rec.width}x{rec.height}, and this bake is {size[0]}x{size[1]}: bake "
                                        "at its size, or bake those objects too")
-                record = None
-            job.keep[q] = record
+                rec = None
+            job.keep[q] = rec
+        out.append(job)
+    return out
+
+
+def _quantity_image(job, settings, quantity, max_bytes):
+    """The image of ``quantity`` of the bake that makes ``job``'s image (a shared image's root name)."""
+    if quantity == job.quantity:
+        return job.image_name
+    return settings.quantity_image_name_for(job.object_name, quantity, max_bytes, root=getattr(job, "atlas", False))

@@ -299,14 +299,16 @@ class BakeSession:
         self.unsummarised_errors = 0  # errors (a file not saved) since the last summary line
         for obj in choice.skipped:
             self._warn(baking.skip_note(obj, settings.occluders, baking.needs_uvs(settings)))
-        for job in jobs:
+        for job in plan.jobs:
             for note in job.notes:
                 self._warn(f"{job.object_name}: {note}")
         w, h = settings.size
-        # UDIM tiles and colour attributes are stored when their object's bake finishes.
-        self.live = live and w * h <= LIVE_MAX_TEXELS and not (settings.vertex_colors or settings.use_udim)
-        self.errors = 0  # jobs whose bake failed
-        self.failed_objects = set()  # their objects
+        # UDIM tiles and colour attributes are stored when their object's bake finishes; an existing
+        # image shared by several objects when its bake finishes too (its other texels stay as they are).
+        self.live = (live and w * h <= LIVE_MAX_TEXELS and not (settings.vertex_colors or settings.use_udim)
+                     and not any(getattr(job, "atlas", False) and job.image_name in bpy.data.images
+                                 for job in plan.jobs))
+        self.errors = 0  # objects whose bake failed
         self.file_errors = 0  # objects baked whose files were not saved
         self.finished = []
         self.results = []  # of the finished jobs, for the summary of a bake of several objects
@@ -328,7 +330,7 @@ class BakeSession:
     def _buffer(self, i):
         """The live pixel buffer of job i (None when its image cannot take the bake)."""
         if i not in self.buffers:
-            w, h = self.settings.size
+            w, h = getattr(self.run.jobs[i], "size", None) or self.settings.size
             self.store.current, self.store.object_name = i, self.run.jobs[i].object_name
             try:
                 image = self.store.image(self.run.jobs[i].image_name, w, h, self.settings.float_buffer, i=i)
@@ -343,8 +345,8 @@ class BakeSession:
         now = time.monotonic()
         if not self.pending or now - self.last_flush < self.live_interval:
             return
-        w, h = self.settings.size
         for i in self.pending:
+            w, h = getattr(self.run.jobs[i], "size", None) or self.settings.size
             image = self.store.image(self.run.jobs[i].image_name, w, h, self.settings.float_buffer, i=i)
             buffer = self.buffers.get(i)
             if buffer is not None and tuple(image.size) == (buffer.shape[1], buffer.shape[0]):

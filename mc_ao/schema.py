@@ -212,7 +212,7 @@ SETTINGS = (
                 ("ATLAS", "One for All",
                  "Every object into one image, the Atlas name: a texture atlas, each object over its own part of "
                  "the UV square, occluding the others"),
-                ("NODE", "Material's Image",
+                ("NODE", "Node Image",
                  "Into the image of each object's materials' active Image Texture node, as Cycles' bake finds it; "
                  "objects sharing an image bake into it together. It writes into whatever image that node "
                  "shows, so it is never the default")), targets=("image",)),

@@ -47,6 +47,11 @@ def plan(settings, jobs, folder=None, formats=None, check_blender=False):
     an existing image cannot take the bake, core.McAoError (FileWriteError, SettingsError) when a
     planned file cannot be written. Nothing is baked or changed."""
     kinds = outputs.kinds_for(settings)
+    from . import atlas
+
+    # Shared images: their sizes and the records of their earlier bakes (an object's own image that
+    # holds other objects' texels becomes a shared one that keeps them).
+    jobs = atlas.prepare(jobs, settings, folder, formats, in_blender=check_blender)
     if check_blender:
         from . import images
 
@@ -56,10 +61,6 @@ def plan(settings, jobs, folder=None, formats=None, check_blender=False):
             except images.ImageError as exc:
                 raise images.ImageError(f"{job.object_name}: {exc}") from None
     files = outputs.plan_files(kinds, folder, jobs, formats) if folder is not None else {}
-    if any(getattr(job, "atlas", False) for job in jobs):
-        from . import atlas
-
-        atlas.prepare(jobs, settings, files, in_blender=check_blender)
     return Plan(settings, jobs, kinds, folder, files)
 
 

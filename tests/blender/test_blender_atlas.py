@@ -1,4 +1,4 @@
-"""Several objects into one image from Blender: Images set to One for All (Atlas), Material's Image (as
+"""Several objects into one image from Blender: Images set to One for All (Atlas), Node Image (as
 Cycles bakes), a named image; the script's --atlas; what an existing image keeps."""
 
 import json
