@@ -33,7 +33,7 @@ class AtlasJob:
     object_name : what messages call the bake (the image's name: "Atlas"); image_name : the image the
     quantity goes into; names, targets : the objects and their geometry; occluding : whether each
     occludes the others (mc_ao.occluders: the Occluders choice, Include, Exclude, Occludes Other
-    Objects); occluders : the other objects that occlude; highpoly, cage : per object (Selected to
+    Objects); occluders : the other objects that occlude; sources, cages : per object (Selected to
     Active), or None; size : (width, height) of the bake (an existing shared image keeps its size);
     keep : {quantity: core AtlasRecord} of an earlier bake of the image.
     """
@@ -44,8 +44,8 @@ class AtlasJob:
     targets: list
     occluding: list
     occluders: list = field(default_factory=list)
-    highpoly: list = None
-    cage: list = None
+    sources: list = None  # Selected to Active: each object's high-poly meshes
+    cages: list = None  # and its cage (or None)
     extrusion: float = 0.0
     max_ray_distance: float = 0.0
     quantity: str = "ao"
@@ -57,7 +57,17 @@ class AtlasJob:
 
     @property
     def selected_to_active(self):
-        return bool(self.highpoly)
+        return bool(self.sources)
+
+    @property
+    def highpoly(self):
+        """Every object's high-poly meshes together (what a summary and the files' metadata list)."""
+        return [h for hs in self.sources or () for h in hs]
+
+    @property
+    def cage(self):
+        """The first cage (the files' metadata names one), or None."""
+        return next((c for c in self.cages or () if c is not None), None)
 
     @property
     def target(self):  # what a Job's outputs read of its target (a colour attribute's, not an atlas's)
@@ -103,11 +113,11 @@ class AtlasJob:
             kw["quantities"] = tuple(quantities)
         if kw.get("bent_normals"):
             kw["bent_space"] = [(t.extra or {}).get("bent_space") for t in self.targets]
-        if self.highpoly:
-            extrusion = "auto" if not any(self.cage or ()) and self.extrusion == 0 else self.extrusion
-            kw.update(highpoly=[[mesh(h) for h in hs] if hs else None for hs in self.highpoly], extrusion=extrusion,
+        if self.sources:
+            extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
+            kw.update(highpoly=[[mesh(h) for h in hs] if hs else None for hs in self.sources], extrusion=extrusion,
                       max_ray_distance=self.max_ray_distance,
-                      cage=None if not self.cage else [None if c is None else mesh(c) for c in self.cage])
+                      cage=None if self.cage is None else [None if c is None else mesh(c) for c in self.cages])
         keep = {q: r for q, r in (self.keep or {}).items() if q in quantities and r is not None}
         atlas = core.Atlas([mesh(t) for t in self.targets], occluding=list(self.occluding),
                            keep=(keep if maps else keep.get(main)) or None)
@@ -224,12 +234,11 @@ def plan(depsgraph, targets, settings, *, selected=(), view_layer=None):
         names = [o.name for o in objects]
         occluding = [n in keys for n in names]
         occluders = [a for key, a in pool if key not in names]
-        size = image_size(image, settings)
         for quantity in settings.quantities:
             name = image if quantity == "ao" else settings.quantity_image_name_for(image, quantity, max_bytes,
                                                                                    root=True)
             job = AtlasJob(image, name, names, arrays, occluding if quantity == "ao" else [False] * len(names),
-                           occluders if quantity == "ao" else [], quantity=quantity, size=size)
+                           occluders if quantity == "ao" else [], quantity=quantity)
             jobs.append(job)
     if jobs:
         jobs[0].notes.extend(notes)
@@ -262,7 +271,7 @@ def from_selected_to_active(jobs, settings, lows):
                     seen.add(o.name)
                     occluders.append(o)
         job = AtlasJob(image, image, names, [j.target for j in members], [True] * len(members), occluders,
-                       highpoly=[j.highpoly for j in members], cage=[j.cage for j in members],
+                       sources=[j.highpoly for j in members], cages=[j.cage for j in members],
                        extrusion=members[0].extrusion, max_ray_distance=members[0].max_ray_distance,
                        quantity=members[0].quantity)
         job.notes = [n for j in members for n in j.notes]
@@ -329,8 +338,8 @@ def prepare(jobs, settings, folder=None, formats=None, in_blender=False):
                 out.append(job)
                 continue
             job = AtlasJob(job.image_name, job.image_name, [job.object_name], [job.target], [True], job.occluders,
-                           highpoly=[job.highpoly] if job.highpoly else None,
-                           cage=[job.cage] if job.highpoly else None, extrusion=job.extrusion,
+                           sources=[job.highpoly] if job.highpoly else None,
+                           cages=[job.cage] if job.highpoly else None, extrusion=job.extrusion,
                            max_ray_distance=job.max_ray_distance, quantity=job.quantity, notes=job.notes)
         if in_blender:
             job.size = image_size(job.image_name, settings)

@@ -198,3 +198,61 @@ def test_script_atlas_writes_one_file_and_a_second_run_keeps_every_object(bpy, s
     assert (out / "Atlas.atlas.npz").read_bytes() == before[1]
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["exit_code"] == 0
+
+
+def test_channel_packing_into_an_atlas(bpy, scene, capfd):
+    """Channel R into an occlusion-roughness-metallic image: the atlas's AO in red, green and blue as
+    they were."""
+    from blender_helpers import run_bake
+
+    floor, lid = two_objects(bpy)
+    orm = bpy.data.images.new("ORM", 24, 24, float_buffer=True, is_data=True)
+    orm.generated_color = (1.0, 0.6, 0.0, 1.0)
+    scene.mc_ao.images = "ATLAS"
+    scene.mc_ao.channel = "R"
+    scene.mc_ao.into = orm
+    select_only(bpy, floor, lid)
+    result, error, _ = run_bake(bpy, capfd)
+    assert result == {"FINISHED"}, error
+    px = np.array(bpy.data.images["ORM"].pixels[:]).reshape(24, 24, 4)
+    ao, _ = image_ao(bpy.data.images["Atlas"])
+    np.testing.assert_allclose(px[..., 0], ao, atol=1e-7)
+    np.testing.assert_allclose(px[..., 1], 0.6, atol=1e-6)
+    np.testing.assert_allclose(px[..., 2], 0.0, atol=1e-6)
+    assert ao[:, :12].max() > 0 and ao[:, 12:].max() > 0
+
+
+def two_pairs(bpy):
+    """Two low-poly planes (UVs in the two halves), each under a high-poly plane with a bump."""
+    lows = []
+    for k, x in enumerate((-3.0, 3.0)):
+        low = add_plane(bpy, f"P{k}_low", size=2, location=(x, 0, 0))
+        into_half(low, right=bool(k))
+        high = add_plane(bpy, f"P{k}_high", size=2, location=(x, 0, 0.01))
+        sub = high.modifiers.new("Subdivide", "SUBSURF")
+        sub.subdivision_type, sub.levels = "SIMPLE", 3
+        lows.append(low)
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(-3.0, 0, 0.3))
+    bpy.context.active_object.name = "Bump"
+    return lows
+
+
+def test_selected_to_active_pairs_into_one_image_from_the_script(bpy, scene, tmp_path):
+    two_pairs(bpy)
+    blend = tmp_path / "pairs.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, SCRIPT, str(blend), "--match-suffix", "_high", "_low", "--atlas", "Pairs",
+                           "--extrusion", "0.1", "--resolution", "32", "--samples", "8", "--output", str(out),
+                           "--quiet"], capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["Pairs.atlas.npz", "Pairs.png"]
+    import core
+
+    record = core.AtlasRecord.read(out / "Pairs.atlas.npz")
+    assert record.names == ("P0_low", "P1_low")
+    owner = record.owner
+    assert np.all(owner[:, :16][owner[:, :16] >= 0] == 0) and np.all(owner[:, 16:][owner[:, 16:] >= 0] == 1)
+    ao = record.ao
+    left = record.owner.reshape(-1)[record.covered] == 0
+    assert ao[left].min() < 0.5 and ao[left].mean() < ao[~left].mean()  # the bump shades P0's high-poly
