@@ -220,6 +220,10 @@ SETTINGS = (
             "The image every object bakes into with Images set to One for All (its files: <name>.png, ...). An "
             "existing image keeps its size, depth and colour space, and the texels of objects not baked now",
             targets=("image",), sets=("images", "ATLAS")),
+    Setting("id_map", "bool", False, "ID Map",
+            'With several objects in one image, also the image "<image>_ID": each object\'s texels (and its '
+            "margin) in a colour of its own, black elsewhere, a mask per object for texturing",
+            targets=("image",)),
     Setting("channel", "enum", "NONE", "Channel",
             "Write the AO into one channel of an existing image (Into) and leave its other channels as they "
             "are, e.g. red of a glTF occlusion-roughness-metallic texture", items=(

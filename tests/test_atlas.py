@@ -298,3 +298,16 @@ def test_ownership_of_coverages_directly():
     assert own.overlaps == [(1, 0, 1)] and own.shared == 3
     assert A.within_reach((np.zeros(3), np.ones(3)), (np.array([1.5, 0, 0]), np.array([2, 1, 1])), 0.5)
     assert not A.within_reach((np.zeros(3), np.ones(3)), (np.array([1.6, 0, 0]), np.array([2, 1, 1])), 0.5)
+
+
+def test_the_id_map_colours_each_target_by_its_name():
+    owner = np.array([[0, 1, -1], [1, 0, 2]], np.int32)
+    m = A.id_map(owner, ("Body", "Eyes", "Hair"))
+    assert m.shape == (2, 3, 3) and m.dtype == np.float32
+    np.testing.assert_array_equal(m[0, 2], 0.0)
+    for (r, c), name in (((0, 0), "Body"), ((0, 1), "Eyes"), ((1, 2), "Hair")):
+        np.testing.assert_array_equal(m[r, c], A.id_colour(name))
+    # an object keeps its colour whatever else the atlas holds
+    np.testing.assert_array_equal(A.id_map(np.array([[0]], np.int32), ("Eyes",))[0, 0], A.id_colour("Eyes"))
+    colours = np.array([A.id_colour(f"Part{k}") for k in range(20)])
+    assert len({tuple(np.round(c, 3)) for c in colours}) == 20 and colours.max(axis=1).min() >= 0.75

@@ -139,4 +139,26 @@ def within_reach(a, b, distance):
     return box_gap(a, b) <= distance * (1.0 + REACH_SLACK)
 
 
-__all__ = ["name_rank", "coverage", "Ownership", "owners", "bounds", "box_gap", "within_reach", "LAYOUT_TILE"]
+def id_colour(name):
+    """The colour (3,) float32 of a target named ``name`` in an ID map: a saturated, bright hue drawn
+    from a hash of the name, so that an object keeps its colour whatever else the atlas holds."""
+    import hashlib
+
+    h = int.from_bytes(hashlib.blake2b(str(name).encode("utf-8"), digest_size=8).digest(), "little")
+    hue = (h % 3600) / 3600.0
+    sat = 0.65 + 0.35 * ((h >> 12) % 100) / 100.0
+    val = 0.75 + 0.25 * ((h >> 24) % 100) / 100.0
+    k = (np.array([5.0, 3.0, 1.0]) + hue * 6.0) % 6.0
+    return (val - val * sat * np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)).astype(np.float32)
+
+
+def id_map(owner, names):
+    """An ID map of an atlas: (H, W, 3) float32, each target's texels (``owner``, covered and margin)
+    in its :func:`id_colour`, black where no target is."""
+    colours = np.zeros((len(names) + 1, 3), np.float32)
+    for i, name in enumerate(names):
+        colours[i] = id_colour(name)
+    return colours[np.where(owner >= 0, owner, len(names))]
+
+
+__all__ = ["id_colour", "id_map", "name_rank", "coverage", "Ownership", "owners", "bounds", "box_gap", "within_reach", "LAYOUT_TILE"]

@@ -256,3 +256,27 @@ def test_selected_to_active_pairs_into_one_image_from_the_script(bpy, scene, tmp
     ao = record.ao
     left = record.owner.reshape(-1)[record.covered] == 0
     assert ao[left].min() < 0.5 and ao[left].mean() < ao[~left].mean()  # the bump shades P0's high-poly
+
+
+def test_an_id_map_gives_each_object_its_own_colour(bpy, scene, capfd, tmp_path):
+    from blender_helpers import run_bake
+
+    from core.geometry.atlas import id_colour
+
+    floor, lid = two_objects(bpy)
+    scene.mc_ao.images = "ATLAS"
+    scene.mc_ao.id_map = True
+    scene.mc_ao.save_to_file = True
+    scene.mc_ao.output_dir = str(tmp_path)
+    select_only(bpy, floor, lid)
+    result, error, _ = run_bake(bpy, capfd)
+    assert result == {"FINISHED"}, error
+    image = bpy.data.images["Atlas_ID"]
+    px = np.array(image.pixels[:]).reshape(24, 24, 4)[..., :3]
+    for name, cols in (("Floor", slice(2, 10)), ("Lid", slice(14, 22))):
+        np.testing.assert_allclose(px[8:16, cols], np.broadcast_to(id_colour(name), (8, 8, 3)), atol=0.5 / 255)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Atlas.atlas.npz", "Atlas.png", "Atlas_ID.png"]
+    scene.mc_ao.images = "OWN"
+    select_only(bpy, floor)
+    result, error, _ = run_bake(bpy, capfd)
+    assert result is None and "ID Map" in error or "id_map" in (error or "")
