@@ -308,7 +308,8 @@ class BakeSession:
         self.live = (live and w * h <= LIVE_MAX_TEXELS and not (settings.vertex_colors or settings.use_udim)
                      and not any(getattr(job, "atlas", False) and job.image_name in bpy.data.images
                                  for job in plan.jobs))
-        self.errors = 0  # objects whose bake failed
+        self.errors = 0  # jobs whose bake failed
+        self.failed_objects = set()  # their objects
         self.file_errors = 0  # objects baked whose files were not saved
         self.finished = []
         self.results = []  # of the finished jobs, for the summary of a bake of several objects

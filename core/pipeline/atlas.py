@@ -26,11 +26,11 @@ from types import SimpleNamespace
 import numpy as np
 
 from .._version import __version__
-from ..base.errors import MeshError, SettingsError
+from ..base.errors import BakeCancelled, BakeMemoryError, MeshError, SettingsError
 from ..base.machine import available_memory, cpu_count
-from ..base.errors import BakeMemoryError
 from ..engine.scheduler import is_cancelled
-from ..engine.settings import BakeSettings, auto_tile_shape, estimate_memory
+from ..engine.settings import BakeSettings, auto_tile_shape
+from ..execution.cost import bake_bytes
 from ..execution.executor import bake_tiles, in_process, processes_of, worker_count
 from ..files.atlasrecord import AtlasRecord
 from ..geometry import atlas as A
@@ -40,10 +40,9 @@ from ..post import bent as bent_mod
 from ..post import denoise as denoise_mod
 from ..targets.atlas import AtlasBake, digest, fingerprint, occluder_digest, settings_digest
 from ..targets.texels import texel_bake
-from . import remote
 from .prologue import Prologue, check, frame_of
 from .remote import mesh_data
-from .result import BakeResult, empty_reason
+from .result import BakeReport, BakeResult, empty_reason
 
 #: Why a target is baked again, by what changed in its fingerprint.
 _WHY = {"own": "its mesh, UVs or transform changed", "settings": "the settings changed"}
@@ -218,9 +217,10 @@ class AtlasImages:
 
 
 def run_atlas(request, atlas, occluders=(), *, highpoly=None, cage=None, bent_space=None, progress=None, cancel=None,
-              on_tile=None, on_rays=None):
+              on_tile=None, on_rays=None, remote=None):
     """Bake ``atlas`` (a :class:`core.targets.atlas.Atlas`) for ``request`` (kind 'image'): {quantity:
-    BakeResult}, each with ``owner``, ``targets`` and ``record``. See :func:`core.bake_ao`."""
+    BakeResult}, each with ``owner``, ``targets`` and ``record``. See :func:`core.bake_ao`. ``remote``:
+    what runs tiles in other processes (:data:`core.pipeline.run.REMOTE`)."""
     targets, occluding, keep = atlas.targets, atlas.occluding, atlas.keep
     if request.kind != "image":
         raise SettingsError(f"several targets bake into one image: a bake of kind {request.kind!r} takes one target")
@@ -294,7 +294,6 @@ def run_atlas(request, atlas, occluders=(), *, highpoly=None, cage=None, bent_sp
     unlimited = not np.isfinite(request.max_distance) and "ao" in quantities and n > 1
     memory_check(parts, todo, s)
     if is_cancelled(cancel):
-        from ..base.errors import BakeCancelled
         raise BakeCancelled("the bake was cancelled before it started")
 
     images = {q: AtlasImages(w, h, request.bent_normals and q == "ao", any(p.checked.s2a for p in parts), owner,
@@ -345,10 +344,12 @@ def memory_check(parts, todo, s):
     """Refuse an atlas whose largest part would not fit in the memory available (BakeMemoryError)."""
     if not todo:
         return
-    tri = max(parts[i].checked.target.triangle_count + sum(o.triangle_count for o in parts[i].occluders)
-              + (parts[i].checked.s2a.triangle_count if parts[i].checked.s2a else 0) for i in todo)
-    need = estimate_memory(s.width, s.height, tri, s.threads, s.chunk_rays, s.samples, s.source, s.replicates,
-                           s.tile_shape[0] * s.tile_shape[1])
+    counts = [(parts[i].checked.target.triangle_count, sum(o.triangle_count for o in parts[i].occluders),
+               parts[i].checked.s2a.triangle_count if parts[i].checked.s2a else 0) for i in todo]
+    largest = max(counts, key=sum)
+    tri = sum(largest)
+    need = bake_bytes(s.width, s.height, largest, s.threads, s.chunk_rays, s.samples, s.source, s.replicates,
+                      s.tile_shape[0] * s.tile_shape[1])
     avail = available_memory()
     if avail is not None and need > avail:
         raise BakeMemoryError(f"a {s.width} x {s.height} atlas whose largest part holds {tri} triangles needs about "
@@ -379,26 +380,6 @@ def atlas_job(parts, todo, root, request, guide):
                         tile=list(root[i].s.tile_shape))
     return dict(kind="atlas", request=parts[todo[0]].request.to_dict(), meshes=meshes, parts=plain,
                 planned=sum(parts[i].layout.planned for i in todo), guide=guide)
-
-
-def build_remote(job, request, cancel, mesh):
-    """The atlas of ``job`` in a worker process (:func:`core.pipeline.remote.build`): an AtlasBake
-    whose parts are built from the job's meshes when their first tile comes."""
-    meshes = [mesh(d) for d in job["meshes"]]
-    quantities = request.all_quantities
-    s = BakeSettings.of(request)
-
-    def build(i):
-        p = job["parts"][i] if i in job["parts"] else job["parts"][str(i)]
-        req = request.replace(tile_size=tuple(p["tile"]))
-        checked = check(req, meshes[p["target"]], [meshes[k] for k in p["occluders"]],
-                        highpoly=None if p["highpoly"] is None else [meshes[k] for k in p["highpoly"]],
-                        cage=None if p["cage"] is None else meshes[p["cage"]])
-        pro = Prologue(checked, req, cancel)
-        bake = texel_bake(pro, BakeSettings.of(req), quantities, request.bent_normals, guide=job.get("guide", False))
-        return bake
-
-    return AtlasBake(build, s, job["planned"], keep_live=s.threads + 1), s
 
 
 def finish(q, img, parts, todo, record, all_names, held_names, rank, owner, own, s, request, ground, why, unlimited,
@@ -472,30 +453,31 @@ def finish(q, img, parts, todo, record, all_names, held_names, rank, owner, own,
     if ground is not None:
         metadata["ground_height"] = ground
     baked = [parts[i].name for i in todo]
-    report = {"covered_texels": int(img.mask.sum()), "overlapping_texels": img.overlap,
-              "degenerate_uv_triangles": sum(parts[i].layout.uvtris.degenerate for i in range(n)),
-              "degenerate_triangles": sum(parts[i].layout.uvtris.degenerate_space for i in range(n)),
-              "uv_outside_triangles": sum(parts[i].layout.uvtris.outside for i in range(n)),
-              "worker_memory": counters.get("worker_memory", []),
-              "atlas": {"targets": list(all_names), "baked": baked,
+    report = BakeReport(covered_texels=int(img.mask.sum()), overlapping_texels=img.overlap,
+                        degenerate_uv_triangles=sum(parts[i].layout.uvtris.degenerate for i in range(n)),
+                        degenerate_triangles=sum(parts[i].layout.uvtris.degenerate_space for i in range(n)),
+                        uv_outside_triangles=sum(parts[i].layout.uvtris.outside for i in range(n)),
+                        worker_memory=counters.get("worker_memory", []),
+                        atlas={"targets": list(all_names), "baked": baked,
                         "kept": [p.name for p in parts if p.index not in todo] + list(held_names),
                         "why": {name: why[name] for name in baked},
                         "reach": {p.name: p.reach for p in parts},
                         "owned": {name: int(np.count_nonzero(owner == k)) for k, name in enumerate(all_names)},
-                        "shared_texels": own.shared, "unlimited_reach": bool(unlimited)}}
-    report["atlas_overlaps"] = [{"a": all_names[i], "b": all_names[j], "texels": c} for i, j, c in own.overlaps]
+                        "shared_texels": own.shared, "unlimited_reach": bool(unlimited)},
+                        atlas_overlaps=[{"a": all_names[i], "b": all_names[j], "texels": c}
+                                        for i, j, c in own.overlaps])
     warnings = []
     for k, name in enumerate(all_names[:n]):
         if not own.covered[k]:
             warnings.append(f"{name!r} covers no texel of the {w} x {h} atlas ("
                             f"{empty_reason(parts[k].layout.uvtris.degenerate_space, parts[k].layout.uvtris.degenerate, parts[k].layout.uvtris.outside)})")
     if unlimited:
-        report["atlas"]["note"] = ("with an unlimited distance every target can occlude every other: a change to one "
-                                   "bakes them all again")
+        report.atlas["note"] = ("with an unlimited distance every target can occlude every other: a change to one "
+                                "bakes them all again")
     if fallback is not None:
         warnings.append(f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
     if warnings:
-        report["warnings"] = warnings
+        report.warn(*warnings)
     if not img.mask.any() and not request.empty_ok:
         raise MeshError(f"the atlas of {', '.join(map(repr, all_names))} covered no texel of the {w} x {h} image: "
                         "nothing was written")
@@ -549,4 +531,4 @@ def _denoise_part(img, i, part, ls, request, guide_tiles):
     img.se[mine] = dse.reshape(-1)[mine]
 
 
-__all__ = ["run_atlas", "plan", "build_remote", "atlas_job"]
+__all__ = ["run_atlas", "plan", "atlas_job"]

@@ -25,6 +25,7 @@ from ..engine.settings import BakeSettings
 from ..execution.worker import CountingScheduler
 from ..geometry.mesh import Mesh
 from ..targets.corners import vertex_bake
+from ..targets.atlas import AtlasBake
 from ..targets.texels import texel_bake
 from .prologue import Prologue, check
 
@@ -76,8 +77,6 @@ def build(job, cancel, progress):
     key = job.get("scene")
     request = BakeRequest.from_dict(job["request"]).replace(threads=job["threads"])
     if job.get("kind") == "atlas":  # several targets, each part set up when its first tile comes
-        from .atlas import build_remote
-
         _SCENE.clear()
         bake, s = build_remote(job, request, cancel, _mesh)
         shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
@@ -137,6 +136,26 @@ def dask_tile(token, job, key):
         totals = dict(rays=shared.rays, trace_seconds=shared.trace_seconds,
                       trace_cpu_seconds=shared.trace_cpu_seconds, counters=bake.start.counters())
     return vars(outs[0]), (os.getpid(), id(entry)), totals
+
+
+def build_remote(job, request, cancel, mesh):
+    """The atlas of ``job`` in a worker process (:func:`core.pipeline.remote.build`): an AtlasBake
+    whose parts are built from the job's meshes when their first tile comes."""
+    meshes = [mesh(d) for d in job["meshes"]]
+    quantities = request.all_quantities
+    s = BakeSettings.of(request)
+
+    def build(i):
+        p = job["parts"][i] if i in job["parts"] else job["parts"][str(i)]
+        req = request.replace(tile_size=tuple(p["tile"]))
+        checked = check(req, meshes[p["target"]], [meshes[k] for k in p["occluders"]],
+                        highpoly=None if p["highpoly"] is None else [meshes[k] for k in p["highpoly"]],
+                        cage=None if p["cage"] is None else meshes[p["cage"]])
+        pro = Prologue(checked, req, cancel)
+        bake = texel_bake(pro, BakeSettings.of(req), quantities, request.bent_normals, guide=job.get("guide", False))
+        return bake
+
+    return AtlasBake(build, s, job["planned"], keep_live=s.threads + 1), s
 
 
 __all__ = ["mesh_data", "scene_key", "forget", "build", "dask_tile"]

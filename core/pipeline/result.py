@@ -23,6 +23,10 @@ class BakeReport:
     points the automatic extrusion serves), ``matching_rays``, ``matching_rays_behind`` (met the
     high-poly from behind), ``missed_matching_rays``, ``missed_texels``, ``partly_missed_texels``,
     ``directions_per_point``, ``matching_seconds`` and ``matching_cpu_seconds`` (the matching's time).
+    Atlases (several targets into one image, :mod:`core.pipeline.atlas`): ``atlas`` (a dict: ``targets``,
+    ``baked`` and why (``why``), ``kept``, each target's ``reach`` and ``owned`` texels, ``shared_texels``,
+    ``unlimited_reach`` and its ``note``) and ``atlas_overlaps`` ([{``a``, ``b``, ``texels``}] per pair
+    of targets whose UVs overlap).
     Every bake: ``worker_memory`` (one entry per process that held the bake,
     :func:`core.execution.memory.memory_entry`: ``process`` 'parent' or 'worker N', ``rss``, ``peak``,
     ``held`` bytes, a worker's ``start``, ``ready``, ``tiles``, ``scene_reused`` and ``request``, the
@@ -54,6 +58,8 @@ class BakeReport:
     directions_per_point: int = None
     matching_seconds: float = None
     matching_cpu_seconds: float = None
+    atlas: dict = None
+    atlas_overlaps: list = None
     worker_memory: list = None
     warnings: list = None
 

@@ -57,7 +57,7 @@ def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=N
         from .atlas import run_atlas
 
         return run_atlas(request, Atlas.of(target), occluders, highpoly=highpoly, cage=cage, bent_space=bent_space,
-                         progress=progress, cancel=cancel, on_tile=on_tile, on_rays=on_rays)
+                         progress=progress, cancel=cancel, on_tile=on_tile, on_rays=on_rays, remote=REMOTE)
     if request.kind == "udim":
         return _udim(request, target, occluders, highpoly, cage, bent_space, progress, cancel, on_tile, on_rays)
     t_start = time.perf_counter()
