@@ -311,3 +311,14 @@ def test_the_id_map_colours_each_target_by_its_name():
     np.testing.assert_array_equal(A.id_map(np.array([[0]], np.int32), ("Eyes",))[0, 0], A.id_colour("Eyes"))
     colours = np.array([A.id_colour(f"Part{k}") for k in range(20)])
     assert len({tuple(np.round(c, 3)) for c in colours}) == 20 and colours.max(axis=1).min() >= 0.75
+
+
+def test_a_kept_target_within_reach_of_a_changed_one_is_said_to_be_stale():
+    kw = dict(resolution=(160, 64), samples=4, seed=2, margin=2, threads=2, max_distance=0.7)
+    first = bake_ao(ten_boxes(), [], **kw)
+    moved = ten_boxes(moved=5)
+    r = bake_ao(Atlas([moved[5]], keep=first.record), [], **kw)  # Box5 alone: the others are held
+    warnings = r.report.get("warnings", [])
+    assert any(w.startswith("Box4 was not baked now, and Box5 within its reach changed") for w in warnings)
+    assert any(w.startswith("Box6 was not baked now") for w in warnings)
+    assert not any(w.startswith(("Box3 ", "Box7 ")) for w in warnings)

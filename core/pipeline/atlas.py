@@ -147,7 +147,9 @@ def plan(request, targets, occluders, highpoly, cage, bent_space, occluding, kee
         occ = {}
         for name, m in near:
             occ[name] = digest(occ.get(name), occluder_digest(m)) if name in occ else occluder_digest(m)
-        part.parts = {q: dict(own=own, settings=settings_digest(req, q, ground), occluders=occ if q == "ao" else {})
+        box = [[float(x) for x in boxes[i][0]], [float(x) for x in boxes[i][1]]]
+        part.parts = {q: dict(own=own, settings=settings_digest(req, q, ground), occluders=occ if q == "ao" else {},
+                              bounds=box)
                       for q in quantities}
         part.fingerprints = {q: fingerprint(p["own"], p["settings"], p["occluders"]) for q, p in part.parts.items()}
         parts.append(part)
@@ -292,6 +294,7 @@ def run_atlas(request, atlas, occluders=(), *, highpoly=None, cage=None, bent_sp
             why[p.name] = reasons[0]
             todo.append(p.index)
     unlimited = not np.isfinite(request.max_distance) and "ao" in quantities and n > 1
+    stale = _stale_held(parts, todo, records, held_names, request.max_distance) if "ao" in quantities else []
     memory_check(parts, todo, s)
     if is_cancelled(cancel):
         raise BakeCancelled("the bake was cancelled before it started")
@@ -337,7 +340,36 @@ def run_atlas(request, atlas, occluders=(), *, highpoly=None, cage=None, bent_sp
         results[q] = finish(q, images[q], parts, todo, records[q], all_names, held_names, rank, owner, own, s,
                             request, ground, why, unlimited, counters, rays, trace_s, trace_cpu, fallback, t_start,
                             lambda i: images[base].tiles.get(i, []))
+        if stale and q == "ao":
+            results[q].report.warn(*stale)
     return results
+
+
+def _stale_held(parts, todo, records, held_names, distance):
+    """Warnings for the targets an earlier bake holds and this one does not bake, within reach of a
+    target baked now (where it is, or where it was): their texels are kept as they were, and no longer
+    what a bake of them would give."""
+    record = records.get("ao")
+    if record is None or not held_names:
+        return []
+    was = record.extra.get("parts") or [{}] * len(record.names)
+    out = []
+    for name in held_names:
+        j = record.index(name)
+        held = (was[j] or {}).get("bounds") if j is not None else None
+        if held is None:
+            continue
+        near = []
+        for i in todo:
+            k = record.index(parts[i].name)
+            boxes = [parts[i].parts["ao"]["bounds"]] + ([was[k]["bounds"]] if k is not None and (was[k] or {}).get("bounds")
+                                                        else [])
+            if any(A.within_reach(np.asarray(held), np.asarray(b), distance) for b in boxes):
+                near.append(parts[i].name)
+        if near:
+            out.append(f"{name} was not baked now, and {', '.join(near)} within its reach changed: its texels are "
+                       f"those of its earlier bake; bake {name} too for them to follow")
+    return out
 
 
 def memory_check(parts, todo, s):

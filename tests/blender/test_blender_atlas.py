@@ -280,3 +280,37 @@ def test_an_id_map_gives_each_object_its_own_colour(bpy, scene, capfd, tmp_path)
     select_only(bpy, floor)
     result, error, _ = run_bake(bpy, capfd)
     assert result is None and "ID Map" in error or "id_map" in (error or "")
+
+
+def test_script_rebakes_only_the_objects_within_reach_of_a_moved_one(bpy, scene, tmp_path):
+    """Three planes in a row, the AO distance reaching the next one only; the last one moved: the
+    second run bakes it and its neighbour, keeps the first, and its file holds what a full bake of the
+    moved scene holds, texel for texel."""
+    import OpenImageIO as oiio
+
+    planes = []
+    for k in range(3):
+        obj = add_plane(bpy, f"Tile{k}", size=1, location=(1.5 * k, 0, 0), rotation=(0, 0.3, 0))
+        for loop in obj.data.uv_layers.active.data:
+            u, v = loop.uv
+            loop.uv = ((u + k) / 3, v)
+        planes.append(obj)
+    blend = tmp_path / "row.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    planes[2].location.x += 0.2
+    moved = tmp_path / "moved.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(moved))
+
+    def run(path, out):
+        proc = subprocess.run([sys.executable, SCRIPT, str(path), "--objects", "Tile0", "Tile1", "Tile2", "--atlas", "Row",
+                               "--format", "exr", "--bits", "float",
+                               "--max-distance", "0.8", "--resolution", "48x16", "--samples", "8", "--output", str(out),
+                               "--quiet"], capture_output=True, text=True, timeout=600, cwd=ROOT)
+        assert proc.returncode == 0, proc.stderr
+        return proc.stdout + proc.stderr, oiio.ImageBuf(str(out / "Row.exr")).get_pixels(oiio.FLOAT)
+
+    run(blend, tmp_path / "out")
+    said, partial = run(moved, tmp_path / "out")
+    assert "baked Tile1, Tile2; kept Tile0 (unchanged)" in said
+    _, full = run(moved, tmp_path / "full")
+    np.testing.assert_array_equal(partial, full)
