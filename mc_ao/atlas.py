@@ -282,10 +282,13 @@ def from_selected_to_active(jobs, settings, lows):
 def summary(job, result):
     """What an atlas's summary line adds: which objects were baked and which kept, and why."""
     report = (getattr(result, "report", None) or {}).get("atlas") or {}
-    baked, kept = report.get("baked", []), report.get("kept", [])
+    baked, held = report.get("baked", []), report.get("held", [])
+    unchanged = [n for n in report.get("kept", []) if n not in held]
     parts = [f"{len(job.names)} object{'s' if len(job.names) != 1 else ''} ({job.label()})"]
-    if kept:
-        parts.append(f"baked {', '.join(baked) or 'none'}; kept {', '.join(kept)} (unchanged)")
+    if unchanged or held:
+        kept = [f"kept {', '.join(unchanged)} (unchanged)"] if unchanged else []
+        kept += [f"kept {', '.join(held)} (not in this bake)"] if held else []
+        parts.append(f"baked {', '.join(baked) or 'none'}; " + "; ".join(kept))
     return "; ".join(parts)
 
 

@@ -24,7 +24,8 @@ class BakeReport:
     high-poly from behind), ``missed_matching_rays``, ``missed_texels``, ``partly_missed_texels``,
     ``directions_per_point``, ``matching_seconds`` and ``matching_cpu_seconds`` (the matching's time).
     Atlases (several targets into one image, :mod:`core.pipeline.atlas`): ``atlas`` (a dict: ``targets``,
-    ``baked`` and why (``why``), ``kept``, each target's ``reach`` and ``owned`` texels, ``shared_texels``,
+    ``baked`` and why (``why``), ``kept`` (and of those, ``held``: the
+    targets an earlier bake held that this one does not name), each target's ``reach`` and ``owned`` texels, ``shared_texels``,
     ``unlimited_reach`` and its ``note``) and ``atlas_overlaps`` ([{``a``, ``b``, ``texels``}] per pair
     of targets whose UVs overlap).
     Every bake: ``worker_memory`` (one entry per process that held the bake,
