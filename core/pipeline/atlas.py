@@ -472,6 +472,13 @@ def finish(q, img, parts, todo, record, all_names, held_names, rank, owner, own,
         if raw_ao is not None:
             r2 = raw_ao.reshape(h, w)
             dilate(r2, mask2, s.margin, threads=s.threads, out=r2, owner=covered_owner.copy(), rank=rank)
+    se2 = img.se.reshape(h, w)
+    if getattr(request, "fix_seams", False):  # after the margins, over the whole image, each seam its target's
+        from ..geometry.seams import seam_lookups
+        from ..post.fixseams import fix_seams
+
+        lookups = seam_lookups([p.checked.target for p in parts], (w, h))
+        fix_seams(ao2, se2, mask2, lookups, owner=out_owner, out=ao2, stderr_out=se2)
     bent = None
     if img.bent is not None:
         bent, _ = bent_mod.dilate_directions(img.bent.reshape(h, w, 3), mask2, s.margin, s.threads,
@@ -515,7 +522,7 @@ def finish(q, img, parts, todo, record, all_names, held_names, rank, owner, own,
         raise MeshError(f"the atlas of {', '.join(map(repr, all_names))} covered no texel of the {w} x {h} image: "
                         "nothing was written")
     seconds = time.perf_counter() - t_start
-    return BakeResult(ao=ao2, mask=mask2, stderr=img.se.reshape(h, w), samples=img.count.reshape(h, w),
+    return BakeResult(ao=ao2, mask=mask2, stderr=se2, samples=img.count.reshape(h, w),
                       rays=_rays(counters, q, rays), seconds=seconds, trace_seconds=trace_s, threads=s.threads,
                       metadata=metadata, report=report, trace_cpu_seconds=trace_cpu, bent=bent,
                       miss=None if img.miss is None else img.miss.reshape(h, w),
