@@ -322,3 +322,18 @@ def test_a_kept_target_within_reach_of_a_changed_one_is_said_to_be_stale():
     assert any(w.startswith("Box4 was not baked now, and Box5 within its reach changed") for w in warnings)
     assert any(w.startswith("Box6 was not baked now") for w in warnings)
     assert not any(w.startswith(("Box3 ", "Box7 ")) for w in warnings)
+
+
+def test_the_same_bits_on_a_dask_cluster():
+    distributed = pytest.importorskip("distributed")
+    import os
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None, silence_logs=40) as cluster, distributed.Client(cluster) as client:
+        client.run(lambda: __import__("sys").path.insert(0, root))
+        targets = scene()
+        ref = bake_ao(targets, [], **KW)
+        r = bake_ao(targets, [], **dict(KW, workers=client))
+    for name in ("ao", "stderr", "samples", "mask", "owner"):
+        np.testing.assert_array_equal(getattr(r, name), getattr(ref, name), err_msg=name)
