@@ -284,8 +284,8 @@ def test_bad_atlases_are_refused_by_name():
         bake_ao([floor, twin], [], **KW)
     with pytest.raises(SettingsError, match="occluding has 1 entries for 2 targets"):
         bake_ao(Atlas([floor, lid], occluding=[True]), [], **KW)
-    with pytest.raises(SettingsError, match="a bake of kind 'udim' takes one target"):
-        core.bake_udim([floor, lid], [], **KW)
+    with pytest.raises(SettingsError, match="an atlas over UDIM tiles is not denoised"):
+        core.bake_udim([floor, lid], [], **dict(KW, denoise=True))
 
 
 def test_ownership_of_coverages_directly():
@@ -337,3 +337,19 @@ def test_the_same_bits_on_a_dask_cluster():
         r = bake_ao(targets, [], **dict(KW, workers=client))
     for name in ("ao", "stderr", "samples", "mask", "owner"):
         np.testing.assert_array_equal(getattr(r, name), getattr(ref, name), err_msg=name)
+
+
+def test_an_atlas_over_udim_tiles_is_each_tiles_atlas():
+    """A floor over tiles 1001 and 1002 and a lid in 1001 only: tile 1002 holds the floor alone (the lid
+    occluding it as a mesh), tile 1001 both; each target's texels are its own UDIM bake's."""
+    floor = quad("Floor", -1, -1, 0.0, 2, (0.5, 0.0), (2.0, 1.0))
+    lid = quad("Lid", -0.5, -0.5, 0.3, 1, (0.1, 0.1), (0.4, 0.9), down=True)
+    r = core.bake_udim([floor, lid], [], **KW)
+    assert sorted(r.tiles) == [1001, 1002] and r.owner.shape == (2, 64, 64) and r.targets == ("Floor", "Lid")
+    assert set(np.unique(r.owner[1]).tolist()) == {0} and set(np.unique(r.owner[0]).tolist()) == {-1, 0, 1}
+    alone = core.bake_udim(floor, [lid], **KW)
+    for k in range(2):
+        mine = r.mask[k] & (r.owner[k] == 0)
+        np.testing.assert_array_equal(r.ao[k][mine], alone.ao[k][mine])
+    again = core.bake_udim(Atlas([floor, lid], keep=r.record), [], **KW)
+    assert again.report["atlas"]["baked"] == [] and np.array_equal(again.ao, r.ao)

@@ -571,4 +571,109 @@ def _denoise_part(img, i, part, ls, request, guide_tiles):
     img.se[mine] = dse.reshape(-1)[mine]
 
 
-__all__ = ["run_atlas", "plan", "atlas_job"]
+
+# -- UDIM tiles -------------------------------------------------------------------------------------------
+
+def run_udim_atlas(request, atlas, occluders=(), *, highpoly=None, cage=None, bent_space=None, progress=None,
+                   cancel=None, on_tile=None, on_rays=None, remote=None):
+    """An atlas over UDIM tiles (``request.kind`` 'udim'): every tile an atlas of its own, of the
+    targets whose UVs reach it (the others occlude as meshes), with its own seed, then each quantity's
+    tiles stacked: ``owner`` (N, H, W) indexes ``targets`` (every target of the list, then those an
+    earlier bake held); ``record`` {tile: AtlasRecord}; ``tiles`` {tile: the tile's result}.
+    ``atlas.keep``: {tile: record (or {quantity: record})} of an earlier bake. Not with ``denoise``:
+    a target's tiles would each be filtered alone, not across the tiles' seams as one target's are."""
+    from ..geometry.uvtiles import covered_tiles, shifted, tile_seed
+    from ..targets.atlas import Atlas
+
+    if request.denoise:
+        raise SettingsError("an atlas over UDIM tiles is not denoised: each target's tiles would be filtered "
+                            "apart, not across the tiles' seams as one target's are; bake it without denoise")
+    targets = list(atlas.targets)
+    names, occluding = _check_targets(targets, atlas.occluding)
+    n = len(targets)
+    highpoly = _per_target(highpoly, n, "highpoly")
+    cage = _per_target(cage, n, "cage")
+    coverage = [covered_tiles(t, request.resolution) for t in targets]
+    todo = sorted(set().union(*[c.tiles for c in coverage])) if request.tiles is None else list(request.tiles)
+    keep = atlas.keep or {}
+    weight = np.array([sum(c.area.get(t, 0.0) for c in coverage) for t in todo]) + 1e-12
+    weight /= weight.sum()
+    done = np.concatenate([[0.0], np.cumsum(weight)])
+    tile_request = request.replace(kind="image", tiles=None, empty_ok=True)
+    quantities = request.all_quantities
+    maps = request.quantities is not None
+    results = {q: {} for q in quantities}
+    for k, tile in enumerate(todo):
+        here = [i for i in range(n) if tile in coverage[i].tiles]
+        if not here:  # a tile asked for that no target reaches: baked empty, as a target's would be
+            here = [0]
+        away = [m for i in range(n) if i not in here and occluding[i]
+                for m in (list(highpoly[i]) if isinstance(highpoly[i], (list, tuple)) else
+                          [highpoly[i]] if highpoly[i] is not None else [targets[i]])]
+
+        def tile_progress(f, k=k):
+            if progress is not None:
+                progress(min(done[k] + weight[k] * f, 1.0))
+
+        def tile_block(*args, tile=tile):
+            if not maps:
+                on_tile(tile, *args)
+            else:
+                on_tile(args[0], tile, *args[1:])
+
+        part = Atlas([shifted(targets[i], tile) for i in here], occluding=[occluding[i] for i in here],
+                     keep=keep.get(tile))
+        baked = run_atlas(tile_request.replace(seed=tile_seed(request.seed, tile)), part, list(occluders or ()) + away,
+                          highpoly=None if all(h is None for h in highpoly) else [highpoly[i] for i in here],
+                          cage=None if all(c is None for c in cage) else [cage[i] for i in here],
+                          bent_space=bent_space if not isinstance(bent_space, (list, tuple))
+                          else [bent_space[i] for i in here], progress=tile_progress, cancel=cancel,
+                          on_tile=None if on_tile is None else tile_block, on_rays=on_rays, remote=remote)
+        for q in quantities:
+            results[q][tile] = baked[q]
+    return {q: _stack_tiles(results[q], names, todo, coverage) for q in quantities}
+
+
+def _stack_tiles(results, names, todo, coverage):
+    """One quantity's UDIM atlas from its tiles' atlases: the planes stacked, the owner maps indexing
+    one list of names, the reports merged."""
+    all_names = list(names)
+    for r in results.values():
+        all_names += [x for x in r.targets if x not in all_names]
+    owners = []
+    for r in results.values():
+        remap = np.array([all_names.index(x) for x in r.targets] + [-1], np.int32)
+        owners.append(np.where(r.owner >= 0, remap[r.owner], -1).astype(np.int32))
+    parts = list(results.values())
+
+    def stack(name):
+        return np.stack([getattr(r, name) for r in parts])
+
+    report = BakeReport(covered_texels=sum(r.report.covered_texels or 0 for r in parts),
+                        overlapping_texels=sum(r.report.overlapping_texels or 0 for r in parts),
+                        degenerate_uv_triangles=parts[0].report.degenerate_uv_triangles,
+                        degenerate_triangles=parts[0].report.degenerate_triangles,
+                        uv_outside_udim_triangles=sum(c.outside for c in coverage), tiles=list(todo),
+                        worker_memory=parts[0].report.worker_memory,
+                        atlas={"targets": all_names,
+                               "baked": [x for x in all_names if any(x in r.report.atlas["baked"] for r in parts)],
+                               "kept": [x for x in all_names if all(x not in r.report.atlas["baked"] for r in parts)],
+                               "tiles": {t: r.report.atlas for t, r in results.items()}},
+                        atlas_overlaps=[dict(o, tile=t) for t, r in results.items()
+                                        for o in (r.report.atlas_overlaps or [])])
+    warnings = [w for r in parts for w in (r.report.warnings or []) if "covers no texel" not in w]
+    if warnings:
+        report.warn(*dict.fromkeys(warnings))
+    if not any(r.mask.any() for r in parts):
+        raise MeshError(f"the atlas of {', '.join(map(repr, names))} covered no texel of the UDIM tiles "
+                        f"{', '.join(map(str, todo))}: nothing was written")
+    return BakeResult(ao=stack("ao"), mask=stack("mask"), stderr=stack("stderr"), samples=stack("samples"),
+                      rays=sum(r.rays for r in parts), seconds=sum(r.seconds for r in parts),
+                      trace_seconds=sum(r.trace_seconds for r in parts), threads=parts[0].threads,
+                      trace_cpu_seconds=sum(r.trace_cpu_seconds for r in parts), metadata=dict(parts[0].metadata),
+                      report=report, tiles=results, bent=stack("bent") if parts[0].bent is not None else None,
+                      owner=np.stack(owners), targets=tuple(all_names),
+                      record={t: r.record for t, r in results.items()})
+
+
+__all__ = ["run_atlas", "run_udim_atlas", "plan", "atlas_job"]

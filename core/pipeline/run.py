@@ -54,9 +54,9 @@ def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=N
     ``request.all_quantities``. The arguments are :func:`core.bake`'s. A list of targets (or a
     :class:`core.targets.atlas.Atlas`) is an atlas (:mod:`core.pipeline.atlas`)."""
     if isinstance(target, (list, tuple, Atlas)):
-        from .atlas import run_atlas
+        from .atlas import run_atlas, run_udim_atlas
 
-        return run_atlas(request, Atlas.of(target), occluders, highpoly=highpoly, cage=cage, bent_space=bent_space,
+        return (run_udim_atlas if request.kind == "udim" else run_atlas)(request, Atlas.of(target), occluders, highpoly=highpoly, cage=cage, bent_space=bent_space,
                          progress=progress, cancel=cancel, on_tile=on_tile, on_rays=on_rays, remote=REMOTE)
     if request.kind == "udim":
         return _udim(request, target, occluders, highpoly, cage, bent_space, progress, cancel, on_tile, on_rays)
