@@ -135,11 +135,13 @@ def plan(request, targets, occluders, highpoly, cage, bent_space, occluding, kee
     ao = "ao" in quantities
     distance = request.max_distance
     boxes = [A.bounds(ms) for ms in surfaces]
+    box_of = {id(m): A.bounds([m]) for ms in surfaces for m in ms}
+    box_of.update({id(o): A.bounds([o]) for o in occluders})
     parts = []
     for i, t in enumerate(targets):
         candidates = [(names[j], m) for j in range(n) if j != i and occluding[j] for m in surfaces[j]]
         candidates += [(o.name, o) for o in occluders]
-        near = [(name, m) for name, m in candidates if A.within_reach(boxes[i], A.bounds([m]), distance)] if ao else []
+        near = [(name, m) for name, m in candidates if A.within_reach(boxes[i], box_of[id(m)], distance)] if ao else []
         req = request.replace(ground=ground)
         checked = check(req, t, [m for _, m in near], highpoly=highpoly[i], cage=cage[i], bent_space=spaces[i])
         part = Part(i, names[i], checked, req, [m for _, m in near], sorted({name for name, _ in near}))
