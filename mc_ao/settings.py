@@ -58,8 +58,12 @@ GREYED = {
     "exclude_collections": lambda v: v.only_local,
     "ground_height": lambda v: v.ground != "HEIGHT",
     # the Image section: a color-attribute bake has no image
-    "resolution": _vertex, "height": _vertex, "margin": _vertex, "uv_map": _vertex, "image_name": _vertex,
-    "error_map": _vertex, "channel": _vertex,
+    "resolution": _vertex, "height": _vertex, "margin": _vertex, "uv_map": _vertex,
+    "error_map": _vertex, "channel": _vertex, "images": _vertex,
+    # which image: the Image name for one image per object, the Atlas name for one for all
+    "image_name": lambda v: _vertex(v) or v.images != "OWN",
+    "atlas": lambda v: _vertex(v) or v.images != "ATLAS",
+    "id_map": lambda v: _vertex(v) or v.images == "OWN",
     "into": lambda v: _vertex(v) or v.channel == "NONE",
     # Save to File's section, closed by its checkbox
     "file_format": lambda v: not v.save_to_file, "output_dir": lambda v: not v.save_to_file,

@@ -79,6 +79,7 @@ def build(job, cancel, progress):
     if job.get("kind") == "atlas":  # several targets, each part set up when its first tile comes
         _SCENE.clear()
         bake, s = build_remote(job, request, cancel, _mesh)
+        bake.request_data = request.to_dict()  # the options this worker baked with, back in the report
         shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
         bake.trace_setup(shared, cancel)
         return bake, shared, s.threads

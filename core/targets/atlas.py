@@ -164,6 +164,7 @@ class AtlasBake:
         self.part_locks = {}
         self.start = _Starts(self)
         self.scene_reused = False
+        self.request_data = None  # a worker's: the options it baked with (core.pipeline.remote)
         self.pattern = None
         self.shared = self.cancel = self.on_rays = None
 

@@ -96,7 +96,7 @@ def test_two_objects_into_one_image_grey_the_button_out(bpy, scene):
     floor, box = floor_and_box(bpy)
     select_only(bpy, floor, box)
     scene.mc_ao.image_name = "Shared"
-    assert "would both bake into image 'Shared': put {object} into the Image name" in reason(bpy)
+    assert "would both bake into image 'Shared': put {object} into the Image name, or set Images to One for All" in reason(bpy)
     scene.mc_ao.image_name = "{object}_Shared"
     assert bpy.ops.object.mc_ao_bake.poll()
 
