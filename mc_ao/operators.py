@@ -105,6 +105,23 @@ def show_in_image_editors(context, image):
             area.tag_redraw()
 
 
+def estimated_seconds(context, settings, choice):
+    """The uncalibrated estimate (mc_ao.baking.bake_cost) of baking ``choice`` in ``context``, as the
+    panel prices it; None where it cannot be made."""
+    from . import selected_to_active
+
+    try:
+        kwargs = {}
+        if settings.use_selected_to_active:
+            active, cage = context.active_object, selected_to_active.cage_of(context.scene.mc_ao)
+            kwargs = dict(highpoly=selected_to_active.high_objects(context.selected_objects, active, cage), cage=cage)
+        return baking.bake_cost(settings, choice.targets, context.evaluated_depsgraph_get(),
+                                selected=context.selected_objects, view_layer=context.view_layer,
+                                threads=resolve_threads(context, settings), **kwargs).seconds
+    except Exception:  # an estimate is never a reason not to bake
+        return None
+
+
 def why_not(context):
     """Why the Bake AO button is disabled in ``context`` (the poll message, the panel's hint), or None."""
     return choice_of(context)[1]
@@ -286,6 +303,8 @@ class BakeSession:
         except ChoiceError as exc:
             self.report({"ERROR"}, str(exc))
             return False
+        # What the panel estimated, beside what the bake will take: the panel's next estimates learn it.
+        self.estimated, self.started = estimated_seconds(context, settings, choice), time.monotonic()
         try:
             folder = _output_dir(settings) if settings.save_to_file else None
             jobs = choice.jobs(context.evaluated_depsgraph_get())
@@ -522,6 +541,8 @@ class BakeSession:
                 self.unsummarised_errors = self.file_errors
                 self._summarise(total_summary(self.results, len(done), self.settings.quantities))
             self.ended = {"FINISHED"} if done else {"CANCELLED"}
+            if done and not self.errors and self.estimated:
+                baking.learn_from_bake(self.estimated, time.monotonic() - self.started)
         # Blender keeps the last registered operators, and with them this session, for its redo
         # and history: keep nothing heavy (the jobs' geometry, the images' old pixels) past the end.
         self.run = None

@@ -236,7 +236,10 @@ def cost_text(context, settings, targets, highpoly=(), cage=None):
         available = baking.corelink.load("execution.executor").memory_limit()
     except Exception:  # the core cannot load (no numpy, no embreex): the bake will say why
         return "", False
-    text = f"Estimate: {cost.describe()}"
+    described = baking.calibrated(cost).describe()
+    if settings.target_error > 0:  # adaptive sampling stops texels early: the estimate is the most it takes
+        described = described.replace("about ", "at most ", 1)
+    text = f"Estimate: {described}"
     if available is not None and cost.bytes > available:
         return f"{text}, more than the {available / 2 ** 30:.1f} GiB free: lower Size or Processes", True
     return text, False
