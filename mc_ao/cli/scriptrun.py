@@ -119,7 +119,12 @@ def bake(plan, args, summary):
         if not save_baked(args.save, settings, [escape(name) for name in baked], summary):
             failures += 1
     table.show(rows)
-    print(f"bake_ao: baked {len(baked)} of {len(objects)} objects" + (f", {failures} failed" if failures else ""))
+    # A shared image (an atlas) is one job of several objects: the line counts its objects.
+    members = {job.object_name: list(job.names) for job in plan.jobs if getattr(job, "atlas", False)}
+    done = [n for name in baked for n in members.get(name, [name])]
+    total = [n for name in objects for n in members.get(name, [name])]
+    into = f" into {len(members)} image{'s' if len(members) != 1 else ''}" if members else ""
+    print(f"bake_ao: baked {len(done)} of {len(total)} objects{into}" + (f", {failures} failed" if failures else ""))
     if failures and summary.error is None:
         summary.error = f"{failures} of {len(objects)} objects failed"
     return 1 if failures else 0
