@@ -293,11 +293,19 @@ def summary(job, result):
 
 
 def notes(result):
-    """The atlas's warnings: overlapping UVs between its objects, an unlimited distance."""
+    """The atlas's warnings: overlapping UVs between its objects; objects baked again only because an
+    unlimited distance makes every object reach every other."""
+    report = getattr(result, "report", None) or {}
     out = []
-    for o in (getattr(result, "report", None) or {}).get("atlas_overlaps", []):
-        out.append(f"the UVs of {o['a']} and {o['b']} overlap on {o['texels']} texel{'s' if o['texels'] != 1 else ''}; "
-                   "each such texel goes to the object covering more of it")
+    for o in report.get("atlas_overlaps") or []:
+        tile = f" in UDIM tile {o['tile']}" if "tile" in o else ""
+        out.append(f"the UVs of {o['a']} and {o['b']} overlap on {o['texels']} texel{'s' if o['texels'] != 1 else ''}"
+                   f"{tile}; each such texel goes to the object covering more of it")
+    atlas = report.get("atlas") or {}
+    why = atlas.get("why") or {}
+    if atlas.get("unlimited_reach") and any("within its reach changed" in w for w in why.values()):
+        out.append("the distance is unlimited, so every object reaches every other: a change to one bakes them all "
+                   "again (a finite Distance bakes again only the objects near a change)")
     return out
 
 

@@ -236,6 +236,10 @@ class Bake:
             self.store.finished(i)
             self.store.notes = None
         outcome.notes.extend(baking.input_notes(results[None]))
+        if getattr(job, "atlas", False):  # several objects in one image: their overlaps, an unlimited reach
+            from . import atlas
+
+            outcome.notes.extend(atlas.notes(results[None]))
         outcome.summary = next((s for s in (k.summarise(job, results) for k in self.plan.kinds) if s), None)
         return outcome
 

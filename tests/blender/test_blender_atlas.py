@@ -317,3 +317,20 @@ def test_script_rebakes_only_the_objects_within_reach_of_a_moved_one(bpy, scene,
     assert "baked Tile1, Tile2; kept Tile0 (unchanged)" in said
     _, full = run(moved, tmp_path / "full")
     np.testing.assert_array_equal(partial, full)
+
+
+
+def test_overlapping_uvs_and_an_unlimited_reach_are_said(bpy, scene, capfd):
+    from blender_helpers import run_bake
+
+    floor, lid = two_objects(bpy)
+    into_half(lid, right=False)  # the lid's UVs now over the floor's half too: stacked UVs
+    scene.mc_ao.images = "ATLAS"
+    select_only(bpy, floor, lid)
+    result, error, out = run_bake(bpy, capfd)
+    assert result == {"FINISHED"}, error
+    assert "the UVs of Floor and Lid overlap on" in out
+    lid.location.z += 0.1
+    result, error, out = run_bake(bpy, capfd)
+    assert result == {"FINISHED"}, error
+    assert "the distance is unlimited, so every object reaches every other" in out
