@@ -284,17 +284,23 @@ def boxfit_lepski(ao, se, mask, guide, radii=(2, 4, 8, 16), kappa=2.0, fine=True
 
 def pilot_bias_denoise(ao, se, mask, guide, radii=(3, 6, 12), rho_scale=0.5, debias=True, verbose=False,
                        min_rho=2, smooth_what="square", report_raw=False, iterations=1, debias_scale=1.0,
-                       pilot="today", with_ds=False, add_pilot_bias=False, spread=None):
+                       pilot="today", with_ds=False, add_pilot_bias=False, spread=None, fine_bandwidths=(1.25, 2.5),
+                       fine_radius=3, fine="today"):
     """Box fits whose bias is the fit of today's denoised map (a pilot with its detail) less the pilot,
     its square debiased by the pilot's variance and averaged over a window of radius rho_scale R."""
     from bench.prototypes.multiscale import fine_all
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
-    fc, var, exact, _ = fine_all(ao, se, mask, guide)
+    if fine == "today":
+        fc, var, exact, _ = fine_all(ao, se, mask, guide, bandwidths=fine_bandwidths, radius=fine_radius)
+    else:
+        from bench.prototypes.atrous import atrous_fine
+        fc, var, exact, _ = atrous_fine(ao, se, mask, guide, levels=fine)
+        fine_bandwidths = [f"a{lev + 1}" for lev in range(fine)]
     y = np.where(mask, ao, 0).astype(np.float64)
     cands = [(y, var, np.zeros_like(y), "raw")]
-    for (F, V, B, L), b in zip(fc, (1.25, 2.5)):
+    for (F, V, B, L), b in zip(fc, fine_bandwidths):
         cands.append((F, V, B, f"fine {b}"))
     # the pilot: today's choice among these
     P, VP, BP, _ = select(cands, exact)

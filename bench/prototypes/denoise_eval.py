@@ -223,6 +223,17 @@ FILTERS.update({"pb": _pb(), "pb1": _pb(rho_scale=1.0), "pbmean": _pb(smooth_wha
                           radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
                 "v2one": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, iterations=1,
                              radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
+                **{f"v2f{i}": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, iterations=1, fine_bandwidths=fb,
+                                  fine_radius=fr, radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3),
+                                                         (4, 24), (24, 4)))
+                   for i, (fb, fr) in enumerate((((1.25, 2.5), 3), ((1.0, 1.8), 2), ((1.5,), 2), ((1.25,), 2), ((2.0,), 3),
+                                                   ((2.5,), 3), ((1.25, 2.5), 2)))},
+                **{f"shp{k}": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, fine_bandwidths=(2.5,), radii=r)
+                   for k, r in dict(A=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4)),
+                                    B=(6, 12, (2, 12), (12, 2), (4, 24), (24, 4)), C=(4, 12, (2, 12), (12, 2)),
+                                    D=(6, 18, (2, 12), (12, 2)), E=(4, 8, 16, (2, 8), (8, 2), (3, 16), (16, 3))).items()},
+                **{f"at{L}": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, fine=L,
+                                 radii=(6, 12, (2, 12), (12, 2), (4, 24), (24, 4))) for L in (1, 2)},
                 "rectb": _pb(rho_scale=1.0, debias_scale=0.5, add_pilot_bias=True,
                              radii=(3, 6, 12, (1, 6), (6, 1), (2, 12), (12, 2)))})
 
