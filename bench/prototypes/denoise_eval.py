@@ -86,11 +86,22 @@ def metrics(ao, se, ref, guide, mask=None):
 def today(ao, se, mask, guide):
     from core.post import denoise as D
 
-    out, err, _ = D.denoise(ao, se, mask, guide)
+    out, err, _ = D.denoise(ao, se, mask, guide, shapes=())
     return out, err
 
 
-FILTERS = {"raw": lambda ao, se, mask, guide: (ao, se), "today": today}
+def _core(**kw):
+    def f(ao, se, mask, guide):
+        from core.post import denoise as D
+
+        out, err, info = D.denoise(ao, se, mask, guide, **kw)
+        print("choice", np.bincount(info.choice[mask], minlength=1 + len(info.bandwidths) + len(info.shapes)))
+        return out, err
+    return f
+
+
+FILTERS = {"raw": lambda ao, se, mask, guide: (ao, se), "today": today, "core": _core(),
+           "core25": _core(bandwidths=(2.5,)), "core20": _core(bandwidths=(2.0,))}
 
 
 def run(filters, resolutions, scenes, samples=16, seed=1, cache=Path("/var/tmp/denoise-cache")):
