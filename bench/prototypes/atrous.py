@@ -153,9 +153,9 @@ def tiled_denoise(ao, se, mask, guide, levels=4, kernel=TENT, beta_decay=1.0, pi
     exact), each level a candidate; the bias of level l from a pilot P: L_l P - P (the same
     weights), its square averaged over a window of radius rho_scale 3^l and debiased by
     debias_scale V_P; each texel takes the least V + B^2."""
-    from bench.prototypes.boxfit import select
+    from bench.prototypes.selection import select
     from bench.prototypes.multiscale import fine_all
-    from bench.prototypes.boxfit import smooth
+    from bench.prototypes.selection import smooth
 
     A = Atrous(guide, mask, levels, kernel, base=3, beta_decay=beta_decay, **kw)
     fc, var, exact, _ = fine_all(ao, se, mask, guide)
