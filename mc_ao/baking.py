@@ -594,12 +594,27 @@ def length_text(value):
     return f"{value:.3g} units"
 
 
+def thickness_summary(settings, result):
+    """How far a thickness map's rays looked, as its summary says it: "rays into the mesh up to 9.11 cm
+    (a twentieth of its size: set Distance for another)" where the core chose it (Distance unlimited),
+    "... up to 50 cm" where Distance set it."""
+    from .schema import unlimited
+
+    distance = (getattr(result, "metadata", None) or {}).get("max_distance")
+    if distance is None:
+        return ""
+    text = f"rays into the mesh up to {length_text(float(distance))}"
+    if unlimited(settings.max_distance):
+        text += " (a twentieth of its size: set Distance for another)"
+    return text
+
+
 def occlusion_summary(job, settings, result):
     """What occluded ``job``'s bake, as its summary line says it: "occluded by itself alone", "by 3
     other objects", "and the ground at 12 cm" (the height used: each object's lowest point with
-    Ground Lowest Point); "" for a thickness map (the object alone, always)."""
+    Ground Lowest Point); for a thickness map (the object alone, always) how far its rays looked."""
     if getattr(job, "quantity", "ao") != "ao":
-        return ""
+        return thickness_summary(settings, result)
     if getattr(job, "highpoly", None):
         others = len(getattr(job, "occluders", ()))
         who = (f"occluded by the high-poly" + (f" and {others} other object{'s' if others != 1 else ''}"

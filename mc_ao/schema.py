@@ -144,7 +144,8 @@ SETTINGS = (
             hi="MAX_RESOLUTION", zero="as wide as high", key=None, targets=("image",),
             ui={"soft_max": 8192, "subtype": "PIXEL"}),
     Setting("max_distance", "distance", 0.0, "Distance",
-            "Occluders farther than this do not count; 0 (or inf) = no limit",
+            "Occluders farther than this do not count; 0 (or inf) = no limit (a thickness map then looks a "
+            "twentieth of the object's size into it)",
             ui={"soft_max": 100.0, "subtype": "DISTANCE", "unit": "LENGTH"}),
     Setting("source", "enum", "SOBOL", "Sampler", "Where each texel's sample points come from", items=(
         ("SOBOL", "Sobol'", "Owen-scrambled Sobol' points over position and direction (least noise)"),

@@ -28,6 +28,7 @@ import numpy as np
 from .._version import __version__
 from ..base.machine import cpu_count
 from ..engine.settings import BakeSettings, auto_tile_shape
+from ..engine.thickness import resolved as thickness_resolved
 from ..base.request import BakeRequest
 from ..execution.contracts import Remote
 from ..execution.executor import bake_tiles, in_process, processes_of, worker_count
@@ -53,6 +54,8 @@ def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=N
     """Bake ``request`` (checked): {quantity: BakeResult}, one per quantity of
     ``request.all_quantities``. The arguments are :func:`core.bake`'s. A list of targets (or a
     :class:`core.targets.atlas.Atlas`) is an atlas (:mod:`core.pipeline.atlas`)."""
+    # a thickness map's distance, decided once from the target(s), before any worker sees the request
+    request = thickness_resolved(request, target.targets if isinstance(target, Atlas) else target)
     if isinstance(target, (list, tuple, Atlas)):
         from .atlas import run_atlas, run_udim_atlas
 

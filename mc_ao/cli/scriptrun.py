@@ -68,6 +68,9 @@ class ScriptRun:
             from ..atlas import summary as atlas_summary
 
             print(f"bake_ao: {name}: {escape(atlas_summary(job, result))}", file=sys.stderr)
+        if result is not None and getattr(job, "quantity", "ao") == "thickness" and outcome.baked:
+            text = baking.thickness_summary(settings, result).replace("set Distance", "set --max-distance")
+            print(f"bake_ao: {name}: thickness map: {text}", file=sys.stderr)
         if result is not None and job.selected_to_active:
             print(f"bake_ao: {name}: from {', '.join(escape(h.name) for h in job.highpoly)}"
                   f"{baking.miss_summary(result)}", file=sys.stderr)

@@ -370,3 +370,21 @@ def test_the_estimate_learns_from_the_bakes_of_the_session(bpy, scene, monkeypat
     for _ in range(20):
         baking.learn_from_bake(1.0, 1000.0)
     assert baking._CALIBRATION["factor"] == 5.0  # never beyond 5x either way
+
+
+def test_a_thickness_summary_says_which_distance_it_used(bpy, scene, capfd):
+    """Thickness at the default Distance (unlimited): the core takes a twentieth of the object's size,
+    and the summary says how far, in the scene's units; with a Distance set, that one."""
+    from mc_ao import operators
+
+    _, box = floor_and_box(bpy)
+    select_only(bpy, box)
+    scene.mc_ao.quantity = {"THICKNESS"}
+    result, error, out = run(bpy, capfd)
+    assert result == {"FINISHED"}, out
+    # the 1 x 1 x 1 box: diagonal sqrt(3), a twentieth of it 8.66 cm
+    assert operators.last_outcome[1].endswith("; rays into the mesh up to 8.66 cm (a twentieth of its size: set "
+                                              "Distance for another)"), operators.last_outcome
+    scene.mc_ao.max_distance = 0.5
+    run(bpy, capfd)
+    assert operators.last_outcome[1].endswith("; rays into the mesh up to 50 cm"), operators.last_outcome
