@@ -18,6 +18,7 @@ _WHERE = {
     "Estimate": "montecarlo.integrate", "estimate": "montecarlo.integrate", "integrate": "montecarlo.integrate",
     "RunningStats": "montecarlo.stats",
     "Mesh": "geometry.mesh",
+    "Atlas": "targets.atlas", "AtlasRecord": "files.atlasrecord",
     "ImageReadError": "files.imageio",
     "bake": "pipeline.api", "bake_ao": "pipeline.api", "bake_maps": "pipeline.api", "bake_udim": "pipeline.api",
     "bake_udim_maps": "pipeline.api", "bake_vertex_ao": "pipeline.api", "bake_vertex_maps": "pipeline.api",

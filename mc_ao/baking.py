@@ -262,16 +262,18 @@ def check_plan(jobs_, settings, objects):
 _COVERAGE = {}
 
 
-def uv_coverage(obj, uv_map=""):
+def uv_coverage(obj, uv_map="", udim=False):
     """About the share of the UV square that ``obj``'s faces cover (core.execution.cost.covered_fraction of its
-    UV map's triangles), cached per mesh; 0.5 where it cannot be read."""
+    UV map's triangles), cached per mesh; 0.5 where it cannot be read. ``udim``: of every UDIM tile
+    together (each triangle counted in the tile of its centre, moved into the square: 2 for two tiles
+    fully covered)."""
     import numpy as np
 
     mesh = obj.data
     layer = mesh.uv_layers.get(uv_map) if uv_map else mesh.uv_layers.active
     if layer is None or not len(mesh.loops):
         return 0.5
-    key = (mesh.name_full, len(mesh.loops), layer.name)
+    key = (mesh.name_full, len(mesh.loops), layer.name, udim)
     if key not in _COVERAGE:
         uv = np.empty(2 * len(mesh.loops), np.float32)
         layer.data.foreach_get("uv", uv)
@@ -279,9 +281,20 @@ def uv_coverage(obj, uv_map=""):
         mesh.calc_loop_triangles()
         tris = np.empty(3 * len(mesh.loop_triangles), np.int32)
         mesh.loop_triangles.foreach_get("loops", tris)
+        corners = uv[tris.reshape(-1, 3)].astype(np.float64)
+        fraction = corelink.load("execution.cost").covered_fraction
         if len(_COVERAGE) > 64:
             _COVERAGE.clear()
-        _COVERAGE[key] = corelink.load("execution.cost").covered_fraction(uv[tris.reshape(-1, 3)])
+        if udim:
+            # each tile a triangle reaches (an island across a tile's border is baked in both), the
+            # triangle's part in it about the clipped corners' area (covered_fraction)
+            lo, hi = np.floor(corners.min(axis=1)), np.ceil(corners.max(axis=1)) - 1
+            tiles = {(u, v) for a, b in zip(lo.astype(int), hi.astype(int))
+                     for u in range(a[0], max(a[0], b[0]) + 1) for v in range(a[1], max(a[1], b[1]) + 1)}
+            _COVERAGE[key] = sum(fraction(corners[(lo[:, 0] <= u) & (hi[:, 0] >= u) & (lo[:, 1] <= v) & (hi[:, 1] >= v)]
+                                          - (u, v)) for u, v in sorted(tiles))
+        else:
+            _COVERAGE[key] = fraction(corners)
     return _COVERAGE[key]
 
 
@@ -293,7 +306,9 @@ _OCCLUDER_COUNTS = {}
 
 
 def forget_occluder_counts():
+    """Blender's data changed: count the occluders and measure the UV maps' coverage again."""
     _OCCLUDER_COUNTS.clear()
+    _COVERAGE.clear()
 
 
 def occluder_counts(depsgraph, settings, selected=(), view_layer=None):
@@ -314,6 +329,28 @@ def occluder_counts(depsgraph, settings, selected=(), view_layer=None):
     return _OCCLUDER_COUNTS[key]
 
 
+#: This machine as the bakes of this session found it: their measured time over what bake_cost
+#: estimated, followed geometrically (each bake moves it half way, in log terms, to its own ratio),
+#: within [1/5, 5]. The panel's estimate is bake_cost's times this (calibrated): a machine faster or
+#: slower than the bench's, or busier than its load average says, is learnt from its own bakes.
+_CALIBRATION = {"factor": 1.0}
+
+
+def calibrated(cost):
+    """``cost`` (core.execution.cost.Cost) with its time scaled by what this session's bakes measured."""
+    return type(cost)(cost.seconds * _CALIBRATION["factor"], cost.bytes)
+
+
+def learn_from_bake(estimated, measured):
+    """A bake estimated at ``estimated`` seconds (uncalibrated) took ``measured``: follow it. Bakes
+    under half a second say more of their fixed costs than of the machine, and are left out."""
+    import math
+
+    if estimated > 0.5 and measured > 0.5:
+        factor = math.sqrt(_CALIBRATION["factor"] * measured / estimated)
+        _CALIBRATION["factor"] = min(5.0, max(0.2, factor))
+
+
 def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None, threads=None, highpoly=(),
               cage=None):
     """What baking ``targets`` with ``settings`` will cost, before it runs (core.execution.cost): a
@@ -328,7 +365,10 @@ def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None
     and the cage's, with the occluders mc_ao.selected_to_active.plan takes. The processes and threads
     are those the bake takes (core.execution.executor.processes_of; Processes 0 picks them from the cores, the
     memory and these counts); ``threads``: the bake's (properties.resolve_threads), else the
-    settings' (0: every core).
+    settings' (0: every core). Every setting that changes the work is priced: the maps baked (AO and
+    thickness: twice the rays), Denoise, UDIM tiles (the texels of every tile), a colour attribute's
+    corners; and the machine's load now (core.execution.cost.machine_load): on a busy machine the bake
+    gets a share of the cores. Adaptive sampling takes at most Samples: the estimate is its longest.
     """
     from types import SimpleNamespace
 
@@ -353,12 +393,14 @@ def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None
     else:
         pool = occluder_counts(depsgraph, settings, selected, view_layer)
     seconds, peak = 0.0, 0
+    # The machine's load now: the bake's threads share the cores with it (read from /proc, no more).
+    load, cpus = cost.machine_load()
     for obj in targets:
         mesh = obj.evaluated_get(depsgraph).data
         triangles = len(mesh.loops) - 2 * len(mesh.polygons)  # an n-gon is n - 2 triangles
         occluders = sum(n for key, n in pool if key != obj.name and key not in skip)
         highpoly_triangles = high + (triangles if cage is not None else 0)  # the cage: the target's topology
-        covered = (uv_coverage(obj, settings.uv_map) if not settings.vertex_colors else 1.0) * w * h
+        covered = (uv_coverage(obj, settings.uv_map, settings.use_udim) if not settings.vertex_colors else 1.0) * w * h
         if settings.vertex_colors:
             covered = len(mesh.loops)
         processes, per_worker = workers.processes_of(
@@ -367,7 +409,9 @@ def bake_cost(settings, targets, depsgraph=None, *, selected=(), view_layer=None
         c = cost.estimate(covered, settings.samples, triangles,
                           image_texels=w * h if not settings.vertex_colors else covered,
                           threads=per_worker, processes=processes, occluder_triangles=occluders,
-                          highpoly_triangles=highpoly_triangles)
+                          highpoly_triangles=highpoly_triangles, quantities=len(settings.quantities),
+                          denoise=settings.denoise, load=load, cpus=cpus,
+                          starting=processes if processes > 1 and not workers.pool_ready(processes, per_worker) else 0)
         seconds += c.seconds
         peak = max(peak, c.bytes)
     return cost.Cost(seconds, peak)
@@ -476,7 +520,8 @@ def check_image_names(images):
     for obj, name in images:
         if name in owners:
             raise ExtractError(f"{owners[name]} and {obj} would both bake into image {name!r}; "
-                               "put {object} into the image name")
+                               "put {object} into the image name, or set Images to One for All to bake them "
+                               "into one image together")
         owners[name] = obj
 
 
@@ -549,12 +594,27 @@ def length_text(value):
     return f"{value:.3g} units"
 
 
+def thickness_summary(settings, result):
+    """How far a thickness map's rays looked, as its summary says it: "rays into the mesh up to 9.11 cm
+    (a twentieth of its size: set Distance for another)" where the core chose it (Distance unlimited),
+    "... up to 50 cm" where Distance set it."""
+    from .schema import unlimited
+
+    distance = (getattr(result, "metadata", None) or {}).get("max_distance")
+    if distance is None:
+        return ""
+    text = f"rays into the mesh up to {length_text(float(distance))}"
+    if unlimited(settings.max_distance):
+        text += " (a twentieth of its size: set Distance for another)"
+    return text
+
+
 def occlusion_summary(job, settings, result):
     """What occluded ``job``'s bake, as its summary line says it: "occluded by itself alone", "by 3
     other objects", "and the ground at 12 cm" (the height used: each object's lowest point with
-    Ground Lowest Point); "" for a thickness map (the object alone, always)."""
+    Ground Lowest Point); for a thickness map (the object alone, always) how far its rays looked."""
     if getattr(job, "quantity", "ao") != "ao":
-        return ""
+        return thickness_summary(settings, result)
     if getattr(job, "highpoly", None):
         others = len(getattr(job, "occluders", ()))
         who = (f"occluded by the high-poly" + (f" and {others} other object{'s' if others != 1 else ''}"

@@ -24,7 +24,7 @@ Reads Blender data (bpy objects passed in); imports no bpy itself.
 
 from dataclasses import dataclass, field
 
-from . import baking, selected_to_active
+from . import atlas, baking, selected_to_active
 from .extract import GEOMETRY_TYPES, ExtractError
 
 
@@ -74,11 +74,21 @@ class Choice:
         """The Jobs of the chosen objects, their geometry evaluated by ``depsgraph`` (modifiers
         applied): mc_ao.baking.plan's, or mc_ao.selected_to_active.plan's for each low-poly. Raises
         ExtractError naming the object (no faces, no such UV map, two objects into one image, ...)."""
-        if not self.settings.use_selected_to_active:
-            return baking.plan(depsgraph, self.targets, self.settings, selected=self.occluding,
+        settings = self.settings
+        if settings.images == "OWN" and atlas.shared(settings):  # a named image: one object into it
+            max_bytes = baking.id_name_max_bytes()
+            baking.check_image_names([(obj.name, settings.image_name_for(obj.name, max_bytes))
+                                      for obj in self.targets])
+        if not settings.use_selected_to_active:
+            if atlas.shared(settings):
+                return atlas.plan(depsgraph, self.targets, settings, selected=self.occluding,
+                                  view_layer=self.view_layer)
+            return baking.plan(depsgraph, self.targets, settings, selected=self.occluding,
                                view_layer=self.view_layer)
-        jobs = [selected_to_active.plan(depsgraph, low, self.sources[low.name], self.settings,
+        jobs = [selected_to_active.plan(depsgraph, low, self.sources[low.name], settings,
                                         view_layer=self.view_layer) for low in self.targets]
+        if atlas.shared(settings):  # the low-poly objects into one image, each from its high-poly
+            return atlas.from_selected_to_active(jobs, settings, {low.name: low for low in self.targets})
         baking.check_image_names([(job.object_name, job.image_name) for job in jobs])
         return jobs
 

@@ -27,7 +27,7 @@ _SKIPPABLE_MAGIC = 0x184D2A5E
 _IMAGE_MAGICS = (
     (b"\x89PNG\r\n\x1a\n", "a PNG image"), (b"\x76\x2f\x31\x01", "an EXR image"),
     (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"), (b"\xff\xd8\xff", "a JPEG image"),
-    (b"ply\n", "a PLY mesh"), (b"ply\r\n", "a PLY mesh"),
+    (b"ply\n", "a PLY mesh"), (b"ply\r\n", "a PLY mesh"), (b"PK\x03\x04", "a zip archive"),
 )
 
 
@@ -127,7 +127,8 @@ def _empty_file(path):
 
 #: What a file of each extension the bake writes holds (file_kind's words).
 KIND_OF_EXTENSION = {".png": "a PNG image", ".exr": "an EXR image", ".tif": "a TIFF image",
-                     ".tiff": "a TIFF image", ".ply": "a PLY mesh", ".blend": "a .blend file"}
+                     ".tiff": "a TIFF image", ".ply": "a PLY mesh", ".blend": "a .blend file",
+                     ".npz": "a zip archive"}  # an atlas's record (core.files.atlasrecord)
 
 
 def replace_problem(path):

@@ -208,6 +208,111 @@ def finish_image(name, ao, float_buffer):
     return image
 
 
+#: Colour spaces whose stored values are the linear values themselves (data, or linear light).
+_LINEAR_SPACES = {"Non-Color", "Raw", "Generic Data", "Linear", "Linear Rec.709", "Linear CIE-XYZ E",
+                  "Linear FilmLight E-Gamut", "Linear Rec.2020", "ACEScg", "ACES2065-1"}
+#: Colour spaces whose byte values are the sRGB encoding of the linear values.
+_SRGB_SPACES = {"sRGB", "sRGB 2.1", "Rec.709"}
+
+
+def encoding_of(image):
+    """How a bake's linear values go into ``image``'s pixels, as Cycles' bake stores them: "linear"
+    (a float image, whose buffer is linear whatever its colour space, or a byte image in a data or
+    linear colour space), "srgb" (a byte image in sRGB: the values' sRGB encoding), or None for a
+    byte image in a colour space this add-on does not encode (it is refused before baking)."""
+    space = image.colorspace_settings.name
+    if image.is_float or getattr(image.colorspace_settings, "is_data", False) or space in _LINEAR_SPACES:
+        return "linear"
+    if space in _SRGB_SPACES:
+        return "srgb"
+    return None
+
+
+def srgb_encode(values):
+    """The sRGB encoding (IEC 61966-2-1, OpenColorIO's "sRGB" of Blender's config) of linear values."""
+    v = np.clip(np.asarray(values, np.float64), 0.0, 1.0)
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * np.power(v, 1.0 / 2.4) - 0.055).astype(np.float32)
+
+
+def describe(image):
+    """"2048x2048, 8-bit, sRGB": what a shared image keeps."""
+    depth = "float" if image.is_float else "8-bit"
+    return f"{image.size[0]}x{image.size[1]}, {depth}, {image.colorspace_settings.name}"
+
+
+def check_shared(name):
+    """Raise ImageError when the existing image ``name`` cannot take a bake into its own pixels (a
+    UDIM, movie or render image; a byte image in a colour space the add-on does not encode)."""
+    image = bpy.data.images.get(name)
+    if image is None:
+        return
+    reason = unusable_reason(image)
+    if reason is None and encoding_of(image) is None:
+        reason = (f"image {name!r} is an 8-bit image in colour space {image.colorspace_settings.name!r}; the bake "
+                  "stores its values into Non-Color, linear or sRGB images: change its colour space, or bake into a "
+                  "float image")
+    if reason is not None:
+        raise ImageError(reason)
+
+
+def store_shared(name, plane, texels):
+    """Write a shared image's bake into the existing image ``name`` as Cycles' bake does: only the
+    ``texels`` (H, W) bool it baked (its objects' covered and margin texels), every other pixel as it
+    was; the image keeps its size, depth and colour space (an 8-bit sRGB image gets the sRGB encoding
+    of the values, which Blender's shaders decode back to them). Returns the image."""
+    image = bpy.data.images.get(name)
+    if image is None:
+        raise ImageError(f"image {name!r} is gone")
+    h, w = plane.shape[:2]
+    if tuple(image.size) != (w, h):
+        raise ImageError(f"image {name!r} is {image.size[0]}x{image.size[1]}, not the bake's {w}x{h}: it changed "
+                         "during the bake")
+    encoding = encoding_of(image)
+    values = plane if encoding == "linear" else srgb_encode(plane)
+    pixels = pixels_of(image)
+    channels = pixels.shape[2]
+    colour = 1 if channels == 2 else min(channels, 3)
+    sel = np.asarray(texels, bool)
+    if values.ndim == 3:
+        pixels[sel, :colour] = values[sel][:, :colour]
+    else:
+        pixels[sel, :colour] = values[sel][:, None]
+    if channels in (2, 4):
+        pixels[sel, channels - 1] = 1.0
+    set_pixels(image, pixels)
+    return image
+
+
+#: The custom property of a Blender image that holds the record of the atlas baked into it
+#: (core.files.atlasrecord: its objects, their fingerprints and texels; mc_ao.atlas reads it).
+RECORD_PROPERTY = "mc_ao_atlas"
+
+
+def keep_record(name, data):
+    """Keep an atlas's record (bytes) on the image ``name``, where its next bake finds it: as base64
+    text (Blender keeps ID property strings as C strings, and an undo step cut raw bytes at their
+    first zero byte)."""
+    import base64
+
+    image = bpy.data.images.get(name)
+    if image is not None:
+        image[RECORD_PROPERTY] = base64.b64encode(bytes(data)).decode("ascii")
+
+
+def record_bytes(image):
+    """The record bytes :func:`keep_record` kept on ``image``, or None."""
+    import base64
+    import binascii
+
+    text = image.get(RECORD_PROPERTY)
+    if text is None:
+        return None
+    try:
+        return base64.b64decode(text if isinstance(text, (str, bytes)) else str(text), validate=True)
+    except (binascii.Error, ValueError):
+        return b""  # not a record: the caller says so
+
+
 def pack(image):
     """Keep a baked image's pixels inside the .blend file: packed, with a fake user.
 

@@ -105,6 +105,23 @@ def show_in_image_editors(context, image):
             area.tag_redraw()
 
 
+def estimated_seconds(context, settings, choice):
+    """The uncalibrated estimate (mc_ao.baking.bake_cost) of baking ``choice`` in ``context``, as the
+    panel prices it; None where it cannot be made."""
+    from . import selected_to_active
+
+    try:
+        kwargs = {}
+        if settings.use_selected_to_active:
+            active, cage = context.active_object, selected_to_active.cage_of(context.scene.mc_ao)
+            kwargs = dict(highpoly=selected_to_active.high_objects(context.selected_objects, active, cage), cage=cage)
+        return baking.bake_cost(settings, choice.targets, context.evaluated_depsgraph_get(),
+                                selected=context.selected_objects, view_layer=context.view_layer,
+                                threads=resolve_threads(context, settings), **kwargs).seconds
+    except Exception:  # an estimate is never a reason not to bake
+        return None
+
+
 def why_not(context):
     """Why the Bake AO button is disabled in ``context`` (the poll message, the panel's hint), or None."""
     return choice_of(context)[1]
@@ -286,6 +303,8 @@ class BakeSession:
         except ChoiceError as exc:
             self.report({"ERROR"}, str(exc))
             return False
+        # What the panel estimated, beside what the bake will take: the panel's next estimates learn it.
+        self.estimated, self.started = estimated_seconds(context, settings, choice), time.monotonic()
         try:
             folder = _output_dir(settings) if settings.save_to_file else None
             jobs = choice.jobs(context.evaluated_depsgraph_get())
@@ -299,12 +318,15 @@ class BakeSession:
         self.unsummarised_errors = 0  # errors (a file not saved) since the last summary line
         for obj in choice.skipped:
             self._warn(baking.skip_note(obj, settings.occluders, baking.needs_uvs(settings)))
-        for job in jobs:
+        for job in plan.jobs:
             for note in job.notes:
                 self._warn(f"{job.object_name}: {note}")
         w, h = settings.size
-        # UDIM tiles and colour attributes are stored when their object's bake finishes.
-        self.live = live and w * h <= LIVE_MAX_TEXELS and not (settings.vertex_colors or settings.use_udim)
+        # UDIM tiles and colour attributes are stored when their object's bake finishes; an existing
+        # image shared by several objects when its bake finishes too (its other texels stay as they are).
+        self.live = (live and w * h <= LIVE_MAX_TEXELS and not (settings.vertex_colors or settings.use_udim)
+                     and not any(getattr(job, "atlas", False) and job.image_name in bpy.data.images
+                                 for job in plan.jobs))
         self.errors = 0  # jobs whose bake failed
         self.failed_objects = set()  # their objects
         self.file_errors = 0  # objects baked whose files were not saved
@@ -328,7 +350,7 @@ class BakeSession:
     def _buffer(self, i):
         """The live pixel buffer of job i (None when its image cannot take the bake)."""
         if i not in self.buffers:
-            w, h = self.settings.size
+            w, h = getattr(self.run.jobs[i], "size", None) or self.settings.size
             self.store.current, self.store.object_name = i, self.run.jobs[i].object_name
             try:
                 image = self.store.image(self.run.jobs[i].image_name, w, h, self.settings.float_buffer, i=i)
@@ -343,8 +365,8 @@ class BakeSession:
         now = time.monotonic()
         if not self.pending or now - self.last_flush < self.live_interval:
             return
-        w, h = self.settings.size
         for i in self.pending:
+            w, h = getattr(self.run.jobs[i], "size", None) or self.settings.size
             image = self.store.image(self.run.jobs[i].image_name, w, h, self.settings.float_buffer, i=i)
             buffer = self.buffers.get(i)
             if buffer is not None and tuple(image.size) == (buffer.shape[1], buffer.shape[0]):
@@ -519,6 +541,8 @@ class BakeSession:
                 self.unsummarised_errors = self.file_errors
                 self._summarise(total_summary(self.results, len(done), self.settings.quantities))
             self.ended = {"FINISHED"} if done else {"CANCELLED"}
+            if done and not self.errors and self.estimated:
+                baking.learn_from_bake(self.estimated, time.monotonic() - self.started)
         # Blender keeps the last registered operators, and with them this session, for its redo
         # and history: keep nothing heavy (the jobs' geometry, the images' old pixels) past the end.
         self.run = None

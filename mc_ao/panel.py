@@ -178,8 +178,30 @@ def draw_lines(layout, context, what, estimate=("", "NONE"), note=("", "NONE")):
         fixed_label(layout, context, text, lines, icon=icon if text else "NONE")
 
 
+def atlas_line(settings, targets):
+    """What a bake into shared images says before it runs: "3 objects into one image 'Atlas'", or
+    per material image; None where each object has an image of its own."""
+    from .atlas import groups, shared
+
+    if not shared(settings):
+        return None
+    try:
+        images = groups(settings, targets, baking.id_name_max_bytes())
+    except Exception as exc:  # an object without an image node: the bake would say the same
+        return str(exc)
+    parts = []
+    for name, objects in images:
+        n = len(objects)
+        parts.append(f"{n} object{'s' if n != 1 else ''} into one image {name!r}" if n > 1
+                     else f"{objects[0].name} into image {name!r}")
+    return "; ".join(parts)
+
+
 def targets_text(settings, targets):
     """What the button bakes, in words: into which images (or colour attribute)."""
+    shared = atlas_line(settings, targets)
+    if shared is not None:
+        return shared
     if settings.vertex_colors:
         domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
         what = f"color attribute {settings.attribute_name} ({domain})"
@@ -214,7 +236,10 @@ def cost_text(context, settings, targets, highpoly=(), cage=None):
         available = baking.corelink.load("execution.executor").memory_limit()
     except Exception:  # the core cannot load (no numpy, no embreex): the bake will say why
         return "", False
-    text = f"Estimate: {cost.describe()}"
+    described = baking.calibrated(cost).describe()
+    if settings.target_error > 0:  # adaptive sampling stops texels early: the estimate is the most it takes
+        described = described.replace("about ", "at most ", 1)
+    text = f"Estimate: {described}"
     if available is not None and cost.bytes > available:
         return f"{text}, more than the {available / 2 ** 30:.1f} GiB free: lower Size or Processes", True
     return text, False
@@ -458,9 +483,19 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
         row = col.row()
         row.active = False
         row.label(text=f"Active render UV map: {default}" if not settings.uv_map and default else "")
-        col.prop(settings, "image_name", **_placeholder(IMAGE_NAME_PLACEHOLDER))
+        col.prop(settings, "images")
+        for name in ("atlas", "image_name"):  # always both rows: the one not in use greyed out
+            row = col.row()
+            row.active = not v.greyed(name)
+            if name == "image_name":
+                row.prop(settings, "image_name", **_placeholder(IMAGE_NAME_PLACEHOLDER))
+            else:
+                row.prop(settings, name)
         col.prop(settings, "float_buffer")
         col.prop(settings, "error_map")
+        row = col.row()
+        row.active = not v.greyed("id_map")
+        row.prop(settings, "id_map")
         col = layout.column()
         col.prop(settings, "channel")
         sub = col.column()

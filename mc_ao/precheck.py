@@ -29,12 +29,16 @@ def problem(settings, targets, images):
     click, as far as names and ``images`` (bpy.data.images, or name -> image) tell; or None."""
     if settings.vertex_colors:
         return None  # a colour attribute: no image
+    from . import atlas
+
+    if atlas.shared(settings):
+        return _shared_problem(settings, targets, images)
     owners = {}
     for obj in targets:
         for name in image_names(settings, obj.name):
             if name in owners and owners[name] != obj.name:
                 return (f"{owners[name]} and {obj.name} would both bake into image {name!r}: put {{object}} into "
-                        "the Image name")
+                        "the Image name, or set Images to One for All to bake them into one image together")
             owners[name] = obj.name
             image = images.get(name)
             if image is None:
@@ -46,6 +50,45 @@ def problem(settings, targets, images):
                 return f"image {name!r} is a {image.source.lower()} image: bake into a plain image (another Image name)"
     if settings.channel != "NONE":
         return _into_problem(settings, targets, owners, images)
+    return None
+
+
+def _shared_problem(settings, targets, images):
+    """:func:`problem` of a bake into shared images (One for All, Node Image): the objects share their
+    image by design; each image a plain one; the Into image of Channel the size of the image the
+    objects bake into (an existing image keeps its own)."""
+    from .atlas import groups
+    from .extract import ExtractError
+
+    try:
+        shared = groups(settings, targets, baking.id_name_max_bytes())
+    except ExtractError as exc:
+        return str(exc)
+    for name, _ in shared:
+        image = images.get(name)
+        if image is not None and image.source not in PLAIN_SOURCES:
+            return f"image {name!r} is a {image.source.lower()} image: bake into a plain image"
+    if settings.channel == "NONE":
+        return None
+    into = settings.into
+    if not into:
+        return f"Into: choose the image whose {settings.channel} channel receives the AO"
+    if len(shared) > 1:
+        return (f"{shared[0][0]!r} and {shared[1][0]!r} would both write into the {settings.channel} channel of "
+                f"{into!r}, each the whole channel: bake one image's objects at a time into it")
+    if into == shared[0][0]:
+        return (f"image {into!r} is both the image the objects bake into and the Into image: one would replace the "
+                "other; choose another Into or Atlas name")
+    image = images.get(into)
+    if image is None:
+        return f"Into: there is no image named {into!r} any more; choose the image to write the AO into"
+    own = images.get(shared[0][0])
+    want = _known_size(own) if own is not None else None
+    want = want or tuple(settings.size)
+    size = _known_size(image)
+    if size is not None and size != want:
+        return (f"Into image {into!r} is {size[0]}x{size[1]}, not the bake's {want[0]}x{want[1]}: bake at its size "
+                f"to write into its {settings.channel} channel")
     return None
 
 

@@ -111,6 +111,17 @@ RULES = (
     Rule("error_map", lambda v: _vertex(v) and v.error_map,
          "is for image textures: a color-attribute bake has no image to hold the standard error; turn it off "
          "(adaptive sampling still uses the error)"),
+    # -- shared images (atlases) -----------------------------------------------------------------
+    Rule("images", lambda v: v.images != "OWN" and _vertex(v),
+         "bakes images into shared images: set {target} to {target:IMAGE_TEXTURES}", poll=True),
+    Rule("images", lambda v: v.images != "OWN" and v.use_udim,
+         "bakes one image over the UV square, not UDIM tiles: turn off {use_udim}", poll=True),
+    Rule("atlas", lambda v: v.images == "ATLAS" and not str(v.atlas).strip(),
+         "must name the image every object bakes into, not be empty"),
+    Rule("atlas", lambda v: v.images == "ATLAS" and "{object}" in str(v.atlas),
+         "{v.atlas!r} names one image for every object: leave out {{object}}"),
+    Rule("id_map", lambda v: v.id_map and v.images == "OWN",
+         "shows which object owns each texel of a shared image: set {images} to {images:ATLAS} or {images:NODE}"),
     # -- the script's options: Selected to Active ------------------------------------------------
     Rule("active", lambda v: not v.use_selected_to_active and v.active is not None, _S2A_OFF, script=True),
     Rule("cage", lambda v: not v.use_selected_to_active and v.cage is not None, _S2A_OFF, script=True),
@@ -146,6 +157,8 @@ RULES = (
     Rule("bits", _bits_cases, "{v.bits} cannot be written as {c[0]}: {c[0]} files take {bits} {c[1]}", script=True),
     Rule("image_name", lambda v: any(sep in v.image_name for sep in "/\\") or v.image_name in (".", ".."),
          "{v.image_name!r} is a path: give a name; files go into {output}", script=True),
+    Rule("atlas", lambda v: v.images == "ATLAS" and (any(sep in v.atlas for sep in "/\\") or v.atlas in (".", "..")),
+         "{v.atlas!r} is a path: give a name; files go into {output}", script=True),
 )
 
 

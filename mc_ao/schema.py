@@ -144,7 +144,8 @@ SETTINGS = (
             hi="MAX_RESOLUTION", zero="as wide as high", key=None, targets=("image",),
             ui={"soft_max": 8192, "subtype": "PIXEL"}),
     Setting("max_distance", "distance", 0.0, "Distance",
-            "Occluders farther than this do not count; 0 (or inf) = no limit",
+            "Occluders farther than this do not count; 0 (or inf) = no limit (a thickness map then looks a "
+            "twentieth of the object's size into it)",
             ui={"soft_max": 100.0, "subtype": "DISTANCE", "unit": "LENGTH"}),
     Setting("source", "enum", "SOBOL", "Sampler", "Where each texel's sample points come from", items=(
         ("SOBOL", "Sobol'", "Owen-scrambled Sobol' points over position and direction (least noise)"),
@@ -205,6 +206,25 @@ SETTINGS = (
             'Image to bake into; empty for "{object}_AO"; {object} is replaced by the object name. An '
             "existing image is reused, resized to the bake's size; files are named after it, made safe",
             targets=("image", "udim", "vertex")),
+    Setting("images", "enum", "OWN", "Images",
+            "Which image each object bakes into: its own, one image for all of them (a texture atlas), or its "
+            "materials' image as Cycles' bake finds it", items=(
+                ("OWN", "One per Object", 'Each object into its own image ("<object>_AO", or the Image name)'),
+                ("ATLAS", "One for All",
+                 "Every object into one image, the Atlas name: a texture atlas, each object over its own part of "
+                 "the UV square, occluding the others"),
+                ("NODE", "Node Image",
+                 "Into the image of each object's materials' active Image Texture node, as Cycles' bake finds it; "
+                 "objects sharing an image bake into it together. It writes into whatever image that node "
+                 "shows, so it is never the default")), targets=("image",)),
+    Setting("atlas", "str", "Atlas", "Atlas",
+            "The image every object bakes into with Images set to One for All (its files: <name>.png, ...). An "
+            "existing image keeps its size, depth and colour space, and the texels of objects not baked now",
+            targets=("image",), sets=("images", "ATLAS")),
+    Setting("id_map", "bool", False, "ID Map",
+            'With several objects in one image, also the image "<image>_ID": each object\'s texels (and its '
+            "margin) in a colour of its own, black elsewhere, a mask per object for texturing",
+            targets=("image",)),
     Setting("channel", "enum", "NONE", "Channel",
             "Write the AO into one channel of an existing image (Into) and leave its other channels as they "
             "are, e.g. red of a glTF occlusion-roughness-metallic texture", items=(

@@ -47,6 +47,11 @@ def plan(settings, jobs, folder=None, formats=None, check_blender=False):
     an existing image cannot take the bake, core.McAoError (FileWriteError, SettingsError) when a
     planned file cannot be written. Nothing is baked or changed."""
     kinds = outputs.kinds_for(settings)
+    from . import atlas
+
+    # Shared images: their sizes and the records of their earlier bakes (an object's own image that
+    # holds other objects' texels becomes a shared one that keeps them).
+    jobs = atlas.prepare(jobs, settings, folder, formats, in_blender=check_blender)
     if check_blender:
         from . import images
 
@@ -231,6 +236,10 @@ class Bake:
             self.store.finished(i)
             self.store.notes = None
         outcome.notes.extend(baking.input_notes(results[None]))
+        if getattr(job, "atlas", False):  # several objects in one image: their overlaps, an unlimited reach
+            from . import atlas
+
+            outcome.notes.extend(atlas.notes(results[None]))
         outcome.summary = next((s for s in (k.summarise(job, results) for k in self.plan.kinds) if s), None)
         return outcome
 

@@ -58,8 +58,12 @@ GREYED = {
     "exclude_collections": lambda v: v.only_local,
     "ground_height": lambda v: v.ground != "HEIGHT",
     # the Image section: a color-attribute bake has no image
-    "resolution": _vertex, "height": _vertex, "margin": _vertex, "uv_map": _vertex, "image_name": _vertex,
-    "error_map": _vertex, "channel": _vertex,
+    "resolution": _vertex, "height": _vertex, "margin": _vertex, "uv_map": _vertex,
+    "error_map": _vertex, "channel": _vertex, "images": _vertex,
+    # which image: the Image name for one image per object, the Atlas name for one for all
+    "image_name": lambda v: _vertex(v) or v.images != "OWN",
+    "atlas": lambda v: _vertex(v) or v.images != "ATLAS",
+    "id_map": lambda v: _vertex(v) or v.images == "OWN",
     "into": lambda v: _vertex(v) or v.channel == "NONE",
     # Save to File's section, closed by its checkbox
     "file_format": lambda v: not v.save_to_file, "output_dir": lambda v: not v.save_to_file,
@@ -128,6 +132,8 @@ class _BakeSettingsMethods:
         object always gets the same image, different objects different ones. This is not a file
         name: files get theirs from mc_ao.filewriter.output_files().
         """
+        if getattr(self, "images", "OWN") == "ATLAS":  # one image for every object
+            return self.atlas_image_name(max_bytes, suffix)
         template = (self.image_name or "{object}_AO") + suffix
         name = template.replace("{object}", object_name)
         if max_bytes is None or len(name.encode("utf-8", "surrogatepass")) <= max_bytes:
@@ -138,6 +144,11 @@ class _BakeSettingsMethods:
         if count and room > 0:
             return template.replace("{object}", _clip_utf8(object_name, room) + tag)
         return _clip_utf8(name, max_bytes - len(tag)) + tag  # the template's own text is too long
+
+    def atlas_image_name(self, max_bytes=None, suffix=""):
+        """The image of One for All (the Atlas setting) + ``suffix``, cut to ``max_bytes`` at a character."""
+        name = str(self.atlas).strip() + suffix
+        return name if max_bytes is None else _clip_utf8(name, max_bytes)
 
     @property
     def vertex_colors(self):
@@ -154,18 +165,26 @@ class _BakeSettingsMethods:
         """core.bake_ao's ground: None (off), 'auto' (each object's lowest point) or a height."""
         return {"OFF": None, "AUTO": "auto"}.get(self.ground, float(self.ground_height))
 
-    def quantity_image_name_for(self, object_name, quantity, max_bytes=None, suffix=""):
+    def quantity_image_name_for(self, object_name, quantity, max_bytes=None, suffix="", root=False):
         """The image of ``object_name``'s bake of ``quantity`` (core's name): image_name_for() for 'ao',
-        "<object>_Thickness" for 'thickness', made to fit the same way; ``suffix`` as image_name_for's."""
+        "<object>_Thickness" for 'thickness', made to fit the same way; ``suffix`` as image_name_for's.
+        ``root``: ``object_name`` is the name the images of a shared image's bake start from (its AO
+        image's: "Atlas" gives "Atlas_Thickness", "Atlas_stderr")."""
+        if root:
+            plain = dataclasses.replace(self, image_name="{object}" if quantity == "ao" else "{object}_" +
+                                        quantity.capitalize(), images="OWN")
+            return plain.image_name_for(object_name, max_bytes, suffix)
         if quantity == "ao":
             return self.image_name_for(object_name, max_bytes, suffix)
         template = "{object}_" + quantity.capitalize()
-        return dataclasses.replace(self, image_name=template).image_name_for(object_name, max_bytes, suffix)
+        return dataclasses.replace(self, image_name=template, images="OWN").image_name_for(object_name, max_bytes,
+                                                                                          suffix)
 
     def bent_image_name_for(self, object_name, max_bytes=None):
         """The image of ``object_name``'s bent normals: "<object>_BentNormal", made to fit as
         image_name_for() makes the AO image's name fit."""
-        return dataclasses.replace(self, image_name="{object}_BentNormal").image_name_for(object_name, max_bytes)
+        return dataclasses.replace(self, image_name="{object}_BentNormal", images="OWN").image_name_for(object_name,
+                                                                                                      max_bytes)
 
     @property
     def replicates(self):

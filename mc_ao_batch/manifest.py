@@ -54,7 +54,8 @@ _NO_EFFECT = {"threads", "processes", "quiet", "output", "summary_json", "blend"
 # Settings added after fingerprints were first recorded: left out while at their default, so that a
 # library baked before them is still found done.
 _ADDED_AT_DEFAULT = {"denoise": False, "occluder_collections": [], "exclude_collections": [], "only_local": False,
-                     "ground": False, "ground_height": None, "quantity": ["ao"], "channel": "none", "into": ""}
+                     "ground": False, "ground_height": None, "quantity": ["ao"], "channel": "none", "into": "",
+                     "images": "own", "atlas": None, "id_map": False}
 _ENTRY_KEYS = {"blend"}
 # Keys of [defaults] and [[bake]] entries that are the batch's own, not bake_ao.py settings: never on
 # the bake's command line, never in a fingerprint.

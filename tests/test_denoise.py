@@ -227,12 +227,18 @@ def test_a_converged_texel_keeps_its_value_and_a_noisy_one_borrows():
 
 
 def test_denoising_is_deterministic_and_does_not_depend_on_threads(monkeypatch):
-    r, g, ao, se, _ = baked("seam", 0)
+    from core.post.denoise import filter as DF
+    from core.post.denoise import wide
+
+    r, g, ao, se, info = baked("seam", 0)
+    assert np.any(info.choice > len(info.bandwidths))  # the wide fits are in it
+    # Several bands of the wide fits, on several threads: the same bits.
+    monkeypatch.setattr(wide, "BAND_CELLS", 3)
     for threads in (1, 3):
         ao2, se2, _ = D.denoise(r.ao, r.stderr, r.mask, g, threads=threads)
         assert np.array_equal(ao, ao2) and np.array_equal(se, se2)
-    # The band height (a constant) orders the float32 additions, and nothing else.
-    monkeypatch.setattr(D, "BAND_ROWS", 5)
+    # The fine filter's band height (a constant) orders its float32 additions, and nothing else.
+    monkeypatch.setattr(DF, "BAND_ROWS", 5)
     ao3, se3, _ = D.denoise(r.ao, r.stderr, r.mask, g)
     np.testing.assert_allclose(ao3, ao, atol=1e-5)
     np.testing.assert_allclose(se3, se, atol=1e-5, rtol=1e-4)

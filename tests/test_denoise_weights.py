@@ -84,7 +84,7 @@ def test_the_weights_are_the_documented_ones_across_the_seam_too(linearised):
     island = guide.island.reshape(-1)
     choice = info.choice.reshape(-1)
     checked = crossed = 0
-    for i in np.flatnonzero(stable & (choice > 0)):
+    for i in np.flatnonzero(stable & (choice > 0) & (choice <= len(info.bandwidths))):
         h = info.bandwidths[choice[i] - 1]
         js = np.flatnonzero(np.abs(J[i]) > 1e-3)
         d2 = ((p[js] - p[i]) ** 2).sum(axis=1) * (inv_s2[js] + inv_s2[i]) / 2

@@ -17,7 +17,7 @@ LAYERS = [
     {"cli", "cli.*"},
     {"service"},
     {"outputs", "outputs.*"},
-    {"precheck", "choose", "selected_to_active", "baking", "occluders"},
+    {"precheck", "choose", "selected_to_active", "baking", "occluders", "atlas"},
     {"udim", "vertex_colors", "bent"},
     {"bakerun", "filewriter", "filecheck"},
     {"images", "undo_images"},

@@ -85,3 +85,62 @@ def test_installed_core_bakes_from_another_folder_the_same_bits(installed, tmp_p
     assert here.returncode == 0, here.stderr.decode()
     assert here.stdout.startswith(b"core.")
     assert there.stdout.split(b"\n", 1)[1] == here.stdout.split(b"\n", 1)[1]
+
+
+E2E = """
+import json, sys
+import numpy as np
+from mc_ao_core import Mesh, bake_ao
+
+P = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+F = np.array([[0, 1, 2], [0, 2, 3]])
+ground = Mesh(P, F, uvs=(P[F][:, :, :2] + 1) / 2)
+lid = Mesh(P * [0.4, 0.4, 0] + [0, 0, 0.5], F)
+
+
+def bake(workers):
+    r = bake_ao(ground, [lid], resolution=32, samples=16, seed=4, workers=workers, threads=1)
+    return {"ao": r.ao.tobytes().hex(), "warnings": r.report.warnings or [],
+            "processes": [m["process"] for m in r.report.worker_memory]}
+
+
+if __name__ == "__main__":  # worker processes and Dask's import this file again: bake in the parent only
+    out = {"1": bake(1)}
+    if sys.argv[1] == "processes":
+        out["2"] = bake(2)
+    else:
+        from distributed import Client, LocalCluster
+
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \\
+                Client(cluster) as client:
+            out["dask"] = bake(client)
+    print(json.dumps(out))
+"""
+
+
+def e2e(installed, tmp_path, how):
+    """The installed core baking from another folder, in this process and ``how`` ('processes' or
+    'dask'): {"1": ..., other: ...}, each the AO's bytes, the report's warnings and its processes."""
+    (tmp_path / "e2e.py").write_text(E2E)
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(installed)}
+    proc = subprocess.run([sys.executable, "e2e.py", how], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    import json
+
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.xfail(strict=True, reason="worker processes boot the core as top-level 'core' (the worker boot "
+                                       "that imports it under the parent's name is trust's, pending): remove "
+                                       "this marker when it lands")
+def test_installed_core_bakes_in_worker_processes_the_same_bits(installed, tmp_path):
+    out = e2e(installed, tmp_path, "processes")
+    assert out["2"]["warnings"] == [] and len(out["2"]["processes"]) > 1, out["2"]  # no fallback to threads
+    assert out["2"]["ao"] == out["1"]["ao"]
+
+
+def test_installed_core_bakes_on_a_dask_local_cluster_the_same_bits(installed, tmp_path):
+    pytest.importorskip("distributed")
+    out = e2e(installed, tmp_path, "dask")
+    assert out["dask"]["warnings"] == [] and out["dask"]["ao"] == out["1"]["ao"]

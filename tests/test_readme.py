@@ -368,7 +368,7 @@ def test_sample_manifest_plans_every_sample_scene(tmp_path):
     path = ROOT / "sample_scenes" / "library.toml"
     tasks = manifest.plan(path, tmp_path / "out")
     assert {Path(t.blend).name for t in tasks} == {"suzanne.blend", "room.blend", "analytic.blend", "rock.blend", "udim.blend",
-                                                   "props.blend"}
+                                                   "props.blend", "atlas.blend"}
     assert all(Path(t.blend).is_file() for t in tasks)
     assert "scripts/bake_batch.py sample_scenes/library.toml --output" in path.read_text()
 

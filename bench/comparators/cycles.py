@@ -97,3 +97,56 @@ def bake(bpy, obj, width, height, samples, threads, seed=0, margin=0, sentinel=N
     if res != {"FINISHED"}:
         raise RuntimeError(f"Cycles bake failed: {res}")
     return read_ao(image), seconds
+
+
+SHARED_IMAGE = "bench_cycles_shared_AO"
+
+
+def bake_shared(bpy, objs, width, height, samples, threads, distance=None, seed=0, margin=0, sentinel=-1.0,
+                light_paths_off=True, terminator_offset=TERMINATOR_OFFSET):
+    """One Cycles AO bake of every object of ``objs`` into ONE shared image, as Cycles bakes an atlas:
+    all of them selected, each with one material whose active Image Texture node holds the same new
+    float, Non-Color image. Returns (ao (H, W) float32, mask (H, W) bool of the texels Cycles wrote,
+    wall seconds of the bake operator).
+
+    The image is first filled with ``sentinel`` and baked with use_clear off, so the texels no object
+    covers keep it (the mask; with ``margin`` 0 only the covered texels change). ``distance``: the AO
+    distance (scene.world.light_settings.distance), None to leave it."""
+    configure(bpy, threads, samples, seed, light_paths_off)
+    scene = bpy.context.scene
+    if distance is not None:
+        if scene.world is None:
+            scene.world = bpy.data.worlds.new("bench_world")
+        scene.world.light_settings.distance = float(distance)
+    image = bpy.data.images.get(SHARED_IMAGE)
+    if image is not None:
+        bpy.data.images.remove(image)
+    image = bpy.data.images.new(SHARED_IMAGE, width, height, alpha=True, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.pixels.foreach_set(np.full(width * height * 4, sentinel, np.float32))
+    mat = bpy.data.materials.get("bench_shared") or bpy.data.materials.new("bench_shared")
+    mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    node = nodes.get("bench_shared_image") or nodes.new("ShaderNodeTexImage")
+    node.name = "bench_shared_image"
+    node.image = image
+    nodes.active = node
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in objs)
+    for obj in objs:
+        if terminator_offset is not None:
+            obj.shadow_terminator_geometry_offset = float(terminator_offset)
+        obj.data.materials.clear()
+        obj.data.materials.append(mat)
+    bpy.context.view_layer.objects.active = objs[0]
+    scene.render.bake.margin = margin
+    scene.render.bake.margin_type = "EXTEND"
+    c0, t0 = time.process_time(), time.perf_counter()
+    res = bpy.ops.object.bake(type="AO", margin=margin, margin_type="EXTEND", use_clear=False,
+                              target="IMAGE_TEXTURES", use_selected_to_active=False)
+    seconds = time.perf_counter() - t0
+    LAST.update(wall=seconds, cpu=time.process_time() - c0)
+    if res != {"FINISHED"}:
+        raise RuntimeError(f"Cycles bake failed: {res}")
+    ao = read_ao(image)
+    return ao, ao != sentinel, seconds

@@ -153,9 +153,9 @@ def tiled_denoise(ao, se, mask, guide, levels=4, kernel=TENT, beta_decay=1.0, pi
     exact), each level a candidate; the bias of level l from a pilot P: L_l P - P (the same
     weights), its square averaged over a window of radius rho_scale 3^l and debiased by
     debias_scale V_P; each texel takes the least V + B^2."""
-    from bench.prototypes.boxfit import select
+    from bench.prototypes.selection import select
     from bench.prototypes.multiscale import fine_all
-    from bench.prototypes.boxfit import smooth
+    from bench.prototypes.selection import smooth
 
     A = Atrous(guide, mask, levels, kernel, base=3, beta_decay=beta_decay, **kw)
     fc, var, exact, _ = fine_all(ao, se, mask, guide)
@@ -181,3 +181,21 @@ def tiled_denoise(ao, se, mask, guide, levels=4, kernel=TENT, beta_decay=1.0, pi
         print("choice", dict(zip([c_[3] for c_ in cands], np.bincount(choice[A.mask], minlength=len(cands)))))
     out = np.where(A.mask, np.clip(out, 0, 1), ao)
     return out.astype(np.float32), np.where(A.mask, np.sqrt(vo + bo * bo), 0).astype(np.float32)
+
+
+def atrous_fine(ao, se, mask, guide, levels=2, kernel=TENT, pilot_range=True, **kw):
+    """Fine candidates from the exact-variance a-trous (3 taps, 3^l apart): per level (F, V, B, None)
+    with B by double smoothing (the cascade up to the level applied to its own output), as
+    multiscale.fine_all returns them; the range term compares a 3x3 geometric pilot."""
+    from bench.prototypes.multiscale import fine_all
+
+    fc, var, exact, (G, vG) = fine_all(ao, se, mask, guide, bandwidths=(1.25,), radius=2)
+    A = Atrous(guide, mask, levels, kernel, base=3, **kw)
+    y = np.where(A.mask, ao, 0).astype(np.float64)
+    outs = A.build(y, var, (G, vG) if pilot_range else None)
+    cands = []
+    for lev, (c, v) in enumerate(outs):
+        # S_l (c_l): the cascade up to level l applied to c_l
+        again = A.apply(c)[lev]
+        cands.append((c, v, np.where(A.mask, again - c, 0), None))
+    return cands, var, exact, (G, vG)

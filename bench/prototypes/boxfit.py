@@ -14,32 +14,13 @@ Quality first, cost later (a prototype for bench.prototypes.denoise_eval).
 
 import numpy as np
 
-
-def sat(a):
-    """Summed-area table with a zero row and column in front: S[y, x] = sum a[:y, :x]."""
-    h, w = a.shape
-    out = np.zeros((h + 1, w + 1))
-    np.cumsum(np.cumsum(a, axis=0), axis=1, out=out[1:, 1:])
-    return out
+from bench.prototypes.selection import box, sat, select, smooth  # noqa: F401
 
 
-def smooth(a, mask, R):
-    """Mean of ``a`` over the texels of ``mask`` in each (2R + 1)^2 window (NaN where none)."""
-    s = box(sat(np.where(mask, a, 0)), R)
-    n = box(sat(mask.astype(np.float64)), R)
-    return np.where(n > 0, s / np.maximum(n, 1), np.nan)
 
 
-def box(S, R):
-    """Sums over the (2R + 1)^2 windows (clipped to the image) from a summed-area table; R may be a
-    pair (Rx, Ry): (2 Rx + 1) columns by (2 Ry + 1) rows."""
-    h, w = S.shape[0] - 1, S.shape[1] - 1
-    Rx, Ry = (R, R) if np.isscalar(R) else R
-    y0 = np.clip(np.arange(h) - Ry, 0, h)
-    y1 = np.clip(np.arange(h) + Ry + 1, 0, h)
-    x0 = np.clip(np.arange(w) - Rx, 0, w)
-    x1 = np.clip(np.arange(w) + Rx + 1, 0, w)
-    return S[y1][:, x1] - S[y0][:, x1] - S[y1][:, x0] + S[y0][:, x0]
+
+
 
 
 def wbox(a, R, passes=1):
@@ -178,21 +159,6 @@ def oracle(ao, se, mask, guide, ref, radii=(2, 4, 8, 16), order=1, fine=True, ve
     return np.clip(out, 0, 1), np.sqrt(best), cands, bf
 
 
-def select(cands, exact=None):
-    """Per texel the candidate (F, V, B, name) with the least V + B^2 (NaN/inf never); returns the
-    chosen F, its V and B and the choice."""
-    best = np.full(cands[0][0].shape, np.inf)
-    out, vo, bo = [np.array(c, np.float64, copy=True) for c in cands[0][:3]]
-    choice = np.zeros(best.shape, int)
-    for k, (F, V, B, _) in enumerate(cands):
-        mse = V + B * B
-        take = np.isfinite(mse) & np.isfinite(F) & (mse < best)
-        if exact is not None:
-            take &= ~exact
-        best = np.where(take, mse, best)
-        out, vo, bo = np.where(take, F, out), np.where(take, V, vo), np.where(take, B, bo)
-        choice[take] = k
-    return out, vo, bo, choice
 
 
 def boxfit_denoise(ao, se, mask, guide, radii=(2, 4, 8, 16), order=1, fine=True, bias_scale=1.0, verbose=False):
@@ -284,17 +250,23 @@ def boxfit_lepski(ao, se, mask, guide, radii=(2, 4, 8, 16), kappa=2.0, fine=True
 
 def pilot_bias_denoise(ao, se, mask, guide, radii=(3, 6, 12), rho_scale=0.5, debias=True, verbose=False,
                        min_rho=2, smooth_what="square", report_raw=False, iterations=1, debias_scale=1.0,
-                       pilot="today", with_ds=False, add_pilot_bias=False, spread=None):
+                       pilot="today", with_ds=False, add_pilot_bias=False, spread=None, fine_bandwidths=(1.25, 2.5),
+                       fine_radius=3, fine="today"):
     """Box fits whose bias is the fit of today's denoised map (a pilot with its detail) less the pilot,
     its square debiased by the pilot's variance and averaged over a window of radius rho_scale R."""
     from bench.prototypes.multiscale import fine_all
 
     mask = mask & guide.covered
     island = np.where(mask, guide.island, -1)
-    fc, var, exact, _ = fine_all(ao, se, mask, guide)
+    if fine == "today":
+        fc, var, exact, _ = fine_all(ao, se, mask, guide, bandwidths=fine_bandwidths, radius=fine_radius)
+    else:
+        from bench.prototypes.atrous import atrous_fine
+        fc, var, exact, _ = atrous_fine(ao, se, mask, guide, levels=fine)
+        fine_bandwidths = [f"a{lev + 1}" for lev in range(fine)]
     y = np.where(mask, ao, 0).astype(np.float64)
     cands = [(y, var, np.zeros_like(y), "raw")]
-    for (F, V, B, L), b in zip(fc, (1.25, 2.5)):
+    for (F, V, B, L), b in zip(fc, fine_bandwidths):
         cands.append((F, V, B, f"fine {b}"))
     # the pilot: today's choice among these
     P, VP, BP, _ = select(cands, exact)

@@ -86,11 +86,22 @@ def metrics(ao, se, ref, guide, mask=None):
 def today(ao, se, mask, guide):
     from core.post import denoise as D
 
-    out, err, _ = D.denoise(ao, se, mask, guide)
+    out, err, _ = D.denoise(ao, se, mask, guide, shapes=())
     return out, err
 
 
-FILTERS = {"raw": lambda ao, se, mask, guide: (ao, se), "today": today}
+def _core(**kw):
+    def f(ao, se, mask, guide):
+        from core.post import denoise as D
+
+        out, err, info = D.denoise(ao, se, mask, guide, **kw)
+        print("choice", np.bincount(info.choice[mask], minlength=1 + len(info.bandwidths) + len(info.shapes)))
+        return out, err
+    return f
+
+
+FILTERS = {"raw": lambda ao, se, mask, guide: (ao, se), "today": today, "core": _core(),
+           "core25": _core(bandwidths=(2.5,)), "core20": _core(bandwidths=(2.0,))}
 
 
 def run(filters, resolutions, scenes, samples=16, seed=1, cache=Path("/var/tmp/denoise-cache")):
@@ -223,6 +234,17 @@ FILTERS.update({"pb": _pb(), "pb1": _pb(rho_scale=1.0), "pbmean": _pb(smooth_wha
                           radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
                 "v2one": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, iterations=1,
                              radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4))),
+                **{f"v2f{i}": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, iterations=1, fine_bandwidths=fb,
+                                  fine_radius=fr, radii=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3),
+                                                         (4, 24), (24, 4)))
+                   for i, (fb, fr) in enumerate((((1.25, 2.5), 3), ((1.0, 1.8), 2), ((1.5,), 2), ((1.25,), 2), ((2.0,), 3),
+                                                   ((2.5,), 3), ((1.25, 2.5), 2)))},
+                **{f"shp{k}": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, fine_bandwidths=(2.5,), radii=r)
+                   for k, r in dict(A=(3, 6, 12, 24, (1, 6), (6, 1), (2, 12), (12, 2), (3, 12), (12, 3), (4, 24), (24, 4)),
+                                    B=(6, 12, (2, 12), (12, 2), (4, 24), (24, 4)), C=(4, 12, (2, 12), (12, 2)),
+                                    D=(6, 18, (2, 12), (12, 2)), E=(4, 8, 16, (2, 8), (8, 2), (3, 16), (16, 3))).items()},
+                **{f"at{L}": _pb(rho_scale=1.0, debias_scale=0.5, spread=0.003, fine=L,
+                                 radii=(6, 12, (2, 12), (12, 2), (4, 24), (24, 4))) for L in (1, 2)},
                 "rectb": _pb(rho_scale=1.0, debias_scale=0.5, add_pilot_bias=True,
                              radii=(3, 6, 12, (1, 6), (6, 1), (2, 12), (12, 2)))})
 

@@ -7,8 +7,8 @@ workload through the core's public calls: the bench's Suzanne scene as an image 
 two worker processes, AO and thickness maps together, face corners, denoised, and the
 selected-to-active terrain. Its cost is the CPU time of the process and every process it started
 (the worker processes: ``RUSAGE_CHILDREN`` of this one, which waits for them all), so that the
-machine's other load changes it little; runs of the two trees alternate (before, after, before, ...),
-and the result is each pair's ratio after / before and their median. Wall times and the load are
+machine's other load changes it little; runs of the two trees alternate, each first in every other
+pair (before, after, after, before, ...), and the result is each pair's ratio after / before and their median. Wall times and the load are
 printed beside them.
 """
 
@@ -94,8 +94,14 @@ def main(argv=None):
         ratios = []
         print("pair  before CPU s  after CPU s  ratio  (wall before, after)  load", flush=True)
         for k in range(args.pairs):
-            ca, wa = run(tmp / "before", scene)
-            cb, wb = run(b, scene)
+            # ABBA: each tree runs first in every other pair, so a drift in the machine's load does not
+            # favour the one that runs second.
+            if k % 2 == 0:
+                ca, wa = run(tmp / "before", scene)
+                cb, wb = run(b, scene)
+            else:
+                cb, wb = run(b, scene)
+                ca, wa = run(tmp / "before", scene)
             ratios.append(cb / ca)
             print(f"{k + 1:4d}  {ca:12.2f}  {cb:11.2f}  {cb / ca:5.3f}  ({wa:.2f}, {wb:.2f})  "
                   f"{os.getloadavg()[0]:.1f}", flush=True)

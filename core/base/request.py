@@ -105,6 +105,9 @@ OPTIONS = (
            "the object alone)", choices=QUANTITIES),
     Option("quantities", "quantities", None, "rays", "several quantities from one bake (distinct names of "
            "'ao', 'thickness'); None: the one ``quantity``"),
+    Option("thickness_distance", "distance", 0.0, "rays", "how far a thickness map's rays look into the mesh "
+           "(world units); 0: max_distance where it is finite, else a twentieth of the target's size (its "
+           "bounding box's diagonal), as the bake's result metadata says"),
     # target
     Option("resolution", "resolution", (1024, 1024), "target", "(width, height) in texels, or one side",
            kinds=IMAGE),

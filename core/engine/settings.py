@@ -63,6 +63,7 @@ class BakeSettings:
     constant_answer: bool = False  # benchmarks only: no query reaches Embree (see core.tracing.tracer.Tracer)
     ground: object = None  # None, 'auto' or a world height (core.tracing.ground)
     quantity: str = "ao"  # 'ao' or 'thickness' (core.engine.thickness)
+    thickness_distance: float = 0.0  # a thickness lane's max_distance (core.engine.thickness.resolved); 0: none
 
     @property
     def tile_shape(self):
@@ -82,6 +83,9 @@ class BakeSettings:
         ``quantity`` (None: the request's base quantity). A bake of mesh corners is a 1 x 1 image
         without margin: its points are units of their own."""
         r = request
+        quantity = r.base_quantity if quantity is None else quantity
+        # a thickness map's rays look as far as its own distance (core.engine.thickness.resolved)
+        max_distance = r.thickness_distance if quantity == "thickness" and r.thickness_distance > 0 else r.max_distance
         w, h = (1, 1) if r.kind == "corners" else r.resolution
         samples = r.samples
         threads = cpu_count() if r.threads is None else r.threads
@@ -92,12 +96,12 @@ class BakeSettings:
         else:
             tile_height = tile_size
         return cls(width=w, height=h, samples=samples, min_samples=min(r.min_samples, samples),
-                   target_error=r.target_error, max_distance=r.max_distance, distribution=r.distribution,
+                   target_error=r.target_error, max_distance=max_distance, distribution=r.distribution,
                    source=r.source, margin=0 if r.kind == "corners" else r.margin, seed=r.seed, threads=threads,
                    ignore_backfaces=r.ignore_backfaces, falloff=r.falloff, tile_size=_tile_side(tile_size),
                    chunk_rays=r.chunk_rays, replicates=min(r.replicates, samples), tile_height=_tile_side(tile_height),
                    auto_tiles=auto_tiles, constant_answer=r.constant_answer, ground=r.ground,
-                   quantity=r.base_quantity if quantity is None else quantity)
+                   quantity=quantity, thickness_distance=r.thickness_distance)
 
     def fit_tiles(self, centres):
         """These settings with automatic tiles shrunk until no tile holds more than TILE_TRIANGLES

@@ -34,6 +34,12 @@ from ..engine.settings import SAMPLE_PIECE, TILE_SIDE, pattern_span
 NS_PER_RAY, NS_PER_TEXEL, NS_PER_TRIANGLE, FIXED_SECONDS = 168.0, 520.0, 3570.0, 0.075
 #: Wall time over CPU time on n cores, the bench's 2-thread bakes: 0.52-0.67 of the CPU time.
 PARALLEL_EFFICIENCY = 0.9
+#: Nanoseconds of CPU per covered texel of a denoised map (the surface guide and the filter: measured
+#: on the Suzanne scene, 64 samples, 256^2 and 512^2 in one thread, 6.7-7.1 us; bench.sections.estimate).
+NS_PER_DENOISED_TEXEL = 7000.0
+#: CPU seconds to start one worker process (an interpreter, numpy and embreex imported, its self-test):
+#: 0.31-0.40 measured on 2 shared cores (children's CPU time, 2 workers, three starts).
+WORKER_START_SECONDS = 0.35
 #: Bytes: per image texel (ao, stderr, samples, mask planes, the margin's work), a process's own, and
 #: per ray of a chunk in flight.
 BYTES_PER_TEXEL, BYTES_PER_PROCESS, BYTES_PER_CHUNK_RAY = 26, 150 << 20, 200
@@ -112,23 +118,58 @@ def parent_bytes(triangles, other_triangles=0):
 
 
 def estimate(covered_texels, samples, triangles, image_texels=None, threads=1, processes=1, chunk_rays=1 << 16,
-             occluder_triangles=0, highpoly_triangles=0):
+             occluder_triangles=0, highpoly_triangles=0, quantities=1, denoise=False, load=None, cpus=None,
+             starting=0):
     """The :class:`Cost` of a bake of ``covered_texels`` at ``samples`` each, holding ``triangles``
     (the target's; occluders' and high-poly meshes' given apart, or counted in ``triangles``, which
     costs their time the same and overstates their memory), on ``processes`` x ``threads``
-    (``image_texels``: the whole image, for the memory; the covered ones when not given)."""
+    (``image_texels``: the whole image, for the memory; the covered ones when not given).
+
+    ``quantities``: the maps baked from it (AO and thickness: 2; each its own rays, a thickness ray
+    costing about an AO ray, measured). ``denoise``: each map filtered (NS_PER_DENOISED_TEXEL a
+    covered texel). ``load``: the machine's load before the bake (runnable threads, the 1-minute load
+    average) on ``cpus`` cores: the bake's threads share the cores with it (:func:`cores_of`).
+    ``starting``: worker processes the bake starts first (none where the pool is running already,
+    core.execution.pool.pool_ready), WORKER_START_SECONDS of CPU each, side by side."""
     covered_texels, triangles = int(covered_texels), int(triangles)
     other = int(occluder_triangles) + int(highpoly_triangles)
-    rays = covered_texels * int(samples)
-    cpu = (NS_PER_RAY * rays + NS_PER_TEXEL * covered_texels + NS_PER_TRIANGLE * (triangles + other)) * 1e-9 \
-        + FIXED_SECONDS
+    quantities = max(1, int(quantities))
+    rays = covered_texels * int(samples) * quantities
+    # Every process that bakes tiles builds its own tables and Embree scenes: the triangles' share is
+    # paid once per process, side by side (a 524k-triangle terrain on 2 workers: twice the CPU).
+    cpu = (NS_PER_RAY * rays + NS_PER_TEXEL * covered_texels * quantities
+           + (NS_PER_DENOISED_TEXEL * covered_texels * quantities if denoise else 0.0)
+           + NS_PER_TRIANGLE * (triangles + other) * max(1, int(processes))) * 1e-9 + FIXED_SECONDS
     cores = max(1, int(threads) * int(processes))
-    seconds = cpu / cores / (PARALLEL_EFFICIENCY if cores > 1 else 1.0)
+    seconds = cpu / cores_of(cores, load, cpus) / (PARALLEL_EFFICIENCY if cores > 1 else 1.0)
+    if starting:
+        seconds += WORKER_START_SECONDS * int(starting) / cores_of(int(starting), load, cpus)
     image = covered_texels if image_texels is None else int(image_texels)
     memory = (BYTES_PER_TEXEL * image + int(processes) * process_bytes(triangles, occluder_triangles, highpoly_triangles)
               + (parent_bytes(triangles, other) if int(processes) > 1 else 0)
               + chunk_bytes(cores, chunk_rays, rays))
     return Cost(float(seconds), int(memory))
+
+
+def cores_of(threads, load=None, cpus=None):
+    """The cores ``threads`` busy threads get on ``cpus`` cores already running ``load`` runnable
+    threads (the load average): all they ask for on an idle machine, a fair share of the cores on a
+    busy one (threads x cpus / (load + threads), at most threads and cpus)."""
+    threads = max(1, int(threads))
+    if load is None or not cpus:
+        return threads
+    return max(min(threads, cpus, threads * cpus / (max(0.0, float(load)) + threads)), 0.05)
+
+
+def machine_load():
+    """(the 1-minute load average, the cores) of this machine, or (None, None) where the system does
+    not say (Windows)."""
+    import os
+
+    try:
+        return os.getloadavg()[0], os.cpu_count()
+    except (AttributeError, OSError):
+        return None, None
 
 
 def covered_fraction(uvs):
@@ -155,5 +196,5 @@ def estimate_bake(target, occluders=(), resolution=(1024, 1024), samples=256, th
                     highpoly_triangles=sum(m.triangle_count for m in highpoly))
 
 
-__all__ = ["Cost", "estimate", "estimate_bake", "bake_bytes", "covered_fraction", "process_bytes", "parent_bytes",
-           "scene_bytes", "chunk_bytes"]
+__all__ = ["Cost", "estimate", "estimate_bake", "bake_bytes", "covered_fraction", "cores_of", "machine_load",
+           "process_bytes", "parent_bytes", "scene_bytes", "chunk_bytes"]

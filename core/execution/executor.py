@@ -17,7 +17,7 @@ from ..engine.scheduler import Scheduler, run_all
 from . import cost as cost_mod
 from .dask import run_dask
 from .memory import memory_entry
-from .pool import pool_for
+from .pool import pool_for, pool_ready
 
 
 def auto_workers(triangles, cores=None, memory=None):
@@ -134,4 +134,5 @@ def usable_pool(remote, processes, threads):
         return f"worker processes could not be started ({e})"
 
 
-__all__ = ["auto_workers", "clamp_processes", "processes_of", "in_process", "worker_count", "run_tiles", "bake_tiles", "usable_pool"]
+__all__ = ["auto_workers", "clamp_processes", "processes_of", "in_process", "worker_count", "run_tiles", "bake_tiles",
+           "usable_pool", "pool_ready"]

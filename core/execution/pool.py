@@ -388,6 +388,14 @@ def pool_for(workers, threads, remote):
         return _POOL
 
 
+def pool_ready(workers, threads):
+    """Whether the persistent pool of ``workers`` processes of ``threads`` threads is running and
+    usable: the next bake of that shape starts no process (core.execution.cost prices a start)."""
+    pool = _POOL
+    return bool(pool is not None and not pool.broken and not pool.failed and len(pool.workers) == workers
+                and pool.threads == threads and all(w.alive for w in pool.workers))
+
+
 def shutdown():
     """End the pool's workers (the add-on's unregister, and the interpreter's exit)."""
     global _POOL
@@ -400,4 +408,4 @@ def shutdown():
 atexit.register(shutdown)
 
 
-__all__ = ["Pool", "pool_for", "shutdown", "boot", "AHEAD", "PROGRESS_STEPS"]
+__all__ = ["Pool", "pool_for", "pool_ready", "shutdown", "boot", "AHEAD", "PROGRESS_STEPS"]

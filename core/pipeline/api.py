@@ -56,6 +56,16 @@ def bake_ao(target, occluders=(), resolution=(1024, 1024), samples=256, *, highp
             progress=None, cancel=None, on_tile=None, on_rays=None, **options):
     """Bake ambient occlusion of ``target`` into a (H, W) texture over its UVs.
 
+    ``target`` may be a list of meshes (or a :class:`core.Atlas` of them): an atlas, every target
+    baked into the one image over its own UVs (:mod:`core.pipeline.atlas`). Each target is baked as
+    it would be alone with the others as occluders, and the texels they share go to the one covering
+    more of each (equal areas: the first by name); margins grow into empty texels only. The result
+    then has ``owner``, ``targets`` and ``record``; ``core.Atlas(targets, occluding=..., keep=record)``
+    says which targets occlude the others and keeps, from an earlier bake's ``record``, the texels of
+    every target whose fingerprint (its mesh, UVs and transform, the settings, the meshes within its
+    reach) did not change: the same bits as baking them again. ``highpoly`` and ``cage`` are then
+    lists with one entry per target, and so may ``bent_space`` be.
+
     With ``highpoly``, bake the AO of the high-poly meshes into the target's UVs instead (Blender's
     "Selected to Active"): each sample point of the target is moved to the high-poly surface by
     Cycles' rules and AO is evaluated there (:mod:`core.highpoly` says exactly how).

@@ -25,6 +25,7 @@ from ..engine.settings import BakeSettings
 from ..execution.worker import CountingScheduler
 from ..geometry.mesh import Mesh
 from ..targets.corners import vertex_bake
+from ..targets.atlas import AtlasBake
 from ..targets.texels import texel_bake
 from .prologue import Prologue, check
 
@@ -50,6 +51,9 @@ def scene_key(job):
     positions and triangles as sent (their dtypes and shapes too). The same key, the same scenes:
     the meshes are moved into the bake's frame by the same arithmetic on the same bits."""
     h = hashlib.blake2b(digest_size=20)
+    if job.get("kind") == "atlas":
+        h.update(b"atlas")
+        return h.hexdigest()
     for m in [job["target"]] + list(job["occluders"]):
         for name in ("positions", "triangles"):
             a = np.ascontiguousarray(m[name])
@@ -72,6 +76,13 @@ def build(job, cancel, progress):
     next bake; another (a Dask task's) keeps none."""
     key = job.get("scene")
     request = BakeRequest.from_dict(job["request"]).replace(threads=job["threads"])
+    if job.get("kind") == "atlas":  # several targets, each part set up when its first tile comes
+        _SCENE.clear()
+        bake, s = build_remote(job, request, cancel, _mesh)
+        bake.request_data = request.to_dict()  # the options this worker baked with, back in the report
+        shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
+        bake.trace_setup(shared, cancel)
+        return bake, shared, s.threads
     highpoly = job.get("highpoly")
     # Popped: the job holds nothing of the target past its use (its UVs go once the bake has its UV triangles).
     checked = check(request, _mesh(job.pop("target")), [_mesh(o) for o in job["occluders"]],
@@ -126,6 +137,26 @@ def dask_tile(token, job, key):
         totals = dict(rays=shared.rays, trace_seconds=shared.trace_seconds,
                       trace_cpu_seconds=shared.trace_cpu_seconds, counters=bake.start.counters())
     return vars(outs[0]), (os.getpid(), id(entry)), totals
+
+
+def build_remote(job, request, cancel, mesh):
+    """The atlas of ``job`` in a worker process (:func:`core.pipeline.remote.build`): an AtlasBake
+    whose parts are built from the job's meshes when their first tile comes."""
+    meshes = [mesh(d) for d in job["meshes"]]
+    quantities = request.all_quantities
+    s = BakeSettings.of(request)
+
+    def build(i):
+        p = job["parts"][i] if i in job["parts"] else job["parts"][str(i)]
+        req = request.replace(tile_size=tuple(p["tile"]))
+        checked = check(req, meshes[p["target"]], [meshes[k] for k in p["occluders"]],
+                        highpoly=None if p["highpoly"] is None else [meshes[k] for k in p["highpoly"]],
+                        cage=None if p["cage"] is None else meshes[p["cage"]])
+        pro = Prologue(checked, req, cancel)
+        bake = texel_bake(pro, BakeSettings.of(req), quantities, request.bent_normals, guide=job.get("guide", False))
+        return bake
+
+    return AtlasBake(build, s, job["planned"], keep_live=s.threads + 1), s
 
 
 __all__ = ["mesh_data", "scene_key", "forget", "build", "dask_tile"]

@@ -23,6 +23,11 @@ class BakeReport:
     points the automatic extrusion serves), ``matching_rays``, ``matching_rays_behind`` (met the
     high-poly from behind), ``missed_matching_rays``, ``missed_texels``, ``partly_missed_texels``,
     ``directions_per_point``, ``matching_seconds`` and ``matching_cpu_seconds`` (the matching's time).
+    Atlases (several targets into one image, :mod:`core.pipeline.atlas`): ``atlas`` (a dict: ``targets``,
+    ``baked`` and why (``why``), ``kept`` (and of those, ``held``: the
+    targets an earlier bake held that this one does not name), each target's ``reach`` and ``owned`` texels, ``shared_texels``,
+    ``unlimited_reach`` and its ``note``) and ``atlas_overlaps`` ([{``a``, ``b``, ``texels``}] per pair
+    of targets whose UVs overlap).
     Every bake: ``worker_memory`` (one entry per process that held the bake,
     :func:`core.execution.memory.memory_entry`: ``process`` 'parent' or 'worker N', ``rss``, ``peak``,
     ``held`` bytes, a worker's ``start``, ``ready``, ``tiles``, ``scene_reused`` and ``request``, the
@@ -54,6 +59,8 @@ class BakeReport:
     directions_per_point: int = None
     matching_seconds: float = None
     matching_cpu_seconds: float = None
+    atlas: dict = None
+    atlas_overlaps: list = None
     worker_memory: list = None
     warnings: list = None
 
@@ -132,6 +139,13 @@ class BakeResult:
 
     raw_ao, raw_stderr : with ``denoise``, the estimate and its error before the filter (``ao`` and
         ``stderr`` are then the denoised map and its error); None otherwise.
+    owner, targets, record : an atlas (a list of targets baked into one image) only, else None:
+        ``owner`` (H, W) int32, the index into ``targets`` of the target owning each covered and
+        margin texel, -1 elsewhere; ``targets`` the targets' names (the list's, then any target an
+        earlier bake held and this one kept); ``record`` the :class:`core.files.atlasrecord.AtlasRecord`
+        a rebake starts from (``keep=``). ``report['atlas']`` says which targets were baked and why,
+        which were kept, each target's reach; ``report['atlas_overlaps']`` the pairs of targets whose
+        UVs overlap, with their texel counts. See :mod:`core.pipeline.atlas`.
 
     The same type for every target. Mesh corners (:func:`core.bake_vertex_ao`): the arrays are per
     corner, (C,) (``bent`` (C, 3)), ``mask`` all true, and ``unit`` (C,) int64 names the sample point
@@ -158,6 +172,9 @@ class BakeResult:
     tiles: dict = None
     raw_ao: np.ndarray = None
     raw_stderr: np.ndarray = None
+    owner: np.ndarray = None
+    targets: tuple = None
+    record: object = None
 
     @property
     def rays_per_second(self):

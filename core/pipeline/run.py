@@ -28,6 +28,7 @@ import numpy as np
 from .._version import __version__
 from ..base.machine import cpu_count
 from ..engine.settings import BakeSettings, auto_tile_shape
+from ..engine.thickness import resolved as thickness_resolved
 from ..base.request import BakeRequest
 from ..execution.contracts import Remote
 from ..execution.executor import bake_tiles, clamp_processes, in_process, processes_of, worker_count
@@ -39,6 +40,7 @@ from ..highpoly.stage import finish_report
 from ..post import bent as bent_mod
 from ..post import denoise as denoise_mod
 from ..base.errors import MeshError, SettingsError
+from ..targets.atlas import Atlas
 from ..targets.corners import vertex_bake
 from ..targets.texels import ImageStore, texel_bake
 from . import remote
@@ -50,7 +52,15 @@ from .result import BakeReport, BakeResult, empty_reason
 def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=None, corners=None, progress=None,
         cancel=None, on_tile=None, on_rays=None):
     """Bake ``request`` (checked): {quantity: BakeResult}, one per quantity of
-    ``request.all_quantities``. The arguments are :func:`core.bake`'s."""
+    ``request.all_quantities``. The arguments are :func:`core.bake`'s. A list of targets (or a
+    :class:`core.targets.atlas.Atlas`) is an atlas (:mod:`core.pipeline.atlas`)."""
+    # a thickness map's distance, decided once from the target(s), before any worker sees the request
+    request = thickness_resolved(request, target.targets if isinstance(target, Atlas) else target)
+    if isinstance(target, (list, tuple, Atlas)):
+        from .atlas import run_atlas, run_udim_atlas
+
+        return (run_udim_atlas if request.kind == "udim" else run_atlas)(request, Atlas.of(target), occluders, highpoly=highpoly, cage=cage, bent_space=bent_space,
+                         progress=progress, cancel=cancel, on_tile=on_tile, on_rays=on_rays, remote=REMOTE)
     if request.kind == "udim":
         return _udim(request, target, occluders, highpoly, cage, bent_space, progress, cancel, on_tile, on_rays)
     t_start = time.perf_counter()

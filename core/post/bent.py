@@ -201,20 +201,22 @@ def encode(bent, filled, tangent):
     return rgb
 
 
-def dilate_directions(bent, mask, margin, threads=1):
+def dilate_directions(bent, mask, margin, threads=1, owner=None, rank=None):
     """Extend the covered texels' unit vectors into the margin (per component, then normalised).
 
     Returns (bent, filled): the dilated (H, W, 3) float32 vectors and which texels hold one (the
     rest hold 0). The three components share the margin's rings
     (:func:`core.geometry.margin.margin_texels`), and only the covered and margin texels are normalised, one
     component plane at a time: a 4096^2 image took 5.4-7.7 s in a bake when each component was
-    dilated into a copy of the image, stacked, and normalised over the whole image.
+    dilated into a copy of the image, stacked, and normalised over the whole image. ``owner``,
+    ``rank``: several targets in one image, each margin texel from its own target's texels
+    (:func:`core.geometry.margin.dilate`; ``owner`` is not changed here).
     """
     if margin <= 0:
         return bent, mask.copy()
     h, w = mask.shape
     flat = np.ascontiguousarray(bent, np.float32).reshape(-1)
-    idx, vals = margin_texels(bent, mask, margin, threads)
+    idx, vals, *_ = margin_texels(bent, mask, margin, threads, owner=owner, rank=rank)
     vals = vals.astype(np.float32, copy=False)
     cov = np.flatnonzero(mask)
     # The covered texels, then the margin's: component c of texel t is flat[3 t + c] = flat[c:][3 t],

@@ -97,7 +97,8 @@ def _add_setting(parser, setting):
         kwargs.setdefault("default", default)
         kwargs.update(type=float, metavar="D" if setting.kind == "distance" else "X")
     else:
-        kwargs.update(default=default, metavar="NAME")
+        kwargs.setdefault("default", default)
+        kwargs["metavar"] = "NAME"
     parser.add_argument(option, **kwargs)
 
 

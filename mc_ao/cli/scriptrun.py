@@ -64,6 +64,13 @@ class ScriptRun:
         result = outcome.result
         for note in outcome.notes:
             print(f"bake_ao: {name}: warning: {escape(note)}", file=sys.stderr)
+        if result is not None and getattr(job, "atlas", False):
+            from ..atlas import summary as atlas_summary
+
+            print(f"bake_ao: {name}: {escape(atlas_summary(job, result))}", file=sys.stderr)
+        if result is not None and getattr(job, "quantity", "ao") == "thickness" and outcome.baked:
+            text = baking.thickness_summary(settings, result).replace("set Distance", "set --max-distance")
+            print(f"bake_ao: {name}: thickness map: {text}", file=sys.stderr)
         if result is not None and job.selected_to_active:
             print(f"bake_ao: {name}: from {', '.join(escape(h.name) for h in job.highpoly)}"
                   f"{baking.miss_summary(result)}", file=sys.stderr)
@@ -115,7 +122,12 @@ def bake(plan, args, summary):
         if not save_baked(args.save, settings, [escape(name) for name in baked], summary):
             failures += 1
     table.show(rows)
-    print(f"bake_ao: baked {len(baked)} of {len(objects)} objects" + (f", {failures} failed" if failures else ""))
+    # A shared image (an atlas) is one job of several objects: the line counts its objects.
+    members = {job.object_name: list(job.names) for job in plan.jobs if getattr(job, "atlas", False)}
+    done = [n for name in baked for n in members.get(name, [name])]
+    total = [n for name in objects for n in members.get(name, [name])]
+    into = f" into {len(members)} image{'s' if len(members) != 1 else ''}" if members else ""
+    print(f"bake_ao: baked {len(done)} of {len(total)} objects{into}" + (f", {failures} failed" if failures else ""))
     if failures and summary.error is None:
         summary.error = f"{failures} of {len(objects)} objects failed"
     return 1 if failures else 0

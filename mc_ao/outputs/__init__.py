@@ -6,6 +6,7 @@
 | ``error_map`` | error_map.py | the standard error in "<image>_stderr" and ``<stem>_stderr.exr`` |
 | ``bent_normals`` | bent_normals.py | the bent normals in "<object>_BentNormal" and its files |
 | ``channel`` | channel.py | the map in one channel of an existing image (Channel, Into) and a copy of its file |
+| ``id_map`` | id_map.py | a shared image's ID map: "<image>_ID", each object's texels in its own colour |
 | ``color_attribute`` | color_attribute.py | the AO in a colour attribute and a PLY file |
 
 ``maps.py`` is what every image kind shares (a kind of map chooses its plane of the core's result,
@@ -21,10 +22,11 @@ from .bent_normals import BentNormalsOutput
 from .channel import ChannelOutput
 from .color_attribute import ColorAttributeOutput
 from .error_map import ErrorMapOutput
+from .id_map import IdMapOutput
 from .image import ImageOutput
 
 #: Every kind of output, in the order their files are planned and written.
-KINDS = (ImageOutput, ErrorMapOutput, BentNormalsOutput, ChannelOutput, ColorAttributeOutput)
+KINDS = (ImageOutput, ErrorMapOutput, BentNormalsOutput, IdMapOutput, ChannelOutput, ColorAttributeOutput)
 
 
 def kinds_for(settings):

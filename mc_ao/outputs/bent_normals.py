@@ -14,6 +14,9 @@ class BentNormalsOutput(MapOutput):
         return settings.bent_normals and not settings.vertex_colors
 
     def image_name(self, job):
+        if getattr(job, "atlas", False):  # a shared image's: "<image>_BentNormal"
+            return self.settings.quantity_image_name_for(job.object_name, "ao", self.max_name_bytes(), "_BentNormal",
+                                                         root=True)
         return self.settings.bent_image_name_for(job.object_name, self.max_name_bytes())
 
     def source(self, result):

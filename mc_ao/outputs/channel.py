@@ -122,7 +122,7 @@ class ChannelOutput(OutputKind):
             reason = images.unusable_reason(image)
             if reason is not None:
                 raise images.ImageError(reason)
-            w, h = self.settings.size
+            w, h = getattr(job, "size", None) or self.settings.size  # a shared image's bake: its own size
             if tuple(image.size) != (w, h):
                 raise images.ImageError(f"image {image.name!r} is {image.size[0]}x{image.size[1]}, not the bake's "
                                         f"{w}x{h}: bake at its size to write into its {self.settings.channel} channel")

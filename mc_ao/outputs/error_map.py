@@ -19,6 +19,9 @@ class ErrorMapOutput(MapOutput):
         return settings.error_map and not settings.vertex_colors
 
     def image_name(self, job):
+        if getattr(job, "atlas", False):  # a shared image's: "<image>_stderr"
+            return self.settings.quantity_image_name_for(job.image_name, "ao", self.max_name_bytes(), "_stderr",
+                                                         root=True)
         return self.settings.quantity_image_name_for(job.object_name, getattr(job, "quantity", "ao"), self.max_name_bytes(),
                                                      "_stderr")
 

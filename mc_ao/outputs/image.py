@@ -9,6 +9,7 @@ class ImageOutput(MapOutput):
 
     name = "image"
     what = "own image"
+    keeps_record = True
 
     @classmethod
     def applies(cls, settings):
@@ -25,6 +26,11 @@ class ImageOutput(MapOutput):
                     f"into {job.image_name!r} in {result.seconds:.2f} s, {per:.0f} samples per texel, "
                     f"{rate:.2f} M rays/s{self.occlusion_words(job, result)}")
         h, w = result.ao.shape
+        if getattr(job, "atlas", False):
+            from .. import atlas
+
+            return (f"{job.object_name}: {atlas.summary(job, result)}: {w}x{h} into {job.image_name!r} in "
+                    f"{result.seconds:.2f} s, {per:.0f} samples per texel, {rate:.2f} M rays/s")
         sources = f" from {', '.join(s.name for s in job.highpoly)}" if getattr(job, "highpoly", None) else ""
         return (f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r}{self.channel_words(job)} in "
                 f"{result.seconds:.2f} s, {per:.0f} samples per texel, {rate:.2f} M rays/s"

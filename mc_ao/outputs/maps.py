@@ -23,6 +23,9 @@ class MapOutput(OutputKind):
     content = "ao"
     #: The image's float buffer: None for the settings' 32-bit Float, else always this.
     float_image = None
+    #: Whether this map's image and files keep the record of a shared image's bake (mc_ao.atlas):
+    #: the map of the bake's own quantity.
+    keeps_record = False
 
     # -- what it is ------------------------------------------------------------------------------
 
@@ -68,10 +71,24 @@ class MapOutput(OutputKind):
         return files.get(self.image_name(job), [])
 
     def planned(self, job, files):
-        return [t[0] for entry in self.entries(job, files) for t in self.targets(entry)]
+        record = self.record_path(job, files)
+        return [t[0] for entry in self.entries(job, files) for t in self.targets(entry)] + ([record] if record else [])
+
+    def record_path(self, job, files):
+        """Where the record of a shared image's bake goes beside its files (the first one's stem), or None."""
+        if not (self.keeps_record and getattr(job, "atlas", False)) or self.settings.use_udim:
+            return None
+        entries = self.entries(job, files)
+        if not entries:
+            return None
+        return corelink.load("files.atlasrecord").sidecar_path(entries[0].path)
 
     def writes(self, job, results, files, metadata):
         out = []
+        record = getattr(results[self.quantity], "record", None)
+        path = self.record_path(job, files)
+        if path is not None and record is not None:
+            out.append(FileWrite(path, lambda target, record=record: record.write_to(target), self.name, planned=path))
         for tile, per_tile in udim_tiles.split(results, self.quantity, self.settings):
             own = udim_tiles.tile_entries(self.entries(job, files), tile)
             result = per_tile[self.quantity]
@@ -94,6 +111,8 @@ class MapOutput(OutputKind):
         if self.settings.use_udim:
             w, h = self.settings.size
             udim_tiles.check(name, w, h)
+        elif getattr(job, "atlas", False):
+            images.check_shared(name)
         else:
             images.check_target(name)
 
@@ -108,8 +127,33 @@ class MapOutput(OutputKind):
             return
         plane = self.plane(results)
         h, w = plane.shape[:2]
+        if getattr(job, "atlas", False):
+            self.store_shared(run, job, name, plane, results[self.quantity])
+            return
         run.image(name, w, h, self.float_buffer())
         images.finish_image(name, plane, self.float_buffer())
+
+    def store_shared(self, run, job, name, plane, result):
+        """A shared image's map (mc_ao.atlas): a new image as any map's; an existing one keeps its size,
+        depth, colour space and every texel the bake did not reach, which the report says."""
+        import bpy
+
+        from .. import images
+
+        h, w = plane.shape[:2]
+        existed = bpy.data.images.get(name) is not None
+        run.image(name, w, h, self.float_buffer())
+        if not existed:
+            images.finish_image(name, plane, self.float_buffer())
+        else:
+            image = images.store_shared(name, plane, result.owner >= 0)
+            if self.keeps_record:
+                report = (result.report or {}).get("atlas") or {}
+                others = [n for n in report.get("kept", []) if n not in job.names]
+                held = f" and the texels of {', '.join(others)}" if others else ""
+                run.report("INFO", f"{job.object_name}: image {name!r} kept its {images.describe(image)}{held}")
+        if self.keeps_record and getattr(result, "record", None) is not None:
+            images.keep_record(name, result.record.to_bytes())
 
     def keep(self, run, job, results, saved):
         from . import store

@@ -96,7 +96,7 @@ def test_two_objects_into_one_image_grey_the_button_out(bpy, scene):
     floor, box = floor_and_box(bpy)
     select_only(bpy, floor, box)
     scene.mc_ao.image_name = "Shared"
-    assert "would both bake into image 'Shared': put {object} into the Image name" in reason(bpy)
+    assert "would both bake into image 'Shared': put {object} into the Image name, or set Images to One for All" in reason(bpy)
     scene.mc_ao.image_name = "{object}_Shared"
     assert bpy.ops.object.mc_ao_bake.poll()
 
@@ -319,3 +319,72 @@ def test_a_preview_in_selected_to_active_shows_the_low_polys_ao_alone(bpy, scene
     assert preview.preview_objects(bpy.context) == [low]
     scene.mc_ao.use_selected_to_active = False
     assert set(preview.preview_objects(bpy.context)) == {low, high}
+
+
+# -- the estimate prices every setting ----------------------------------------------------------------
+
+def test_the_estimate_prices_every_setting_that_changes_the_work(bpy, scene, monkeypatch):
+    """Denoise, a second quantity, UDIM tiles (every tile's texels) and the machine's load each change
+    the panel's estimate, in the direction the work does; adaptive sampling says it is the longest."""
+    from mc_ao import baking, corelink, panel
+    from mc_ao.settings import BakeSettings
+
+    cost_mod = corelink.load("execution.cost")
+    monkeypatch.setattr(cost_mod, "machine_load", lambda: (0.0, 2))
+    floor, _ = floor_and_box(bpy)
+    uv = floor.data.uv_layers.active.data
+    for i in range(len(uv)):
+        uv[i].uv = (uv[i].uv[0] * 2, uv[i].uv[1])  # over tiles 1001 and 1002
+    select_only(bpy, floor)
+    s = scene.mc_ao
+    s.resolution, s.samples, s.processes, s.threads = 512, 64, 1, 2
+
+    def seconds(**values):
+        settings = BakeSettings.from_properties(s, **values).in_effect()
+        return baking.bake_cost(settings, [floor], threads=2).seconds
+
+    plain = seconds()
+    assert seconds(denoise=True) > plain * 1.05
+    assert seconds(quantity=("AO", "THICKNESS")) > plain * 1.6
+    assert seconds(use_udim=True) > plain * 1.6  # two tiles' texels, not the one square's
+    assert seconds(samples=256) > plain * 3
+    monkeypatch.setattr(cost_mod, "machine_load", lambda: (14.0, 2))
+    assert seconds() == pytest.approx(8 * plain, rel=0.01)  # 2 of 16 runnable threads' share
+    s.target_error = 0.01
+    text, _ = panel.cost_text(bpy.context, BakeSettings.from_properties(s).in_effect(), [floor])
+    assert text.startswith("Estimate: at most ") or text.startswith("Estimate: under a second")
+
+
+def test_the_estimate_learns_from_the_bakes_of_the_session(bpy, scene, monkeypatch, capfd):
+    """A bake that took twice its estimate moves the next estimates half way there (geometrically);
+    bakes under half a second teach nothing."""
+    from mc_ao import baking
+
+    monkeypatch.setitem(baking._CALIBRATION, "factor", 1.0)
+    baking.learn_from_bake(10.0, 40.0)
+    assert baking._CALIBRATION["factor"] == pytest.approx(2.0)
+    baking.learn_from_bake(0.2, 4.0)
+    assert baking._CALIBRATION["factor"] == pytest.approx(2.0)
+    cost = baking.corelink.load("execution.cost").Cost(3.0, 100)
+    assert baking.calibrated(cost) == type(cost)(6.0, 100)
+    for _ in range(20):
+        baking.learn_from_bake(1.0, 1000.0)
+    assert baking._CALIBRATION["factor"] == 5.0  # never beyond 5x either way
+
+
+def test_a_thickness_summary_says_which_distance_it_used(bpy, scene, capfd):
+    """Thickness at the default Distance (unlimited): the core takes a twentieth of the object's size,
+    and the summary says how far, in the scene's units; with a Distance set, that one."""
+    from mc_ao import operators
+
+    _, box = floor_and_box(bpy)
+    select_only(bpy, box)
+    scene.mc_ao.quantity = {"THICKNESS"}
+    result, error, out = run(bpy, capfd)
+    assert result == {"FINISHED"}, out
+    # the 1 x 1 x 1 box: diagonal sqrt(3), a twentieth of it 8.66 cm
+    assert operators.last_outcome[1].endswith("; rays into the mesh up to 8.66 cm (a twentieth of its size: set "
+                                              "Distance for another)"), operators.last_outcome
+    scene.mc_ao.max_distance = 0.5
+    run(bpy, capfd)
+    assert operators.last_outcome[1].endswith("; rays into the mesh up to 50 cm"), operators.last_outcome

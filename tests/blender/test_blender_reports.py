@@ -113,6 +113,18 @@ def test_a_clean_bake_ends_with_its_summary_as_info(bpy, scene):
 
 # -- the panel ------------------------------------------------------------------------------------
 
+@pytest.fixture(autouse=True)
+def idle_machine(monkeypatch):
+    """The estimates here as the bare model gives them: an idle machine (the load average changes
+    between two reads on a shared one), the worker pool running (no start priced), no calibration by
+    earlier bakes; tests/blender/test_blender_panel.py and tests/test_estimate.py price those."""
+    from mc_ao import baking, corelink
+
+    monkeypatch.setattr(corelink.load("execution.cost"), "machine_load", lambda: (None, None))
+    monkeypatch.setattr(corelink.load("execution.executor"), "pool_ready", lambda *_: True)
+    monkeypatch.setitem(baking._CALIBRATION, "factor", 1.0)
+
+
 class FakeLayout:
     """Records a panel's labels and their icons (a panel cannot be drawn without a window)."""
 

@@ -76,3 +76,11 @@ def test_the_operator_counts_an_object_with_two_quantities_once(bpy, scene):
         kind, text = reports[-1]
         assert kind == "INFO" and text.startswith(f"AO bake: {words} (AO and thickness) in "), text
         assert operators.last_outcome == reports[-1]
+
+
+def test_a_thickness_map_at_its_defaults_says_its_distance(tmp_path):
+    proc = script(SUZANNE, "--objects", "Suzanne", "--quantity", "thickness", "--resolution", "16", "--samples", "4",
+                  "--output", str(tmp_path), "--quiet", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert re.search(r"bake_ao: Suzanne: thickness map: rays into the mesh up to [0-9.]+ cm \(a twentieth of its "
+                     r"size: set --max-distance for another\)", proc.stderr), proc.stderr

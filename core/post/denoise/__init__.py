@@ -53,6 +53,7 @@ from .guide import GUIDE_TILE, RADIUS, SurfaceGuide, surface_guide, tile_guide
 from .filter import (BAND_ROWS, BANDWIDTHS, BIAS_SCALE, NORMAL_SHARPNESS, PILOT_BANDWIDTH, PILOT_RADIUS, RANGE_FLAT,
                      RANGE_SIGMAS, SEGMENT_GAP, DenoiseInfo, denoise)
 from .vertices import VERTEX_BANDWIDTHS, denoise_vertices
+from .wide import FLATNESS, PILOT_DEBIAS, SHAPES
 from .udim import denoise_udim, udim_canvas, udim_guide
 
 __all__ = [

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .guide import RADIUS
+from .wide import SHAPES, WideFits, choose_wide, groups
 
 
 #: Candidate bandwidths, in texels of world size (the raw value is a candidate too). A third between
@@ -45,13 +46,15 @@ SEGMENT_GAP = 16
 @dataclass
 class DenoiseInfo:
     """What :func:`denoise` chose: ``choice`` (H, W) int8, the candidate each texel took (0: its raw
-    value, k: bandwidth ``bandwidths[k - 1]``); ``variance`` and ``bias`` (H, W) float32, the parts of
-    the reported error (stderr^2 = variance + bias^2)."""
+    value; k <= len(bandwidths): bandwidth ``bandwidths[k - 1]``; beyond, a wide fit over one of the
+    rectangles ``shapes[k - 1 - len(bandwidths)]``, a group of :mod:`.wide`'s shapes); ``variance``
+    and ``bias`` (H, W) float32, the parts of the reported error (stderr^2 = variance + bias^2)."""
 
     choice: np.ndarray
     variance: np.ndarray
     bias: np.ndarray
     bandwidths: tuple
+    shapes: tuple = ()
 
 
 class _Features:
@@ -425,7 +428,8 @@ def _trusted_zeros(F, var, r=2):
 
 def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, normal_sharpness=NORMAL_SHARPNESS,
             range_sigmas=RANGE_SIGMAS, range_flat=RANGE_FLAT, pilot_bandwidth=PILOT_BANDWIDTH,
-            bias_scale=BIAS_SCALE, margin=0, threads=2, neighbours="surface", use_error=True, use_bias=True):
+            bias_scale=BIAS_SCALE, margin=0, threads=2, neighbours="surface", use_error=True, use_bias=True,
+            shapes=SHAPES):
     """Denoise a baked AO map over the surface; return it with its standard error.
 
     Parameters
@@ -451,6 +455,8 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     use_error, use_bias : off only in the tests that break the filter on purpose: without the error
         every texel takes the widest candidate whatever its standard error; without the bias the
         reported error is the propagated variance alone.
+    shapes : the wide candidates' rectangles (half-widths in texels along x and y; :mod:`.wide`), taken
+        after the fine candidates with the fine result as their pilot; () for the fine stage alone.
 
     Returns
     -------
@@ -551,6 +557,15 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
     for k in range(K):
         take = choice == k + 1
         out[take], varo[take], bias[take] = Fk[k][take], Vark[k][take], Bk[k][take]
+    shapes = tuple(tuple(int(r) for r in sh) for sh in shapes) if use_halo and use_error else ()
+    if shapes:
+        # The wide candidates, with the fine result as their pilot (its detail tells their bias).
+        fits = WideFits(y, var, mask, np.where(mask, guide.island, -1), guide.normal, out, varo, shapes=shapes)
+        best = (varo + bias * bias).astype(np.float32)
+        bias2 = (bias * bias).astype(np.float32)
+        sign = np.sign(bias).astype(np.float32)
+        choose_wide(best, out, varo, bias2, choice, exact, mask, fits, K + 1, threads=threads)
+        bias = np.where(choice > K, np.sqrt(bias2), np.abs(bias) * sign).astype(np.float32)
     out = np.clip(out, 0.0, 1.0)
     se = np.sqrt(varo + bias * bias)
     res = np.where(mask, out, np.asarray(ao, np.float32)).astype(np.float32)
@@ -560,7 +575,8 @@ def denoise(ao, stderr, mask, guide, *, bandwidths=BANDWIDTHS, radius=RADIUS, no
         dilate(res, mask, int(margin), threads=threads, out=res)
     info = DenoiseInfo(choice=np.where(mask, choice, 0).astype(np.int8),
                        variance=np.where(mask, varo, 0).astype(np.float32),
-                       bias=np.where(mask, bias, 0).astype(np.float32), bandwidths=tuple(bws))
+                       bias=np.where(mask, bias, 0).astype(np.float32), bandwidths=tuple(bws),
+                       shapes=groups(shapes))
     return res, se, info
 
 

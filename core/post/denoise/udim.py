@@ -75,7 +75,7 @@ def denoise_udim(tile_maps, guide, margin=0, **kw):
         if margin:
             dilate(a, mask[b], int(margin), out=a)
         part = DenoiseInfo(choice=info.choice[b].copy(), variance=info.variance[b].copy(), bias=info.bias[b].copy(),
-                           bandwidths=info.bandwidths)
+                           bandwidths=info.bandwidths, shapes=info.shapes)
         result[t] = (a, err[b].copy(), part)
     return result
 
