@@ -126,7 +126,17 @@ def sobol_uint32(indices, dims):
 # Owen scrambling
 # ---------------------------------------------------------------------------------------------
 
-_REV16 = np.array([int(f"{i:016b}"[::-1], 2) for i in range(1 << 16)], dtype=np.uint16)
+def _reversed_16_bits():
+    """Every 16-bit value with its bits reversed, as a table: 16 array passes (a Python loop over
+    the 65536 values cost a few tenths of a second at every import, in every worker process)."""
+    i = np.arange(1 << 16, dtype=U32)
+    r = np.zeros(1 << 16, dtype=U32)
+    for b in range(16):
+        r |= ((i >> b) & 1) << (15 - b)
+    return r.astype(np.uint16)
+
+
+_REV16 = _reversed_16_bits()
 
 
 def reverse_bits_uint32(x):
