@@ -131,9 +131,6 @@ def e2e(installed, tmp_path, how):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.xfail(strict=True, reason="worker processes boot the core as top-level 'core' (the worker boot "
-                                       "that imports it under the parent's name is trust's, pending): remove "
-                                       "this marker when it lands")
 def test_installed_core_bakes_in_worker_processes_the_same_bits(installed, tmp_path):
     out = e2e(installed, tmp_path, "processes")
     assert out["2"]["warnings"] == [] and len(out["2"]["processes"]) > 1, out["2"]  # no fallback to threads
