@@ -41,6 +41,8 @@ class Pick:
         high-poly objects (with ``match_suffix`` the low-poly ones); empty: the selection.
     active_name : the low-poly named (``--active``); None: the active object.
     match_suffix : ``(HIGH, LOW)``: Selected to Active for every pair <base>HIGH, <base>LOW.
+    match_collections : Selected to Active for every low-poly ``names`` names, from the other objects of
+        its own collection.
     script : the script's pick: with nothing bakeable selected and nothing named it bakes every mesh
         of the view layer (the operator refuses), the objects it bakes are the "Selected" occluders
         (the operator's: its selection), a cage object must be in the view layer, and its errors say
@@ -52,6 +54,7 @@ class Pick:
     names: tuple = ()
     active_name: str = None
     match_suffix: tuple = None
+    match_collections: bool = False
     script: bool = False
 
 
@@ -144,6 +147,8 @@ def _selected_to_active(settings, pick, view_layer):
     choice = Choice(settings, view_layer, [])
     if pick.match_suffix:
         pairs = _suffix_pairs(pick, view_layer, choice.notes)
+    elif pick.match_collections:
+        pairs = _collection_pairs(pick, view_layer, cage)
     else:
         low = _named(view_layer, [pick.active_name], "object")[0] if pick.active_name is not None else pick.active
         if pick.names:
@@ -173,6 +178,26 @@ def _selected_to_active(settings, pick, view_layer):
         choice.targets.append(low)
         choice.sources[low.name] = group
     return choice
+
+
+def _collection_pairs(pick, view_layer, cage):
+    """[(low-poly, [high-poly])] of --match-collections: each low-poly ``pick.names`` names with the other
+    objects with a surface in its own collections (their direct members, in name order), less the other
+    low-poly objects and the cage. A low-poly whose collections hold none is an error naming it."""
+    lows = _named(view_layer, pick.names, "object")
+    layer = view_layer.objects
+    skip = {o.name for o in lows} | ({cage.name} if cage is not None else set())
+    pairs = []
+    for low in lows:
+        highs = sorted({o.name: o for c in low.users_collection for o in c.objects
+                        if o.name not in skip and o.name in layer and o.type in GEOMETRY_TYPES}.values(),
+                       key=lambda o: o.name)
+        if not highs:
+            where = ", ".join(repr(c.name) for c in low.users_collection) or "no collection"
+            raise ChoiceError(f"{low.name} has no high-poly objects: its collection ({where}) holds no other object "
+                              "with a surface to bake from")
+        pairs.append((low, highs))
+    return pairs
 
 
 def _suffix_pairs(pick, view_layer, notes):

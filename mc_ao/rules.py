@@ -132,6 +132,13 @@ RULES = (
     Rule("match_suffix", lambda v: bool(v.match_suffix) and (not all(v.match_suffix)
                                                             or v.match_suffix[0] == v.match_suffix[1]),
          "needs two different, non-empty suffixes, not {v.match_suffix[0]!r} and {v.match_suffix[1]!r}", script=True),
+    Rule("match_collections", lambda v: v.match_collections and bool(v.match_suffix),
+         "pairs each low-poly with the objects of its collection; {match_suffix} pairs them by name: give one",
+         script=True),
+    Rule("match_collections", lambda v: v.match_collections and not v.objects,
+         "needs {objects}: the low-poly objects, each baked from the other objects of its collection", script=True),
+    Rule("active", lambda v: v.match_collections and v.active is not None,
+         "names one low-poly; with {match_collections}, {objects} names the low-poly objects", script=True),
     Rule("active", lambda v: bool(v.match_suffix) and v.active is not None,
          "names one low-poly; with {match_suffix}, {objects} names the low-poly objects", script=True),
     Rule("cage", lambda v: bool(v.match_suffix) and bool(v.cage),

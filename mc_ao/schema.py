@@ -397,6 +397,10 @@ OPTIONS = (
     Option("match_suffix", "bake each object named <base>HIGH onto <base>LOW (e.g. _high _low: Chair_high onto "
            "Chair_low), one image per low-poly; implies --selected-to-active", shape="pair",
            metavar=("HIGH", "LOW"), section="selected_to_active"),
+    Option("match_collections", "bake each low-poly that --objects names from the other objects of its own "
+           "collection (a collection per asset: Chair holds Chair_low and the high-poly parts), every low-poly "
+           "with its own high-poly objects; implies --selected-to-active", shape="flag",
+           section="selected_to_active"),
     Option("summary_json", "write a JSON record of the run (settings, each object's status, time, rays and "
            "files) to PATH at the end, whatever the exit status", kind="path", metavar="PATH", section="run",
            batch=False),

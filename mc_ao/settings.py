@@ -255,7 +255,8 @@ def from_options(args):
     values, problems = schema.from_options(args)
     values.update(
         resolution=width, height=height, float_buffer=args.attribute_type == "float",
-        use_selected_to_active=bool(args.selected_to_active or args.match_suffix),
+        use_selected_to_active=bool(args.selected_to_active or args.match_suffix
+                                    or getattr(args, "match_collections", False)),
         use_cage=args.cage is not None, cage_object=args.cage or "",
     )
     settings = BakeSettings(**values)

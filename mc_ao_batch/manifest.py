@@ -55,7 +55,7 @@ _NO_EFFECT = {"threads", "processes", "quiet", "output", "summary_json", "blend"
 # library baked before them is still found done.
 _ADDED_AT_DEFAULT = {"denoise": False, "occluder_collections": [], "exclude_collections": [], "only_local": False,
                      "ground": False, "ground_height": None, "quantity": ["ao"], "channel": "none", "into": "",
-                     "images": "own", "atlas": None, "id_map": False}
+                     "images": "own", "atlas": None, "id_map": False, "match_collections": False}
 _ENTRY_KEYS = {"blend"}
 # Keys of [defaults] and [[bake]] entries that are the batch's own, not bake_ao.py settings: never on
 # the bake's command line, never in a fingerprint.

@@ -45,7 +45,7 @@ from .manifest import Task
 
 # Entries of a summary's "settings" that choose which objects a run bakes: no file's metadata
 # carries them (each file records its own object and high-poly objects), so they are not compared.
-_RUN_ONLY_SETTINGS = {"match_suffix"}
+_RUN_ONLY_SETTINGS = {"match_suffix", "match_collections"}
 GUARD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "guard.py")
 _TAIL_LINES = 12
 

@@ -24,7 +24,7 @@ MOST_LINES = 300
 FEATURES = "Every feature, one command each"
 #: Features that must each have a section with a command there (a word of its title, lower case).
 FEATURE_WORDS = ("blender", "error map", "denois", "udim", "bent normals", "colour attributes",
-                 "selected to active", "thickness", "ground", "occluder collections", "channel packing", "python",
+                 "selected to active", "thickness", "ground", "occluder collections", "channel packing", "atlas", "python",
                  "library")
 #: What a command line may need that this checkout does not bring (its "# needs ..." comment says
 #: which), and how a line shows it needs it.

@@ -184,6 +184,8 @@ def run(argv, in_blender, summary):
     summary.settings = record = filewriter.settings_record(settings)
     if args.match_suffix:  # the summary's record only: file metadata holds plain values
         summary.settings = dict(record, match_suffix=list(args.match_suffix))
+    if getattr(args, "match_collections", False):
+        summary.settings = dict(summary.settings, match_collections=True)
     return bake(plan, args, summary)
 
 
@@ -193,7 +195,8 @@ def choose_jobs(bpy, args, settings):
     view_layer = bpy.context.view_layer
     layer = view_layer.objects
     pick = Pick(selected=[o for o in layer if o.select_get()], active=layer.active, names=tuple(args.objects or ()),
-                active_name=args.active, match_suffix=tuple(args.match_suffix or ()) or None, script=True)
+                active_name=args.active, match_suffix=tuple(args.match_suffix or ()) or None,
+                match_collections=bool(getattr(args, "match_collections", False)), script=True)
     try:
         choice = choose(settings, pick, view_layer)
         needs_uvs = baking.needs_uvs(settings)

@@ -334,3 +334,35 @@ def test_overlapping_uvs_and_an_unlimited_reach_are_said(bpy, scene, capfd):
     result, error, out = run_bake(bpy, capfd)
     assert result == {"FINISHED"}, error
     assert "the distance is unlimited, so every object reaches every other" in out
+
+
+def test_selected_to_active_pairs_by_collection_into_one_image(bpy, scene, tmp_path):
+    """--match-collections: each low-poly baked from the other objects of its own collection."""
+    lows = two_pairs(bpy)
+    for k, low in enumerate(lows):
+        coll = bpy.data.collections.new(f"Asset{k}")
+        bpy.context.scene.collection.children.link(coll)
+        for obj in (low, bpy.data.objects[f"P{k}_high"]):
+            for old in list(obj.users_collection):
+                old.objects.unlink(obj)
+            coll.objects.link(obj)
+    bump = bpy.data.objects["Bump"]
+    for old in list(bump.users_collection):
+        old.objects.unlink(bump)
+    bpy.data.collections["Asset0"].objects.link(bump)  # a high-poly part of asset 0
+    blend = tmp_path / "assets.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, SCRIPT, str(blend), "--objects", "P0_low", "P1_low", "--match-collections",
+                           "--atlas", "Assets", "--extrusion", "0.1", "--resolution", "32", "--samples", "8",
+                           "--output", str(out)], capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    import core
+
+    record = core.AtlasRecord.read(out / "Assets.atlas.npz")
+    assert record.names == ("P0_low", "P1_low")
+    left = record.owner.reshape(-1)[record.covered] == 0
+    assert record.ao[left].min() < 0.5 and record.ao[left].mean() < record.ao[~left].mean()
+    refused = subprocess.run([sys.executable, SCRIPT, str(blend), "--match-collections", "--output", str(out)],
+                             capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert refused.returncode == 2 and "--match-collections needs --objects" in refused.stderr

@@ -75,7 +75,7 @@ button = lambda image: image[ready["y"] - 8:ready["y"] + 8, sx + 20:sx + sw - 40
 # Blender draws a disabled button dimmer, its face and its text: (median, 99.9th percentile) of R+G+B
 bright_greyed, bright_enabled = ([float(v) for v in np.percentile(button(pixels(n)), [50, 99.9])]
                                  for n in ("greyed", "enabled"))
-check("button greyed with the reason", not greyed["poll"] and "put {object} into the Image name" in (greyed["reason"] or "")
+check("button greyed with the reason", not greyed["poll"] and "would both bake into image 'Shared'" in (greyed["reason"] or "")
       and clicked["last"] is None and not clicked["running"] and load("enabled")["poll"]
       and bright_enabled[0] > bright_greyed[0] + 12 and bright_enabled[1] > bright_greyed[1] + 20,
       {"reason": greyed["reason"], "last after the click": clicked["last"],
