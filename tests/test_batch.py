@@ -447,7 +447,7 @@ def test_values_out_of_range_stop_the_batch_before_anything_runs(tmp_path, capsy
     from mc_ao_batch.manifest import bake_script_module
 
     if not hasattr(bake_script_module(), "settings_from"):
-        pytest.skip("this scripts/bake_ao.py has no settings_from (its value checks came with issue 11)")
+        pytest.skip("this scripts/bake_ao.py has no settings_from (an older script without value checks)")
     manifest = tmp_path / "m.toml"
     manifest.write_text(text)
     assert cli.main([str(manifest), "--output", str(tmp_path / "out"), "--blender", "bpy"]) == 2

@@ -1,4 +1,4 @@
-"""Bent normals (issue 14): the mean unoccluded direction per texel from the AO bake's own rays,
+"""Bent normals: the mean unoccluded direction per texel from the AO bake's own rays,
 against the exact cosine-weighted means of the visible directions beside a wall, and Blender's
 tangent-space encoding (the exact inverse of Cycles' Normal Map node)."""
 

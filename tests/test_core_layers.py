@@ -159,13 +159,6 @@ def test_no_module_is_longer_than_700_lines():
         assert lines <= MAX_LINES, f"core/{path.relative_to(CORE)} has {lines} lines (at most {MAX_LINES})"
 
 
-def test_names_say_purpose_not_history():
-    for path in CORE.rglob("*.py"):
-        text = path.read_text().lower()
-        for word in ("issue 3", "issue 39", "round 4", "round 3"):
-            assert word not in text, f"{path.relative_to(CORE)} says {word!r}"
-
-
 if __name__ == "__main__":
     found = modules()
     for module, edges in sorted(imports().items(), key=lambda kv: (layer_of(kv[0]) if kv[0] != "_version" else -1,

@@ -1,4 +1,4 @@
-"""The error map and adaptive sampling against exact answers (issue 16).
+"""The error map and adaptive sampling against exact answers.
 
 The error a bake reports must be the error it makes: z = (ao - exact) / stderr over the texels of
 scenes whose AO is known in closed form has mean 0 and standard deviation 1, for every sample source,
@@ -161,7 +161,7 @@ def test_the_error_map_is_the_error_it_makes(scene, samples, source):
         with np.errstate(invalid="ignore", divide="ignore"):
             z.append(((r.ao - truth) / r.stderr)[partly])
     z = np.concatenate(z)
-    # The issue's bounds. Over 4096 (cone: 8192) values the estimates' own noise is about 0.02 on
+    # The bounds asked of the error map. Over 4096 (cone: 8192) values the estimates' own noise is about 0.02 on
     # the standard deviation and 0.02-0.04 on the mean (texels sharing a pool pattern correlate).
     assert 0.85 <= z.std() <= 1.15, z.std()
     assert abs(z.mean()) < 0.1, z.mean()

@@ -77,7 +77,7 @@ def test_ao_and_stderr_onto_a_full_disk_change_neither(disk, tmp_path, ext, bits
 
 
 def test_a_truncated_png_is_caught_by_reading_it_back(tmp_path, monkeypatch):
-    """Without the read-back, OpenImageIO's PNG writer reports a cut-short file as written (issue 11)."""
+    """Without the read-back, OpenImageIO's PNG writer reports a cut-short file as written."""
     real = imageio._write_temp
 
     def cut_short(oiio, temp, *args):

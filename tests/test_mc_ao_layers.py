@@ -112,13 +112,6 @@ def test_nothing_below_the_ui_imports_it():
             assert not imported & UI, f"mc_ao.{module} imports {sorted(imported & UI)}"
 
 
-def test_names_say_purpose_not_history():
-    for path in PACKAGE.rglob("*.py"):
-        text = path.read_text().lower()
-        for word in ("issue 1", "issue1", "round 1", "issue14"):
-            assert word not in text, f"{path.relative_to(PACKAGE)} says {word!r}"
-
-
 if __name__ == "__main__":
     for module, imported in sorted(imports().items()):
         path = PACKAGE / (module.replace(".", "/") + ".py")

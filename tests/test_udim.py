@@ -1,4 +1,4 @@
-"""UDIM tiles in the core (issue 14): which tiles a layout touches, each baked as its own image with
+"""UDIM tiles in the core: which tiles a layout touches, each baked as its own image with
 the UVs shifted by the tile's origin, against Lambert's exact AO; tiles far apart; UVs on borders."""
 
 import math

@@ -1,4 +1,4 @@
-"""AO at mesh corners (issue 14, colour attributes): sample units that are points, the texel
+"""AO at mesh corners (colour attributes): sample units that are points, the texel
 baker's estimator, sampling and errors, against Lambert's exact AO at each vertex."""
 
 import math

@@ -1,6 +1,6 @@
 """numexpr in the kernel: does fusing the kernel's elementwise passes make a whole bake 1.25x faster?
 
-The one experiment issue 42 allows: numexpr (fused elementwise expressions, no temporaries) in the
+The numexpr experiment: numexpr (fused elementwise expressions, no temporaries) in the
 kernel's arithmetic, adopted only if a whole one-thread bake of the bench's Suzanne scene and of the
 terrain gets at least 1.25x faster. This prototype replaces, in a subclass of :class:`core.engine.kernel.Kernel`
 built from the kernel's own source with three blocks swapped:

@@ -23,7 +23,7 @@ to a 64-sample bake at N^2, and with ``--cost-against COMMIT`` that commit's cor
     .venv/bin/python -m bench.sections.denoise --done-when --resolutions 256 512 --reference-samples 2048
                                              --reference-cache DIR --json bench/results/denoise-done.json
 
-``--done-when``: the issue's figures (:func:`done_when`): the add-on's operator with Denoise on against
+``--done-when``: the equal-error figures against Cycles (:func:`done_when`): the add-on's operator with Denoise on against
 Cycles, each against its own converged image; the high-gradient check; OIDN RTLightmap; z.
 """
 
@@ -461,7 +461,7 @@ def cycles_equal_error(res=512, ref_samples=2048, threads=2, cache=None, scenes=
     return out
 
 
-# --- the issue's figures: the operator with Denoise on against Cycles, each against its own converged image --
+# --- equal error against Cycles: the operator with Denoise on against Cycles, each against its own converged image --
 
 def _gradient(img, mask):
     """|grad| per texel of ``img`` (central differences between covered texels, one-sided at borders)."""
@@ -499,7 +499,7 @@ def _load():
 def done_when(res=512, scenes=CYCLES_SCENES, threads=2, ref_samples=2048, cycles_ref_samples=2048, cache=None,
               cycles_samples=(32, 64, 128, 256), raw_samples=(16, 32, 64, 128, 256), dn_samples=(8, 16, 32, 64),
               seed=1):
-    """The issue's figures in one run, per scene: Cycles' AO bake at ``cycles_samples`` against a Cycles
+    """The equal-error figures in one run, per scene: Cycles' AO bake at ``cycles_samples`` against a Cycles
     bake of ``cycles_ref_samples``; the add-on's operator (bpy.ops.object.mc_ao_bake, Processes =
     ``threads``) with Denoise on at ``dn_samples`` and off at ``raw_samples``, against a core bake of
     ``ref_samples`` that no filter touched; Open Image Denoise RTLightmap on the same noisy bake as a
@@ -671,7 +671,7 @@ def main(argv=None):
                     help="the equal-error table against Cycles (bpy) on the Suzanne scene, the room and dense.blend")
     ap.add_argument("--scenes", nargs="+", default=list(CYCLES_SCENES))
     ap.add_argument("--done-when", action="store_true",
-                    help="the issue's figures: the operator with Denoise on against Cycles, each against its own "
+                    help="the equal-error figures: the operator with Denoise on against Cycles, each against its own "
                          "converged image, at --resolution (several allowed with --resolutions)")
     ap.add_argument("--resolutions", type=int, nargs="+", default=None)
     ap.add_argument("--cycles-reference-samples", type=int, default=2048)

@@ -41,7 +41,7 @@ def bake(rock, **kw):
 
 def test_the_automatic_extrusion_bakes_the_rock_as_the_hand_set_one_does(rock):
     """Two bakes at 0.1 with other seeds differ by about 0.03 (mean absolute, noise alone); every
-    default (the automatic extrusion) against 0.1 within the issue's 0.06, extrusion 0 far off
+    default (the automatic extrusion) against 0.1 within 0.06, extrusion 0 far off
     (about 0.4: the blobs), with a warning naming the object; the automatic one warns of nothing."""
     auto = bake(rock, seed=0)
     hand = bake(rock, extrusion=0.1, seed=1)

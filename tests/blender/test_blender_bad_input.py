@@ -1,4 +1,4 @@
-"""Issue 8, the Blender side: bad selections, odd images, unwritable folders, Esc, core failures, undo.
+"""Bad input on the Blender side: bad selections, odd images, unwritable folders, Esc, core failures, undo.
 
 Each case checks what the user is told (the operator's reports, as a script sees them: errors raise
 RuntimeError from bpy.ops, infos and warnings are printed) and that the previous image content is

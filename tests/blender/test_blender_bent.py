@@ -1,4 +1,4 @@
-"""Issue 14, bent normals in Blender: "<object>_BentNormal" beside the AO image, from the same rays;
+"""Bent normals in Blender: "<object>_BentNormal" beside the AO image, from the same rays;
 its tangent space is the one Cycles' Normal Map node decodes (checked through a Cycles normal bake),
 its object space Blender's; meshes Blender computes no tangents for are refused by name."""
 

@@ -1,4 +1,4 @@
-"""Writes that fail change nothing, through scripts/bake_ao.py and the operator's Save to File (issue 11).
+"""Writes that fail change nothing, through scripts/bake_ao.py and the operator's Save to File.
 
 The output folder lies on a small tmpfs the test mounts (CI runs as root; elsewhere these skip with
 the reason) and fills: every format, the AO file alone and with its standard-error file, through

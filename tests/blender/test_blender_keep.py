@@ -1,4 +1,4 @@
-"""Issue 11, the Blender side: nothing a user baked or had is lost, through Esc, undo, save and reopen.
+"""Nothing a user baked or had is lost, through Esc, undo, save and reopen.
 
 - Esc during a bake into an existing image (generated or loaded from a file, painted or not, of
   another size than the bake) puts back its size and pixels; a later, unrelated undo step keeps them.

@@ -1,4 +1,4 @@
-"""Issue 14, Preview on Object: one click shows the baked AO on the object (multiplied into its
+"""Preview on Object: one click shows the baked AO on the object (multiplied into its
 materials' Base Color, or through an object-linked copy where the material is not its own), the
 same button removes it and leaves every material as it was, and each is one undo step."""
 

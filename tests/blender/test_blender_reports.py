@@ -1,4 +1,4 @@
-"""Issue 11, what the user reads: warnings as sentences, the summary last, the panel's lines whole.
+"""What the user reads: warnings as sentences, the summary last, the panel's lines whole.
 
 The status bar shows only the last report, so each object's warnings come before its summary, which
 comes last and counts them; the panel keeps the last bake's outcome under the button. Notes about

@@ -1,4 +1,4 @@
-"""Issue 8 for scripts/bake_ao.py: what a script user reads (stderr) and the exit status, files kept."""
+"""Bad input to scripts/bake_ao.py: what a script user reads (stderr) and the exit status, files kept."""
 
 import json
 import math
@@ -294,7 +294,7 @@ def test_zero_and_inf_max_distance_are_unlimited(blends, tmp_path, distance):
 
 
 def test_a_too_long_image_name_becomes_a_shorter_file_name(blends, tmp_path):
-    """Before issue 11 this failed with "File name too long" after the bake; now the name is shortened."""
+    """A name too long for the file system is shortened before the bake, not refused after it ("File name too long")."""
     long_name = "L" * 300 + "{object}"
     proc = run_script(blends["mixed"], "--objects", "Ground", "--output", tmp_path / "out",
                       "--image-name", long_name, *FAST)

@@ -1,4 +1,4 @@
-"""Issue 14 in scripts/bake_ao.py and the batch: --udim, --bent-normals, --target vertex-colors
+"""The other targets in scripts/bake_ao.py and the batch: --udim, --bent-normals, --target vertex-colors
 (PLY files, --save into a .blend file atomically, never the input unless asked), and the same
 options passed through a batch manifest."""
 

@@ -1,4 +1,4 @@
-"""Issue 12 in Blender: Selected to Active, against Cycles' own selected-to-active AO bake.
+"""Selected to Active in Blender, against Cycles' own selected-to-active AO bake.
 
 The operator bakes the selected objects onto the active one into ``<active>_AO`` with Cycles'
 settings (``scene.mc_ao.use_selected_to_active``, ``cage_extrusion``, ``max_ray_distance``,
@@ -288,7 +288,7 @@ def test_the_button_and_panel_say_why_it_is_disabled_in_this_mode(bpy, scene, ca
     assert reason() == "Selected to Active: the cage object is Low itself; choose a copy of it, moved outwards"
     scene.mc_ao.use_cage = False
     select_only(bpy, low, high)
-    # What Selected to Active does not bake (issue 14's targets), said before the selection.
+    # What Selected to Active does not bake (UDIM tiles, colour attributes, bent normals), said before the selection.
     for prop, value, text in [("target", "VERTEX_COLORS", "set Target to Image Textures"),
                               ("use_udim", True, "turn off UDIM Tiles"), ("bent_normals", True, "turn off Bent Normals")]:
         setattr(scene.mc_ao, prop, value)

@@ -1,4 +1,4 @@
-"""Issue 14, UDIM tiles in Blender: one tiled image per object, one tile per tile the UVs touch, the
+"""UDIM tiles in Blender: one tiled image per object, one tile per tile the UVs touch, the
 core's tiles exactly; an existing tiled image filled tile by tile (its other tiles kept), one of
 another size refused by name; files <name>.<tile>.<ext>; nothing changes before the bake ends."""
 

@@ -1,4 +1,4 @@
-"""Object names come from whoever made the .blend file: they never choose where a file goes (issue 11).
+"""Object names come from whoever made the .blend file: they never choose where a file goes.
 
 A .blend file is baked by scripts/bake_ao.py and by the operator's Save to File with objects named
 like paths (relative, absolute, Windows ones), a Windows device name, names that differ only in

@@ -1,4 +1,4 @@
-"""Issue 14, colour attributes: Target = Color Attributes bakes AO per vertex or face corner as Cycles
+"""Colour attributes: Target = Color Attributes bakes AO per vertex or face corner as Cycles
 does (checked against Cycles' own AO bake into a colour attribute), refuses what it cannot write
 (naming the object and the attribute), changes nothing until it finishes, and is one undo step."""
 

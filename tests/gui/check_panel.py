@@ -1,4 +1,4 @@
-"""Blender side of tests/gui/panel.sh: the panel's items of issue 45 in a real Blender 4.3.
+"""Blender side of tests/gui/panel.sh: the panel's items in a real Blender 4.3.
 
 Run inside ../shared/tools/blender-gui.sh by panel.sh: ``blender --factory-startup --python
 tests/gui/check_panel.py``. It installs the zip named by $MC_AO_ZIP (as Install from Disk does),

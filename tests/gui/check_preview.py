@@ -1,4 +1,4 @@
-"""Blender side of the GUI picture of issue 14 (docs/preview.png): UDIM tiles, bent normals and
+"""Blender side of the GUI picture docs/preview.png: UDIM tiles, bent normals and
 Preview on Object in a real Blender.
 
 Run by tests/gui/preview.sh inside ../shared/tools/blender-gui.sh: ``blender --factory-startup

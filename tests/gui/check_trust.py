@@ -1,4 +1,4 @@
-"""Blender side of the GUI check of issue 11 (nothing baked is lost; the status bar; the panel's hints).
+"""Blender side of the GUI check that nothing baked is lost (nothing baked is lost; the status bar; the panel's hints).
 
 Run by tests/gui/trust.sh inside ../shared/tools/blender-gui.sh: ``blender --factory-startup
 --python tests/gui/check_trust.py``. It installs the zip named by $MC_AO_ZIP, builds a scene (a

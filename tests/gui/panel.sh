@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# GUI check of the panel (issue 45's panel items) in a real Blender 4.3 (not run by CI). From the
+# GUI check of the panel's items in a real Blender 4.3 (not run by CI). From the
 # repository root, under the GUI lock:
 #
 #   .venv/bin/python scripts/build_extension.py --platform linux-x64      # the zip with the cp313 wheel

@@ -1,4 +1,4 @@
-"""The verdict of tests/gui/panel.sh: each panel item of issue 45, checked on what the real Blender
+"""The verdict of tests/gui/panel.sh: each panel item, checked on what the real Blender
 answered (check_panel.py's JSON files) and on the screenshots' pixels; writes verdict.json and the
 pictures for docs/ (docs_*.png), and exits with 1 when an item fails.
 

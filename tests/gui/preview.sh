@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# GUI picture of issue 14 in a real Blender (not run by CI): UDIM tiles, bent normals, Preview on
+# GUI picture of the other targets in a real Blender (not run by CI): UDIM tiles, bent normals, Preview on
 # Object. From the repository root:
 #
 #   python scripts/build_extension.py --platform linux-x64

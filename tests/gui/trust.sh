@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# GUI check of issue 11 in a real Blender (not run by CI). From the repository root:
+# GUI check that nothing baked is lost, in a real Blender (not run by CI). From the repository root:
 #
 #   python scripts/build_extension.py --platform linux-x64
 #   ../shared/tools/blender-gui.sh exec 'bash tests/gui/trust.sh'
