@@ -263,10 +263,18 @@ SETTINGS = (
                      "process)",
             lo=0, hi=MAX_THREADS, zero="every core", ui={"soft_max": 256}),
     Setting("processes", "int", 0, "Processes",
-            "Worker processes the bake's tiles are baked in, each with its own copy of the scene, so that every "
-            "core works while Blender stays responsive; 0 picks them from the cores and the memory, 1 bakes in "
-            "Blender's own process on threads. The image is the same either way",
-            lo=0, hi=MAX_THREADS, zero="from the cores and the memory", ui={"soft_max": 64}),
+            "Worker processes the bake's tiles are baked in, each with its own copy of the scene; 1 bakes in "
+            "Blender's own process on threads. 0, with Threads 0, bakes where this machine is predicted to "
+            "finish sooner: on Blender's threads, which share one Python, or in as many worker processes as "
+            "the cores and the memory hold, which each set up the scene again and must start first unless "
+            "they are running; the summary says which and why. The image is the same either way",
+            cli_help="Worker processes the bake's tiles are baked in, each with its own copy of the scene; 1 "
+                     "bakes in this process on threads. 0, with --threads 0, bakes where this machine is "
+                     "predicted to finish sooner: on this process's threads, which share one Python, or in as "
+                     "many worker processes as the cores and the memory hold, which each set up the scene again "
+                     "and must start first unless they are running (--summary-json says which and why). The "
+                     "image is the same either way",
+            lo=0, hi=MAX_THREADS, zero="threads or processes, whichever is sooner", ui={"soft_max": 64}),
     Setting("denoise", "bool", False, "Denoise",
             "Filter the baked AO over the surface, across UV seams, each texel weighed by its own error: much "
             "less noise at few samples (16 denoised samples beat 128 raw ones on the bench), for about a "

@@ -41,9 +41,9 @@ import core  # noqa: E402
 from core import Mesh  # noqa: E402
 
 LISTS = ROOT / "scripts" / "output_hashes"
-#: Report entries that depend on the machine, not on the bake: the processes' memory (and any
-#: entry named "...seconds": a time).
-MACHINE_KEYS = {"worker_memory"}
+#: Report entries that depend on the machine, not on the bake: the processes' memory and where the
+#: tiles ran (threads or processes: the cores, the pool) (and any entry named "...seconds": a time).
+MACHINE_KEYS = {"worker_memory", "parallel"}
 #: Result fields that are wall or CPU times.
 TIME_FIELDS = {"seconds", "trace_seconds", "trace_cpu_seconds"}
 QUAD = np.array([[0, 1, 2], [0, 2, 3]])

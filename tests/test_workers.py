@@ -25,9 +25,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def without_memory(report):
-    """A bake's report less ``worker_memory`` (each process's sizes differ from bake to bake) and the
-    warning of a worker count the machine's cores cut down (on this machine, not another)."""
-    out = {k: v for k, v in report.items() if k != "worker_memory"}
+    """A bake's report less ``worker_memory`` (each process's sizes differ from bake to bake), ``parallel``
+    (where the tiles ran) and the warning of a worker count the machine's cores cut down (on this
+    machine, not another)."""
+    out = {k: v for k, v in report.items() if k not in ("worker_memory", "parallel")}
     warnings = [w for w in out.get("warnings") or [] if not w.startswith("asked for ")]
     out.pop("warnings", None)
     if warnings:

@@ -53,6 +53,24 @@ BYTES_PER_TRIANGLE, BYTES_PER_OCCLUDER_TRIANGLE, BYTES_PER_HIGHPOLY_TRIANGLE = 3
 #: Bytes a point of the sample pool takes (its 4D point and two sets of lifted features), and a sample
 #: unit (its affine maps; a few per texel of a tile, UNITS_PER_TEXEL).
 BYTES_PER_POOL_POINT, BYTES_PER_UNIT, UNITS_PER_TEXEL = 64, 600, 4
+#: Threads or processes (:func:`choose_parallel`): the model of how a bake's work shares the cores, from
+#: the bench's quiet 2-core runs (bench/results/device.json, bench/LOG.md "threads or processes").
+#: n busy cores run n / (1 + CORE_CONTENTION (n - 1)) times one (2 worker processes: 1.88x); T threads of
+#: one process run a further T / (1 + GIL_SHARE (T - 1)) slower (their numpy calls wait for each other's
+#: Python: 2 threads 1.71x against 1 thread).
+CORE_CONTENTION, GIL_SHARE = 0.064, 0.10
+#: The part of NS_PER_TRIANGLE that is set-up before the tiles (CPU ns a triangle; the rest is the tiles'
+#: per-triangle work, which the cores share): the prologue, UV triangles and bins (the parent, and each
+#: worker process again), the surface table (each process that bakes tiles) and the Embree scene (each
+#: such process; a worker keeps its scene for the next bake of the same meshes). Measured on
+#: dense.blend's 524k triangles (bench.sections.parallel).
+NS_SETUP_PER_TRIANGLE, NS_TABLE_PER_TRIANGLE, NS_EMBREE_PER_TRIANGLE = 270.0, 390.0, 120.0
+#: A worker's job (the meshes as arrays): CPU ns a byte to send it (the parent, worker after worker)
+#: and to receive it (each worker); a bake's fixed cost on a warm pool (messages, the worker's bake set
+#: up, the results assembled); the share of a mean tile the last tiles leave workers idle (tiles go
+#: whole to one worker: 4 tiles on 2 workers measured 7-11% over an even split, bench.sections.parallel).
+#: A pool's start is WORKER_START_SECONDS of each worker, side by side, until one is measured in this process.
+NS_SEND_PER_BYTE, NS_RECEIVE_PER_BYTE, WORKER_BAKE_SECONDS, TAIL_TILES = 1.0, 0.5, 0.015, 0.25
 #: Bytes per triangle the parent adds while worker processes bake (its UV triangles and tiles of the
 #: target: 90 measured; 30 for an occluder or a high-poly mesh), beyond the caller's own arrays.
 BYTES_PER_PARENT_TRIANGLE, BYTES_PER_PARENT_OTHER_TRIANGLE = 110, 40
@@ -172,6 +190,130 @@ def machine_load():
         return None, None
 
 
+@dataclass(frozen=True)
+class Work:
+    """What a bake will do, for :func:`choose_parallel`: ``covered`` texels (or points) of ``samples``
+    each on a ``width`` x ``height`` image, ``triangles`` (target, occluders, high-poly) and the
+    ``job_bytes`` a worker process is sent (the meshes' arrays)."""
+
+    covered: float
+    samples: int
+    triangles: tuple
+    width: int = 1
+    height: int = 1
+    job_bytes: int = 0
+
+    def tile_seconds(self):
+        """CPU seconds of the tiles' work on one thread (what the cores share)."""
+        tiles_per_triangle = NS_PER_TRIANGLE - NS_SETUP_PER_TRIANGLE - NS_TABLE_PER_TRIANGLE - NS_EMBREE_PER_TRIANGLE
+        return 1e-9 * (NS_PER_RAY * self.covered * self.samples + NS_PER_TEXEL * self.covered
+                       + tiles_per_triangle * sum(self.triangles))
+
+
+def speedup(processes, threads):
+    """How many times one thread's speed ``processes`` x ``threads`` run the tiles at (the model above)."""
+    n = processes * threads
+    return n / (1.0 + CORE_CONTENTION * (n - 1)) / (1.0 + GIL_SHARE * (threads - 1))
+
+
+def parallel_seconds(work, processes, threads, pool_start=0.0, scene_kept=False, tiles=None):
+    """Predicted wall seconds of ``work`` on ``processes`` x ``threads`` (1 x T: this process's threads),
+    as {part: seconds}: ``parent`` (the checks, UV triangles and bins, the margin and the result, in
+    this process either way), ``scene`` (a baking process's surface table and Embree scene), ``tiles``
+    (the tiles' work shared by the cores) and, in worker processes, ``start`` (a pool not running:
+    ``pool_start``), ``send`` (the job to each worker in turn), ``workers`` (each worker's own set-up:
+    receiving the job, its UV triangles, bins, table and, unless ``scene_kept``, its Embree scene) and
+    ``tail`` (the last ``tiles`` whole tiles, which leave other workers idle)."""
+    tri = work.triangles
+    target, every = tri[0], sum(tri)
+    tile = work.tile_seconds()
+    out = {"parent": FIXED_SECONDS + 1e-9 * NS_SETUP_PER_TRIANGLE * target}
+    scene = 1e-9 * (NS_TABLE_PER_TRIANGLE * target + (0 if scene_kept else NS_EMBREE_PER_TRIANGLE * every))
+    if processes == 1:
+        out.update(scene=scene, tiles=tile / speedup(1, threads))
+        return out
+    if tiles is None:
+        tiles = 2 * processes * threads
+    out.update(start=float(pool_start), send=1e-9 * NS_SEND_PER_BYTE * work.job_bytes * processes,
+               workers=WORKER_BAKE_SECONDS + 1e-9 * (NS_RECEIVE_PER_BYTE * work.job_bytes
+                                                     + NS_SETUP_PER_TRIANGLE * target) + scene,
+               tiles=tile / speedup(processes, threads),
+               tail=TAIL_TILES * tile / max(int(tiles), 1) / speedup(1, threads))
+    return out
+
+
+@dataclass(frozen=True)
+class ParallelChoice:
+    """Where a bake's tiles run: ``processes`` (1: this process) x ``threads`` each, with ``why`` (a
+    sentence) and the ``predicted`` wall seconds of each option weighed ({'threads': ..., 'processes':
+    ...}, each a :func:`parallel_seconds` sum)."""
+
+    processes: int
+    threads: int
+    why: str
+    predicted: dict = None
+    options: dict = None
+
+    def report(self):
+        """The choice as plain data (``BakeReport.parallel``): ``processes``, ``threads``, ``why``, and
+        where the bake chose, ``predicted_seconds`` and ``options`` ({'threads': [1, T], 'processes': [P,
+        threads each]}) of the options weighed."""
+        out = {"processes": self.processes, "threads": self.threads, "why": self.why}
+        if self.predicted and len(self.predicted) > 1:
+            out.update(predicted_seconds=dict(self.predicted), options={k: list(v) for k, v in self.options.items()})
+        return out
+
+
+#: What each part of the worker processes' extra time is called in a choice's ``why``.
+_PART_WORDS = {"start": "starting them", "send": "sending each the meshes", "workers": "each one's own set-up",
+               "tail": "the last tiles, which go whole to one process"}
+
+
+def choose_parallel(work, cores, workers, pool_start=0.0, scene_kept=False, tiles=None):
+    """Threads of this process or worker processes for ``work`` (:class:`Work`), whichever the model
+    (:func:`parallel_seconds`) predicts sooner: ``cores`` threads here against ``workers`` = (processes,
+    threads each), what :func:`core.execution.executor.auto_workers` lets the memory hold, with the
+    pool's start (``pool_start`` seconds: 0 when one runs) and the Embree scenes the workers keep
+    (``scene_kept``). Returns a :class:`ParallelChoice` whose ``why`` names the biggest difference."""
+    processes, per_worker = workers
+    here = parallel_seconds(work, 1, cores)
+    if processes <= 1:
+        reason = "one core" if cores <= 1 else "the memory holds one copy of the scene"
+        return ParallelChoice(1, cores, f"{_threads(cores)} of this process: {reason}", {"threads": sum(here.values())})
+    there = parallel_seconds(work, processes, per_worker, pool_start, scene_kept, tiles)
+    t_here, t_there = sum(here.values()), sum(there.values())
+    predicted = {"threads": t_here, "processes": t_there}
+    options = {"threads": (1, cores), "processes": (processes, per_worker)}
+    in_workers = f"{processes} worker processes" + (f" of {_threads(per_worker)} each" if per_worker > 1 else "")
+    if t_there < t_here:
+        why = (f"{in_workers}: about {_s(t_there)} against {_s(t_here)} on {_threads(cores)} of this process, "
+               f"whose numpy work waits for one interpreter ({_s(here['tiles'] - there['tiles'])} more in the tiles)")
+        return ParallelChoice(processes, per_worker, why, predicted, options)
+    extra = {k: there[k] - here.get(k, 0.0) for k in ("start", "send", "workers", "tail")}
+    part = max(extra, key=extra.get)
+    why = (f"{_threads(cores)} of this process: about {_s(t_here)} against {_s(t_there)} in {in_workers}, "
+           f"most of the difference {_PART_WORDS[part]} ({_s(extra[part])})")
+    return ParallelChoice(1, cores, why, predicted, options)
+
+
+def _threads(n):
+    return f"{n} thread{'s' if n != 1 else ''}"
+
+
+def _s(seconds):
+    """Seconds in a choice's words: 0.23 s, 5.48 s, 12.3 s."""
+    return f"{seconds:.2f} s" if seconds < 10 else f"{seconds:.1f} s"
+
+
+def covered_texels(uvs, width, height):
+    """About how many texels of a ``width`` x ``height`` image UV triangles ``uvs`` (T, 3, 2) cover: their
+    area (:func:`covered_fraction`) plus a texel per texel of the islands' borders (cut texels count)."""
+    covered = covered_fraction(uvs) * width * height
+    uv = np.asarray(uvs, np.float64) * [width, height]
+    border = 0.5 * np.linalg.norm(np.roll(uv, -1, axis=1) - uv, axis=2).sum()
+    return min(width * height, covered + border)
+
+
 def covered_fraction(uvs):
     """About the share of a [0, 1] UV square that UV triangles ``uvs`` (T, 3, 2) cover: their areas
     inside the square added up (overlaps counted twice), at most 1."""
@@ -185,12 +327,7 @@ def estimate_bake(target, occluders=(), resolution=(1024, 1024), samples=256, th
     """The :class:`Cost` of :func:`core.bake_ao` of these meshes, before any work: the covered texels
     from the UVs' area (:func:`covered_fraction`), plus the texels along the islands' borders."""
     w, h = (resolution, resolution) if np.ndim(resolution) == 0 else resolution
-    frac = covered_fraction(target.uvs) if target.uvs is not None else 0.0
-    covered = frac * w * h
-    # Texels cut by an island's border are covered too: about a texel per texel of border.
-    uv = np.asarray(target.uvs, np.float64) * [w, h] if target.uvs is not None else np.zeros((0, 3, 2))
-    border = 0.5 * np.linalg.norm(np.roll(uv, -1, axis=1) - uv, axis=2).sum()
-    covered = min(w * h, covered + border)
+    covered = covered_texels(target.uvs, w, h) if target.uvs is not None else 0.0
     return estimate(covered, samples, target.triangle_count, image_texels=w * h, threads=threads, processes=processes,
                     occluder_triangles=sum(m.triangle_count for m in occluders),
                     highpoly_triangles=sum(m.triangle_count for m in highpoly))

@@ -14,10 +14,11 @@ from ..base.errors import SettingsError
 from ..base.machine import cpu_count, memory_limit
 from ..base.request import is_dask_client
 from ..engine.scheduler import Scheduler, run_all
+from ..engine.settings import TILE_TRIANGLES, auto_tile_shape
 from . import cost as cost_mod
 from .dask import run_dask
 from .memory import memory_entry
-from .pool import pool_for, pool_ready
+from .pool import pool_for, pool_ready, pool_state
 
 
 def auto_workers(triangles, cores=None, memory=None):
@@ -59,22 +60,76 @@ def clamp_processes(asked, threads, triangles, cores=None, memory=None):
     return out, ("; ".join(why) if out < asked else None)
 
 
-def processes_of(workers, threads, settings, triangles):
+def processes_of(workers, threads, settings, triangles, work=None, remote=None, scene=None):
     """(processes, threads each) of a bake given ``workers`` (1, N or 'auto', checked) and the
     ``threads`` argument: with workers, ``threads`` counts each worker's threads (None: one each, or
-    what 'auto' picks); workers=1 is this process with ``settings.threads``."""
+    what 'auto' picks); workers=1 is this process with ``settings.threads``. The arguments after
+    ``triangles`` are :func:`parallel_of`'s (without them 'auto' bakes on :func:`auto_workers`' processes)."""
+    choice = parallel_of(workers, threads, settings, triangles, work, remote, scene)
+    return choice.processes, choice.threads
+
+
+def parallel_of(workers, threads, settings, triangles, work=None, remote=None, scene=None):
+    """Where a bake's tiles run, and why: a :class:`core.execution.cost.ParallelChoice`.
+
+    ``workers`` 1 or N, or 'auto' with ``threads`` given, are taken as asked (see :func:`processes_of`).
+    'auto' with ``threads`` None weighs this process's threads against :func:`auto_workers`' processes
+    by the time each would take (:func:`core.execution.cost.choose_parallel`), given ``work`` (a
+    :class:`core.execution.cost.Work`) and the state of the pool ``remote`` runs on
+    (:func:`core.execution.pool.pool_state`: its start if none runs, measured in this process when one
+    has started before; the Embree scenes its workers keep when ``scene``, the bake's scene token, is
+    theirs). Without ``work``, 'auto' takes :func:`auto_workers`' processes."""
     if is_dask_client(workers):
-        return workers, 1 if threads is None else settings.threads
+        return cost_mod.ParallelChoice(workers, 1 if threads is None else settings.threads, "a Dask cluster, as asked")
     if workers == 1:
-        return 1, settings.threads
-    if workers == "auto":
-        processes, per_worker = auto_workers(triangles)
-        if threads is None:
-            return processes, per_worker
+        n = settings.threads
+        return cost_mod.ParallelChoice(1, n, f"{_threads(n)} of this process, as asked")
+    if workers != "auto":
+        n = 1 if threads is None else settings.threads
+        processes, fewer = clamp_processes(workers, n, triangles)
+        where = f"{processes} worker processes of {_threads(n)} each" if processes > 1 else f"{_threads(n)} of this process"
+        return cost_mod.ParallelChoice(processes, n, f"{where}, as asked" if fewer is None
+                                       else f"{where}, not the {workers} asked for: {fewer}")
+    processes, per_worker = auto_workers(triangles)
+    if threads is not None:
         # Threads asked for each: as many workers as the cores hold at that many threads each.
-        return max(1, min(processes, cpu_count() // settings.threads)), settings.threads
-    each = 1 if threads is None else settings.threads
-    return clamp_processes(workers, each, triangles)[0], each
+        n = settings.threads
+        processes = max(1, min(processes, cpu_count() // n))
+        return cost_mod.ParallelChoice(processes, n, f"{processes} worker processes of {_threads(n)} each: as many "
+                                       f"as the cores hold at the {_threads(n)} asked for" if processes > 1
+                                       else f"{_threads(n)} of this process, as asked")
+    if work is None or processes <= 1 or remote is None:
+        return cost_mod.ParallelChoice(processes, per_worker, f"{processes} worker processes of "
+                                       f"{_threads(per_worker)} each, from the cores and the memory" if processes > 1
+                                       else f"{_threads(per_worker)} of this process: the memory holds one copy "
+                                       "of the scene")
+    state, detail = pool_state(processes, per_worker, remote)
+    cores = cpu_count()
+    if state == "failed":
+        return cost_mod.ParallelChoice(1, cores, f"{_threads(cores)} of this process: the worker processes failed "
+                                       f"their self-test earlier ({detail})")
+    if state == "running":
+        start = 0.0
+    else:  # measured when a pool started before in this process, else the model's workers side by side
+        start = detail if detail is not None else cost_mod.WORKER_START_SECONDS * processes / min(processes, cores)
+    kept = state == "running" and scene is not None and detail == (scene() if callable(scene) else scene)
+    return cost_mod.choose_parallel(work, cores, (processes, per_worker), start, kept,
+                                    tiles=_tile_count(work, processes * per_worker, settings))
+
+
+def _tile_count(work, threads, settings):
+    """About how many tiles worker processes of ``threads`` threads in all get (the pipeline's rule: two
+    tiles a thread at least, fewer triangles each on dense meshes)."""
+    if settings.tile_size is not None and not settings.auto_tiles:
+        tw, th = settings.tile_shape
+    else:
+        tw, th = auto_tile_shape(work.width, work.height, 2 * threads, work.samples)
+    tiles = -(-work.width // tw) * -(-work.height // th)
+    return max(tiles, -(-int(work.triangles[0]) // TILE_TRIANGLES))
+
+
+def _threads(n):
+    return f"{n} thread{'s' if n != 1 else ''}"
 
 
 def in_process(processes):
@@ -134,5 +189,5 @@ def usable_pool(remote, processes, threads):
         return f"worker processes could not be started ({e})"
 
 
-__all__ = ["auto_workers", "clamp_processes", "processes_of", "in_process", "worker_count", "run_tiles", "bake_tiles",
-           "usable_pool", "pool_ready"]
+__all__ = ["auto_workers", "clamp_processes", "processes_of", "parallel_of", "in_process", "worker_count", "run_tiles",
+           "bake_tiles", "usable_pool", "pool_ready"]

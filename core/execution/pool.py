@@ -69,6 +69,7 @@ import queue
 import subprocess
 import sys
 import threading
+import time
 
 from ..engine.scheduler import is_cancelled
 from ..engine.tilebaker import TileOut
@@ -209,13 +210,19 @@ class Pool:
     worker must match."""
 
     def __init__(self, workers, threads, remote):
+        global _STARTED_IN
+        t0 = time.perf_counter()
         self.workers_wanted, self.threads, self.remote = int(workers), int(threads), remote
         self.inbox = queue.Queue()
         self.workers = [_Worker(self.threads, self.inbox, i, remote.entry) for i in range(self.workers_wanted)]
         self.broken = False
         self.bake_id = 0
+        self.scene = None  # the token of the scene the workers keep from the last bake (the job's "scene_key")
         self.lock = threading.Lock()  # one bake at a time
         self.failed = self._check()
+        self.started_in = time.perf_counter() - t0
+        if self.failed is None:
+            _STARTED_IN = self.started_in
 
     def _check(self):
         """None when every worker started and its self-test bake gave this process's bits, else why
@@ -256,6 +263,7 @@ class Pool:
             bake_id = self.bake_id
             quantum = max(1, planned // (PROGRESS_STEPS * len(self.workers)))
             job = dict(job, quantum=quantum, threads=self.threads)
+            self.scene = job.get("scene_key")
             for w in self.workers:
                 w.send("setup", bake_id, job)
                 w.ready, w.busy, w.asked = False, [], False
@@ -370,6 +378,23 @@ class Pool:
 
 _POOL = None
 _POOL_LOCK = threading.Lock()
+#: Wall seconds the last pool that passed its self-test took to start in this process (None: none yet).
+_STARTED_IN = None
+
+
+def pool_state(workers, threads, remote):
+    """What a bake on ``workers`` processes of ``threads`` threads running ``remote`` would find, without
+    starting anything: ('running', the token of the scene its workers keep), ('failed', why: its
+    self-test failed, bakes run on threads) or ('none', the wall seconds a start took in this process,
+    or None when none has started yet)."""
+    with _POOL_LOCK:
+        p = _POOL
+        if p is not None and (p.workers_wanted, p.threads, p.remote) == (workers, threads, remote):
+            if p.failed:
+                return "failed", p.failed
+            if not p.broken and len(p.workers) == workers and all(w.alive for w in p.workers):
+                return "running", p.scene
+        return "none", _STARTED_IN
 
 
 def pool_for(workers, threads, remote):

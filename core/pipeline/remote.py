@@ -49,14 +49,23 @@ _SCENE = {}
 def scene_key(job):
     """A digest of what a bake's occlusion scenes are built from: the target's and the occluders'
     positions and triangles as sent (their dtypes and shapes too). The same key, the same scenes:
-    the meshes are moved into the bake's frame by the same arithmetic on the same bits."""
-    h = hashlib.blake2b(digest_size=20)
+    the meshes are moved into the bake's frame by the same arithmetic on the same bits. The parent
+    computes it once (the job's ``scene_key``, :func:`scene_key_of`), else each worker does."""
     if job.get("kind") == "atlas":
+        h = hashlib.blake2b(digest_size=20)
         h.update(b"atlas")
         return h.hexdigest()
-    for m in [job["target"]] + list(job["occluders"]):
+    key = job.get("scene_key")
+    return key if key is not None else scene_key_of([job["target"]] + list(job["occluders"]))
+
+
+def scene_key_of(meshes):
+    """:func:`scene_key` of ``meshes`` (the target, then the occluders: :func:`mesh_data` dicts or
+    :class:`core.Mesh` objects)."""
+    h = hashlib.blake2b(digest_size=20)
+    for m in meshes:
         for name in ("positions", "triangles"):
-            a = np.ascontiguousarray(m[name])
+            a = np.ascontiguousarray(m[name] if isinstance(m, dict) else getattr(m, name))
             h.update(f"{name}{a.dtype.str}{a.shape};".encode())
             h.update(memoryview(a).cast("B"))
     return h.hexdigest()
@@ -159,4 +168,4 @@ def build_remote(job, request, cancel, mesh):
     return AtlasBake(build, s, job["planned"], keep_live=s.threads + 1), s
 
 
-__all__ = ["mesh_data", "scene_key", "forget", "build", "dask_tile"]
+__all__ = ["mesh_data", "scene_key", "scene_key_of", "forget", "build", "dask_tile"]

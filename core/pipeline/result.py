@@ -28,7 +28,10 @@ class BakeReport:
     targets an earlier bake held that this one does not name), each target's ``reach`` and ``owned`` texels, ``shared_texels``,
     ``unlimited_reach`` and its ``note``) and ``atlas_overlaps`` ([{``a``, ``b``, ``texels``}] per pair
     of targets whose UVs overlap).
-    Every bake: ``worker_memory`` (one entry per process that held the bake,
+    Every bake: ``parallel`` (where its tiles ran, and why: ``processes`` (1: this process), ``threads``
+    each, ``why`` (a sentence) and ``predicted_seconds`` (the model's time of each option weighed, when
+    the bake chose between this process's threads and worker processes itself), from
+    :func:`core.execution.executor.parallel_of`); ``worker_memory`` (one entry per process that held the bake,
     :func:`core.execution.memory.memory_entry`: ``process`` 'parent' or 'worker N', ``rss``, ``peak``,
     ``held`` bytes, a worker's ``start``, ``ready``, ``tiles``, ``scene_reused`` and ``request``, the
     options it baked with as plain data) and ``warnings`` (sentences naming the object; None when there
@@ -61,6 +64,7 @@ class BakeReport:
     matching_cpu_seconds: float = None
     atlas: dict = None
     atlas_overlaps: list = None
+    parallel: dict = None
     worker_memory: list = None
     warnings: list = None
 

@@ -31,7 +31,8 @@ from ..engine.settings import BakeSettings, auto_tile_shape
 from ..engine.thickness import resolved as thickness_resolved
 from ..base.request import BakeRequest
 from ..execution.contracts import Remote
-from ..execution.executor import bake_tiles, clamp_processes, in_process, processes_of, worker_count
+from ..execution import cost as cost_mod
+from ..execution.executor import bake_tiles, clamp_processes, in_process, parallel_of, worker_count
 from ..execution.pool import pool_for
 from ..geometry.margin import dilate
 from ..geometry.mesh import Mesh
@@ -67,8 +68,12 @@ def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=N
     checked = check(request, target, occluders, highpoly, cage, bent_space, corners)
     pro = Prologue(checked, request, cancel)
     s = BakeSettings.of(request)
-    processes, per_worker = processes_of(request.workers, request.threads, s, pro.triangle_counts)
+    scene = _scene_token(checked)
+    choice = parallel_of(request.workers, request.threads, s, pro.triangle_counts, _work(request, checked, s), REMOTE,
+                         scene)
+    processes, per_worker = choice.processes, choice.threads
     made = (Corners if request.kind == "corners" else Texels)(pro, s, processes, per_worker, checked, on_tile)
+    made.parallel, made.scene = choice, scene
     pro.check_memory(made.planned)
     pro.check_cancel()
     rays, trace_s, trace_cpu, counters, fallback = bake_tiles(REMOTE, made.bake, made.keys, processes, per_worker,
@@ -94,6 +99,32 @@ def clamped_note(request, processes, threads, triangles):
         return None
     _, why = clamp_processes(asked, threads, triangles)
     return f"asked for {asked} worker processes, baked on {processes}: {why}"
+
+
+def _work(request, checked, s):
+    """What :func:`core.execution.executor.parallel_of` weighs threads against worker processes by (a
+    :class:`core.execution.cost.Work`), for a bake whose workers and threads are both automatic."""
+    if request.workers != "auto" or request.threads is not None:
+        return None
+    others = [*(checked.s2a.highs if checked.s2a else ()),
+              *((checked.s2a.cage,) if checked.s2a is not None and checked.s2a.cage is not None else ())]
+    meshes = [checked.target, *checked.occluders, *others]
+    job_bytes = sum(a.nbytes for m in meshes for a in mesh_data(m).values() if isinstance(a, np.ndarray))
+    triangles = (checked.target.triangle_count, sum(o.triangle_count for o in checked.occluders),
+                 sum(m.triangle_count for m in others))
+    if request.kind == "corners":
+        return cost_mod.Work(len(checked.corners), s.samples, triangles, job_bytes=job_bytes)
+    return cost_mod.Work(cost_mod.covered_texels(checked.target.uvs, s.width, s.height), s.samples, triangles,
+                         s.width, s.height, job_bytes)
+
+
+def _scene_token(checked):
+    """A function giving the bake's scene token (:func:`core.pipeline.remote.scene_key_of`, computed once,
+    when first asked for): what tells a worker that the scene it keeps is this bake's. None for
+    selected to active (its workers keep no scene)."""
+    if checked.s2a is not None:
+        return None
+    return functools.lru_cache(maxsize=1)(functools.partial(remote.scene_key_of, [checked.target, *checked.occluders]))
 
 
 class Texels:
@@ -147,7 +178,7 @@ class Texels:
                     occluders=[mesh_data(o) for o in checked.occluders],
                     highpoly=None if s2a is None else [mesh_data(m) for m in checked.s2a.highs],
                     cage=None if s2a is None or checked.s2a.cage is None else mesh_data(checked.s2a.cage),
-                    guide=self.guide is not None)
+                    guide=self.guide is not None, scene_key=None if self.scene is None else self.scene())
 
     def checked_order(self, counters):
         """The quantities in order, after refusing a bake that covered nothing (or, with selected to
@@ -222,7 +253,7 @@ class Corners:
         root = self.lanes[self.base]
         return dict(request=self.request.to_dict(), target=mesh_data(self.checked.target),
                     occluders=[mesh_data(o) for o in self.checked.occluders], corners=self.pro.corners,
-                    block=root.block)
+                    block=root.block, scene_key=None if self.scene is None else self.scene())
 
     def checked_order(self, counters):
         return self.request.all_quantities
@@ -268,8 +299,11 @@ def finish(made, q, counters, fallback, t_start):
         warnings = extra.pop("warnings")
         r.report = dataclasses.replace(r.report, **extra)
         r.report.warn(*warnings)  # beside any other warning of the bake (a list, empty when none)
+    r.report.parallel = made.parallel.report()
     if fallback is not None:
         r.report.warn(f"baked on {s.threads} threads of this process, not in worker processes: {fallback}")
+        r.report.parallel.update(processes=1, threads=s.threads, why=f"{s.threads} threads of this process: "
+                                 f"the worker processes could not be used ({fallback})")
     return r
 
 
@@ -361,6 +395,8 @@ def _assemble(target, resolution, results, todo, coverage, denoise, margin):
                 report[key] = value  # the same in every tile (the extrusion is measured on the whole mesh)
             elif key == "warnings":
                 report[key] = report.get(key, []) + [w for w in value if w not in report.get(key, [])]
+            elif key == "parallel":  # each tile chooses; the last tile's choice stands for the bake
+                report[key] = value
             elif key == "worker_memory":  # per process, the tile bake of its largest peak
                 best = {e["process"]: e for e in report.get(key, [])}
                 for e in value:

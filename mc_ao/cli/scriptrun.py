@@ -10,7 +10,7 @@ from ..terminal import escape
 from . import table
 from .blendsave import save_baked
 from .progress import Progress
-from .summary import s2a_record
+from .summary import parallel_record, s2a_record
 
 
 class ScriptRun:
@@ -90,7 +90,7 @@ class ScriptRun:
         else:
             per_texel, _ = baking.throughput(result)
             self.summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, outcome.files,
-                             **s2a_record(job, result))
+                             **s2a_record(job, result), **parallel_record(result))
             label = name if len(self.quantities[job.object_name]) == 1 else (
                 f"{name}: {table.QUANTITY_WORDS.get(job.quantity, job.quantity)}")
             self.rows.append(table.row(label, result, settings, outcome.files))

@@ -89,6 +89,20 @@ def s2a_record(job, result=None):
             "missed_texels": int(report.get("missed_texels", 0))}
 
 
+def parallel_record(result):
+    """Where a bake's tiles ran, for the summary's object record: {"parallel": {"processes", "threads",
+    "why", and where the core chose between threads and worker processes, "predicted_seconds" of
+    each}} (core.pipeline.result.BakeReport.parallel); {} without it."""
+    report = getattr(result, "report", None) or {}
+    p = report.get("parallel")
+    if not p:
+        return {}
+    out = {k: p[k] for k in ("processes", "threads", "why")}
+    if "predicted_seconds" in p:
+        out["predicted_seconds"] = {k: round(float(v), 3) for k, v in p["predicted_seconds"].items()}
+    return {"parallel": out}
+
+
 def cancel_note(summary, what="cancelled"):
     """What a cancel left: which objects have all their files written, and of which nothing was
     written (an object's files are written with Ctrl-C held off: all of them or none)."""

@@ -52,5 +52,5 @@ class ColorAttributeOutput(OutputKind):
         settings = self.settings
         domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
         return (f"{job.object_name}: {len(result.ao)} face corners into color attribute "
-                f"{settings.attribute_name!r} ({domain}) in {result.seconds:.2f} s, {per:.0f} samples per "
-                f"corner, {rate:.2f} M rays/s")
+                f"{settings.attribute_name!r} ({domain}) in {result.seconds:.2f} s{baking.parallel_words(result)}, "
+                f"{per:.0f} samples per corner, {rate:.2f} M rays/s")

@@ -23,8 +23,8 @@ class ImageOutput(MapOutput):
             tiles = sorted(result.tiles)
             listed = ", ".join(map(str, tiles))
             return (f"{job.object_name}: {len(tiles)} UDIM tile{'s' if len(tiles) != 1 else ''} ({listed}) of {w}x{h} "
-                    f"into {job.image_name!r} in {result.seconds:.2f} s, {per:.0f} samples per texel, "
-                    f"{rate:.2f} M rays/s{self.occlusion_words(job, result)}")
+                    f"into {job.image_name!r} in {result.seconds:.2f} s{baking.parallel_words(result)}, {per:.0f} "
+                    f"samples per texel, {rate:.2f} M rays/s{self.occlusion_words(job, result)}")
         h, w = result.ao.shape
         if getattr(job, "atlas", False):
             from .. import atlas
@@ -33,7 +33,7 @@ class ImageOutput(MapOutput):
                     f"{result.seconds:.2f} s, {per:.0f} samples per texel, {rate:.2f} M rays/s")
         sources = f" from {', '.join(s.name for s in job.highpoly)}" if getattr(job, "highpoly", None) else ""
         return (f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r}{self.channel_words(job)} in "
-                f"{result.seconds:.2f} s, {per:.0f} samples per texel, {rate:.2f} M rays/s"
+                f"{result.seconds:.2f} s{baking.parallel_words(result)}, {per:.0f} samples per texel, {rate:.2f} M rays/s"
                 f"{self.occlusion_words(job, result)}{baking.miss_summary(result)}")
 
     def channel_words(self, job):

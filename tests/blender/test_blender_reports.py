@@ -83,11 +83,14 @@ def test_each_objects_warnings_come_before_its_summary_and_the_total_comes_last(
     assert texts[1] == "A: 576 texels lie under overlapping UV islands; each averages every surface over it"
     # A's summary counts the two warnings before it; B's has none; the whole bake's comes last.
     number = r"[0-9]+\.[0-9]{2}"
+    # where the tiles ran (Processes and Threads automatic: the core chose, and says both predictions)
+    where = r"(on [0-9]+ threads?|in [0-9]+ worker processes)"
+    ran = rf" {where}( \(about {number} s against {number} s {where}\))?"
     assert kinds[2] == "WARNING" and re.fullmatch(
-        rf"A: 24x24 into 'A_AO' in {number} s, 16 samples per texel, {number} M rays/s; "
+        rf"A: 24x24 into 'A_AO' in {number} s{ran}, 16 samples per texel, {number} M rays/s; "
         "occluded by itself and 1 other object; 2 warnings before this, in the Info editor", texts[2])
     assert kinds[3] == "INFO" and re.fullmatch(
-        rf"B: 24x24 into 'B_AO' in {number} s, 16 samples per texel, {number} M rays/s; "
+        rf"B: 24x24 into 'B_AO' in {number} s{ran}, 16 samples per texel, {number} M rays/s; "
         "occluded by itself and 1 other object", texts[3])
     assert kinds[4] == "WARNING" and re.fullmatch(
         rf"AO bake: 2 objects in {number} s, 16 samples per texel, {number} M rays/s; "
@@ -109,6 +112,38 @@ def test_a_clean_bake_ends_with_its_summary_as_info(bpy, scene):
     assert kind == "INFO" and text.startswith("Ground: 24x24 into 'Ground_AO' in ") and "warning" not in text
     assert text.endswith(" M rays/s; occluded by itself and 1 other object")
     assert operators.last_outcome == reports[-1]
+
+
+def test_the_summary_says_where_the_tiles_ran_and_why(bpy, scene):
+    """Processes 0 and Threads 0: the core weighs Blender's threads against worker processes (by its
+    model's prediction of each) and the summary says which ran and both predictions; given counts are
+    said as they ran."""
+    from mc_ao import corelink
+
+    ground = add_plane(bpy, "Ground", size=4)
+    add_cube(bpy, "Block", size=1.0, location=(0, 0, 0.8))
+    select_only(bpy, ground)
+    s = scene.mc_ao
+    s.threads, s.processes = 0, 0
+    session, reports = new_session()
+    assert session.start(bpy.context, live=False)
+    assert tick_until(bpy, session, lambda: False) == {"FINISHED"}
+    (_, text), = reports
+    cores = corelink.load("base.machine").cpu_count()
+    m = re.search(r" in [0-9.]+ s (on|in) ([0-9]+) (threads?|worker processes) \(about ([0-9.]+) s against "
+                  r"([0-9.]+) s (on|in) ([0-9]+) (threads?|worker processes)\), 16 samples per texel", text)
+    if cores == 1:  # one core: nothing to weigh
+        assert m is None and " on 1 thread, " in text
+        return
+    assert m, text
+    chosen, other = float(m.group(4)), float(m.group(5))
+    assert chosen <= other  # the sooner of the two ran
+    assert {m.group(3), m.group(8)} == {"threads" if cores > 1 else "thread", "worker processes"}
+    s.processes = 1  # given: as it ran, no weighing
+    session, reports = new_session()
+    assert session.start(bpy.context, live=False)
+    assert tick_until(bpy, session, lambda: False) == {"FINISHED"}
+    assert f" s on {cores} threads, 16 samples per texel" in reports[-1][1] and "against" not in reports[-1][1]
 
 
 # -- the panel ------------------------------------------------------------------------------------
