@@ -519,10 +519,18 @@ def check_image_names(images):
     owners = {}
     for obj, name in images:
         if name in owners:
-            raise ExtractError(f"{owners[name]} and {obj} would both bake into image {name!r}; "
-                               "put {object} into the image name, or set Images to One for All to bake them "
-                               "into one image together")
+            raise ExtractError(image_name_clash(owners[name], obj, name))
         owners[name] = obj
+
+
+def image_name_clash(first, second, name):
+    """The refusal of two images named ``name``, of the objects ``first`` and ``second`` (one object's
+    two images where they are the same): the poll's and the bake's checks say it in these words."""
+    if first == second:
+        return (f"{first}'s images would both be named {name!r} (its AO and its bent normals or error "
+                "map): choose another Image name")
+    return (f"{first} and {second} would both bake into image {name!r}: put {{object}} into the Image name, "
+            "or set Images to One for All to bake them into one image together")
 
 
 # Channel index of each Channel setting.

@@ -6,7 +6,7 @@ left to the checks after the click, mc_ao.service.plan, which stay the ones that
 
 from . import baking
 
-__all__ = ["problem"]
+__all__ = ["own_image_is_into", "problem"]
 
 #: Image.source values an image of a plain bake can be (a tiled one takes UDIM bakes only).
 PLAIN_SOURCES = {"GENERATED", "FILE"}
@@ -24,6 +24,13 @@ def image_names(settings, target_name):
     return names
 
 
+def own_image_is_into(into, owner):
+    """The refusal of an Into image that is ``owner``'s (an object's name) own image: the poll's and the
+    bake's checks say it in these words."""
+    return (f"image {into!r} is both {owner}'s own image and the Into image: one would replace the other; "
+            "choose another Into or Image name")
+
+
 def problem(settings, targets, images):
     """Why a bake of ``targets`` (objects) with ``settings`` (in effect) would be refused after the
     click, as far as names and ``images`` (bpy.data.images, or name -> image) tell; or None."""
@@ -36,9 +43,8 @@ def problem(settings, targets, images):
     owners = {}
     for obj in targets:
         for name in image_names(settings, obj.name):
-            if name in owners and owners[name] != obj.name:
-                return (f"{owners[name]} and {obj.name} would both bake into image {name!r}: put {{object}} into "
-                        "the Image name, or set Images to One for All to bake them into one image together")
+            if name in owners:
+                return baking.image_name_clash(owners[name], obj.name, name)
             owners[name] = obj.name
             image = images.get(name)
             if image is None:
@@ -97,8 +103,7 @@ def _into_problem(settings, targets, owners, images):
     if not into:
         return f"Into: choose the image whose {settings.channel} channel receives the AO"
     if into in owners:
-        return (f"image {into!r} is both {owners[into]}'s own image and the Into image: one would replace the "
-                "other; choose another Into or Image name")
+        return own_image_is_into(into, owners[into])
     if len(targets) > 1:
         return (f"{targets[0].name} and {targets[1].name} would both write into the {settings.channel} channel of "
                 f"{into!r}, each the whole channel: bake one object at a time into it")

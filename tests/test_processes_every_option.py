@@ -45,8 +45,9 @@ NEEDS = {
     "quantity": dict(bent_normals=False),
 }
 #: Options a worker gets as the parent settled them (the tiles the parent cut, the extrusion it measured,
-#: its own threads, each UDIM tile as an image of its own; the parent denoises), not as given.
-WORKER_CHOSEN = {"tile_size", "threads", "extrusion", "tiles", "denoise"}
+#: each UDIM tile as an image of its own; the parent denoises), not as given. Threads reach each worker
+#: as given: the threads of each.
+WORKER_CHOSEN = {"tile_size", "extrusion", "tiles", "denoise"}
 #: Options that are the execution path itself, not a setting it must carry.
 NOT_CARRIED = {"workers": "the option under test: 1 here, 2 there"}
 #: The bake's inputs beside the request (core.bake's keywords that are not callbacks), each with the
@@ -166,7 +167,14 @@ def test_every_option_and_input_has_a_case():
 
 
 @pytest.mark.parametrize("name, kind", cases())
-def test_worker_processes_give_the_bits_of_one_process(name, kind):
+def test_worker_processes_give_the_bits_of_one_process(name, kind, monkeypatch):
+    from core.execution import executor
+
+    # Two workers of VALUES["threads"] threads each on any machine: the clamp by cores (tested in
+    # tests/test_worker_boot.py) would bake them in this process where the cores are fewer, and the
+    # option would never reach a worker.
+    cores = executor.cpu_count()
+    monkeypatch.setattr(executor, "cpu_count", lambda: max(cores, 2 * VALUES["threads"]))
     base = {k: v for k, v in BASE.items() if kind in next(o for o in OPTIONS if o.name == k).kinds}
     extra = {}
     if name in INPUTS:

@@ -104,12 +104,10 @@ class ChannelOutput(OutputKind):
         return None
 
     def check(self, job):
-        from .. import images
+        from .. import images, precheck
 
         if self.settings.into == job.image_name:  # the object's own image would take the whole AO over it
-            raise images.ImageError(f"image {job.image_name!r} is both its own image and the Into image whose "
-                                    f"{self.settings.channel} channel gets the AO: one would replace the other; "
-                                    "give its image another name (Image Name) or choose another Into")
+            raise images.ImageError(precheck.own_image_is_into(job.image_name, job.object_name))
         if not self.mine(job):
             return
         problem = self._one_object(job)

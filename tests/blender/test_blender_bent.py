@@ -211,5 +211,5 @@ def test_an_image_name_clash_is_refused(bpy, scene):
     scene.mc_ao.image_name = "{object}_BentNormal"
     session, reports = new_session()
     assert not session.start(bpy.context, live=False)
-    assert reports[-1] == ("ERROR", "Ground and Ground would both bake into image 'Ground_BentNormal'; "
-                                    "put {object} into the image name")
+    assert reports[-1] == ("ERROR", "Ground's images would both be named 'Ground_BentNormal' (its AO and its "
+                                    "bent normals or error map): choose another Image name")

@@ -88,7 +88,7 @@ def test_an_into_image_that_is_the_objects_own_image_is_refused(bpy, scene, capf
     before = pattern_image(bpy, "ORM", 16, 16)
     s.channel, s.into, s.image_name = "R", bpy.data.images["ORM"], "ORM"
     result, error, out = run_bake(bpy, capfd)
-    assert result is None and "is both its own image and the Into image" in error, (result, error, out)
+    assert result is None and "is both Floor's own image and the Into image" in error, (result, error, out)
     assert images.pixels_of(bpy.data.images["ORM"]).tobytes() == before.tobytes()
 
 

@@ -1,6 +1,7 @@
 """Bad input to scripts/bake_ao.py: what a script user reads (stderr) and the exit status, files kept."""
 
 import json
+import os
 import math
 import re
 import signal
@@ -153,7 +154,8 @@ def test_ctrl_c_during_a_bake_exits_130_and_writes_nothing(blends, tmp_path):
     record = json.loads(summary.read_text())
     assert record["exit_code"] == 130 and record["error"] == "cancelled (Ctrl-C)"
     assert record["objects"] == [{"object": "Ground", "status": "failed", "seconds": 0.0, "rays": 0,
-                                  "samples_per_texel": 0.0, "files": [], "error": "not baked: cancelled (Ctrl-C)"}]
+                                  "samples_per_texel": 0.0, "files": [], "file_stats": {},
+                                  "error": "not baked: cancelled (Ctrl-C)"}]
 
 
 # Runs the script with SIGINT sent to itself right after its first image file is written: a Ctrl-C
@@ -349,7 +351,11 @@ def test_the_summary_records_the_settings_every_file_carries(blends, tmp_path):
     }
     assert [o["object"] for o in record["objects"]] == ["Block", "Ground"]
     for obj in record["objects"]:
-        assert list(obj) == ["object", "status", "seconds", "rays", "samples_per_texel", "files", "error"]
+        assert list(obj) == ["object", "status", "seconds", "rays", "samples_per_texel", "files", "file_stats",
+                             "error", "parallel"]
+        assert obj["file_stats"] == {os.path.basename(f): [os.stat(f).st_size, os.stat(f).st_mtime_ns]
+                                     for f in obj["files"]}  # each file as the run left it
+        assert obj["parallel"]["processes"] >= 1 and obj["parallel"]["threads"] >= 1 and obj["parallel"]["why"]
         assert obj["status"] == "ok" and obj["error"] is None and obj["seconds"] > 0
         assert obj["rays"] > 0 and 1 <= obj["samples_per_texel"] <= 4
         stem = out / f"{obj['object']}_AO"
