@@ -40,7 +40,7 @@ def test_tasks_at_a_time_and_their_processes_fit_the_memory_by_the_process_model
     def needs(tasks, processes):  # every task's Blender and its bake's worker processes
         return tasks * (BYTES_PER_BAKE_PROCESS + (processes * cost.process_bytes(0) if processes > 1 else 0))
 
-    for memory in (1.2 * GiB, 2 * GiB, 4 * GiB, 8 * GiB):
+    for memory in (1.0 * GiB, 1.2 * GiB, 2 * GiB, 4 * GiB, 8 * GiB):  # 1 GiB: one task, room for 2 processes
         tasks, processes, why = batch_share(16, cores=16, memory=memory)
         assert needs(tasks, processes) <= 0.8 * memory < needs(tasks, processes + 1)  # the most that fit
         assert tasks * processes <= 16 and f"memory for {tasks} x {processes} processes" in why

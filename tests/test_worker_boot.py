@@ -150,6 +150,18 @@ def test_an_explicit_worker_count_is_clamped_by_the_cores_and_the_memory_and_sai
     assert clamp_processes(1000, 2, 1000, cores=16, memory=64 << 30)[0] == 8
     n, why = clamp_processes(16, 1, 2_000_000, cores=16, memory=4 << 30)
     assert n < 16 and "memory for" in why  # 2M triangles a copy: fewer copies fit
+    # The number is the process model's: within 80% of the memory, the parent's share first, then a
+    # copy of the scene (target, occluders, high-poly) for each worker.
+    from core import cost
+
+    for triangles in ((2_000_000, 0, 0), (300_000, 1_500_000, 0), (200_000, 100_000, 900_000)):
+        for memory in (3 << 30, 4 << 30, 6 << 30):
+            fit = int((0.8 * memory - cost.parent_bytes(triangles[0], sum(triangles[1:])))
+                      // cost.process_bytes(*triangles))
+            assert 1 < fit < 16
+            assert clamp_processes(16, 1, triangles, cores=16, memory=memory) == (
+                fit, f"memory for {fit} ({memory / 2 ** 30:.1f} GiB available, about "
+                     f"{cost.process_bytes(*triangles) / 2 ** 20:.0f} MiB each)")
     assert clamp_processes(2, 1, 1000, cores=16, memory=64 << 30) == (2, None)
     P = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
     F = np.array([[0, 1, 2], [0, 2, 3]])
