@@ -22,7 +22,7 @@ plan() reads Blender data (main thread); AtlasJob.run() touches no bpy.
 
 from dataclasses import dataclass, field
 
-from . import corelink
+from . import baking, corelink
 from .extract import ExtractError, object_arrays
 
 
@@ -92,38 +92,28 @@ class AtlasJob:
         return self._bake(settings, threads, tuple(quantities), True, progress, cancel, on_tile)
 
     def _bake(self, settings, threads, quantities, maps, progress, cancel, on_tile):
+        """The atlas's core bake: mc_ao.baking.core_bake (the add-on's one core call) of a core.Atlas of
+        its targets, at the atlas's size, with each target's bent-normal space and, for Selected to
+        Active, each one's high-poly meshes and cage."""
         core = corelink.load()
 
         def mesh(arrays, uvs=True):
             return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
                              normals=arrays.normals, name=arrays.name)
 
-        main = "ao" if maps else quantities[0]
-        kw = settings.bake_kwargs(threads)
-        if self.size is not None:
-            kw["resolution"] = tuple(self.size)
-        if "ao" not in quantities:
-            kw.pop("ground", None)
-            kw.pop("ignore_backfaces", None)
-        if not maps and main != "ao":
-            kw["quantity"] = main
-        if main != self.quantity:
-            kw.pop("bent_normals", None)
-        if maps:
-            kw["quantities"] = tuple(quantities)
-        if kw.get("bent_normals"):
-            kw["bent_space"] = [(t.extra or {}).get("bent_space") for t in self.targets]
+        extra = {"bent_space": [(t.extra or {}).get("bent_space") for t in self.targets]}
         if self.sources:
-            extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
-            kw.update(highpoly=[[mesh(h) for h in hs] if hs else None for hs in self.sources], extrusion=extrusion,
-                      max_ray_distance=self.max_ray_distance,
-                      cage=None if self.cage is None else [None if c is None else mesh(c) for c in self.cages])
+            extra.update(highpoly=[[mesh(h) for h in hs] if hs else None for hs in self.sources],
+                         cage=None if self.cage is None else [None if c is None else mesh(c) for c in self.cages],
+                         extrusion=baking.extrusion_of(self.cage, self.extrusion),
+                         max_ray_distance=self.max_ray_distance)
+        main = "ao" if maps else quantities[0]
         keep = {q: r for q, r in (self.keep or {}).items() if q in quantities and r is not None}
         atlas = core.Atlas([mesh(t) for t in self.targets], occluding=list(self.occluding),
                            keep=(keep if maps else keep.get(main)) or None)
         occluders = [mesh(o) for o in self.occluders] if "ao" in quantities else []
-        bake = core.bake_maps if maps else core.bake_ao
-        return bake(atlas, occluders, progress=progress, cancel=cancel, on_tile=on_tile, **kw)
+        return baking.core_bake(settings, threads, quantities, maps, self.quantity, atlas, occluders,
+                                resolution=self.size, progress=progress, cancel=cancel, on_tile=on_tile, **extra)
 
 
 # -- which objects share an image ---------------------------------------------------------------------

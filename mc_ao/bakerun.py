@@ -78,7 +78,7 @@ class BakeRun:
 
     def _group(self, i):
         """The jobs from ``i`` on that are other quantities of job ``i``'s object, with every quantity
-        they need, when that is more than one (they are then baked together, core.bake_maps: one set-up,
+        they need, when that is more than one (they are then baked together, one core.bake: one set-up,
         each quantity its own rays); else None."""
         job = self.jobs[i]
         if not hasattr(job, "run_maps"):

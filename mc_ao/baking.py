@@ -1,4 +1,4 @@
-"""What to bake: pick the targets, gather their geometry and their occluders, run core.bake_ao.
+"""What to bake: pick the targets, gather their geometry and their occluders, run the core (core.bake).
 
 plan() reads Blender data and must run in the main thread; Job.run() and Job.run_maps() (one core
 call, Job._bake, for every kind) touch no bpy and run on a worker thread (the operator's, scripts/bake_ao.py's), so that the main thread stays free.
@@ -121,59 +121,85 @@ class Job:
 
     def run_maps(self, settings, threads=None, quantities=("ao", "thickness"), progress=None, cancel=None,
                  on_tile=None):
-        """Several core quantities of this object from one bake (core.bake_maps, bake_udim_maps or
-        bake_vertex_maps: one set-up, each quantity its own rays): {quantity: result}, each bit for bit
+        """Several core quantities of this object from one bake (core.bake of a request with several
+        quantities: one set-up, each quantity its own rays): {quantity: result}, each bit for bit
         what :meth:`run` returns for it from this job (its occluders for the AO, none for a thickness
         map; the ground, back faces and bent normals for the AO only, the bent normals only where the
         AO is the job's own quantity). ``on_tile(quantity, rows, cols, block)``. Needs no bpy."""
         return self._bake(settings, threads, tuple(quantities), True, progress, cancel, on_tile)
 
     def _bake(self, settings, threads, quantities, maps, progress, cancel, on_tile):
-        """The one core call of every bake: an image, UDIM tiles or a colour attribute (core.bake_ao,
-        bake_udim, bake_vertex_ao; with ``maps`` several ``quantities`` at once, core.bake_maps,
-        bake_udim_maps, bake_vertex_maps), from the settings' options (BakeSettings.bake_kwargs)."""
+        """This job's core bake (:func:`core_bake`): its target, its occluders for the AO, its
+        high-poly meshes and cage for Selected to Active, its corners for a colour attribute."""
         core = corelink.load()
 
         def mesh(arrays, uvs=True):
             return core.Mesh(positions=arrays.positions, triangles=arrays.triangles, uvs=arrays.uvs if uvs else None,
                              normals=arrays.normals, name=arrays.name)
 
-        # The quantity whose options the bake takes: a bake of maps takes the AO's.
-        main = "ao" if maps else quantities[0]
-        kw = settings.bake_kwargs(threads)
-        if "ao" not in quantities:  # the ground and back faces are the AO's (core refuses them for thickness)
-            kw.pop("ground", None)
-            kw.pop("ignore_backfaces", None)
-        if not maps and main != "ao":
-            kw["quantity"] = main
-        if main != self.quantity:
-            kw.pop("bent_normals", None)
-        if maps:
-            kw["quantities"] = tuple(quantities)
-        occluders = [mesh(o) for o in self.occluders] if "ao" in quantities else []  # a thickness map: none
-        tiles = {}
+        extra = {}
         if settings.vertex_colors:
-            for key in ("resolution", "margin", "bent_normals"):
-                kw.pop(key, None)
-            bake = core.bake_vertex_maps if maps else core.bake_vertex_ao
-            kw["corners"] = self.target.extra["corners"]
-            target = mesh(self.target, uvs=False)
+            extra["corners"] = self.target.extra["corners"]
         else:
-            if kw.get("bent_normals"):
-                kw["bent_space"] = (self.target.extra or {}).get("bent_space")
+            extra["bent_space"] = (self.target.extra or {}).get("bent_space")
             if self.highpoly and not (settings.use_udim or settings.bent_normals):
-                # Extrusion 0 (the default) is measured from the meshes (core.highpoly's automatic
-                # extrusion: how far the high-poly lies outside the low-poly), never Cycles' trap of none.
-                extrusion = "auto" if self.cage is None and self.extrusion == 0 else self.extrusion
-                kw.update(highpoly=[mesh(h) for h in self.highpoly], extrusion=extrusion,
-                          max_ray_distance=self.max_ray_distance, cage=None if self.cage is None else mesh(self.cage))
-            if settings.use_udim:
-                bake = core.bake_udim_maps if maps else core.bake_udim
-            else:
-                bake = core.bake_maps if maps else core.bake_ao
-                tiles = {"on_tile": on_tile}
-            target = mesh(self.target)
-        return bake(target, occluders, progress=progress, cancel=cancel, **tiles, **kw)
+                extra.update(highpoly=[mesh(h) for h in self.highpoly],
+                             cage=None if self.cage is None else mesh(self.cage),
+                             extrusion=extrusion_of(self.cage, self.extrusion), max_ray_distance=self.max_ray_distance)
+        occluders = [mesh(o) for o in self.occluders] if "ao" in quantities else []  # a thickness map: none
+        return core_bake(settings, threads, quantities, maps, self.quantity, mesh(self.target, uvs=not
+                         settings.vertex_colors), occluders, progress=progress, cancel=cancel, on_tile=on_tile, **extra)
+
+
+def extrusion_of(cage, extrusion):
+    """The core's extrusion of a Selected to Active bake: 0 (the default) without a cage is "auto",
+    measured from the meshes (how far the high-poly lies outside the low-poly: core.highpoly), never
+    Cycles' trap of none; else the distance as given."""
+    return "auto" if cage is None and extrusion == 0 else extrusion
+
+
+def core_bake(settings, threads, quantities, maps, own, target, occluders, *, highpoly=None, cage=None,
+              extrusion=None, max_ray_distance=0.0, bent_space=None, corners=None, resolution=None, progress=None,
+              cancel=None, on_tile=None):
+    """The one core call of every bake (core.bake), for a job of one object (Job) or of several into one
+    image (mc_ao.atlas: ``target`` a core.Atlas): an image, UDIM tiles or a colour attribute, of one
+    quantity or (``maps``) several at once; ``own`` is the job's own quantity (bent normals come with
+    its bake only). The request is made of the settings' options (BakeSettings.bake_kwargs, with
+    ``threads``; ``resolution`` in place of theirs), less what the bake does not take: the ground and
+    back faces are the AO's (the core refuses them for a thickness map), an image's resolution and
+    margin are not a colour attribute's. ``highpoly`` (with ``cage``, ``extrusion``,
+    ``max_ray_distance``): Selected to Active. Returns {quantity: result} with ``maps``, else the one
+    result. Needs no bpy."""
+    core = corelink.load()
+    kind = "corners" if settings.vertex_colors else "udim" if settings.use_udim else "image"
+    main = "ao" if maps else quantities[0]  # the quantity whose options the bake takes: a bake of maps takes the AO's
+    kw = settings.bake_kwargs(threads)
+    if resolution is not None:
+        kw["resolution"] = tuple(resolution)
+    if "ao" not in quantities:
+        kw.pop("ground", None)
+        kw.pop("ignore_backfaces", None)
+    if not maps and main != "ao":
+        kw["quantity"] = main
+    if main != own or kind == "corners":
+        kw.pop("bent_normals", None)
+    if maps:
+        kw["quantities"] = tuple(quantities)
+    options = corelink.load("base.request").BY_NAME
+    kw = {name: value for name, value in kw.items() if kind in options[name].kinds}
+    calls = {"progress": progress, "cancel": cancel}
+    if kind == "corners":
+        calls["corners"] = corners
+    else:
+        if kw.get("bent_normals"):
+            calls["bent_space"] = bent_space
+        if highpoly is not None:
+            kw.update(extrusion=extrusion, max_ray_distance=max_ray_distance)
+            calls.update(highpoly=highpoly, cage=cage)
+        if kind == "image":
+            calls["on_tile"] = on_tile
+    results = core.bake(target, occluders, core.BakeRequest.from_options("bake", kind, kw), **calls)
+    return results if maps else results[main]
 
 
 # core's BakeResult.report keys that point at a problem in the input, and the sentence that says

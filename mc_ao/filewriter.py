@@ -21,6 +21,7 @@ import os
 from dataclasses import dataclass
 
 from . import corelink
+from .schema import FROM_CORE
 from .settings import FILE_FORMATS
 
 # The image file formats of the Format setting (PLY is a colour-attribute bake's own, chosen by its target).
@@ -65,6 +66,8 @@ def settings_record(settings):
         **({"ground_height": float(settings.ground_height)} if settings.ground == "HEIGHT" else {}),
         **({"quantity": " ".join(settings.quantities)} if settings.quantities != ("ao",) else {}),
         "replicates": int(kw["replicates"]),
+        # the core's options that are settings by themselves (mc_ao.schema.FROM_CORE): where not the default
+        **{s.core: kw[s.core] for s in FROM_CORE if getattr(settings, s.name) != s.default},
     }
     if getattr(settings, "use_selected_to_active", False):
         record.update({"selected_to_active": True, "cage_extrusion": float(settings.cage_extrusion),

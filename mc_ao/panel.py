@@ -4,7 +4,7 @@ import bpy
 
 from . import baking
 from . import operators
-from . import preview, selected_to_active
+from . import preview, schema, selected_to_active
 from .operators import OBJECT_OT_mc_ao_bake, is_running
 from .extract import default_uv_map
 from .properties import resolve_threads
@@ -333,6 +333,9 @@ class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
         col.prop(settings, "threads")
         col.prop(settings, "processes")
         col.prop(settings, "denoise")
+        # The core's options that are settings by themselves (mc_ao.schema.FROM_CORE): each as it comes.
+        for setting in schema.FROM_CORE:
+            col.prop(settings, setting.name)
 
 
 # The scene settings that are lists of collections (Include, Exclude).

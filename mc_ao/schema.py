@@ -6,25 +6,34 @@ Made from these lists: the scene's property group (mc_ao.properties), the fields
 mc_ao.settings.BakeSettings, scripts/bake_ao.py's options (mc_ao.cli.options) and with them the batch
 manifest's keys (a manifest key is the option's name with '_' for '-': :func:`manifest_keys`), and
 the one check of every value before any work (:func:`problems`, with the rules between settings of
-mc_ao.rules). Limits that are the core's (``MAX_SAMPLES``, ``MAX_RESOLUTION``, ``MAX_SEED``) are named
-here and read from ``core.base.request`` where they are used.
+mc_ao.rules).
+
+The bake's own options are the core's: :data:`core.base.request.OPTIONS` (numpy-free, read when this
+module loads, before the core's dependencies) defines each once, with its type, default, limits and
+meaning. A setting that gives one names it (``core``) and takes its limits from it unless it says
+otherwise; a core option that no setting maps, and that is not one the add-on decides itself
+(:data:`CORE_INTERNAL`), becomes a setting of its own (its name, label, help, limits and choices from
+the core), so a new option of the core reaches the panel's properties, the script's options, the
+manifest keys and the core call (mc_ao.settings.BakeSettings.bake_kwargs) with no edit here.
 
 "No distance limit" has one meaning for every distance here: 0 or infinity (:func:`unlimited`).
 """
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from . import rules
+from . import corelink, rules
+
+#: The core's options of a bake (core.base.request: no numpy).
+request = corelink.load("base.request")
 
 __all__ = ["Setting", "SETTINGS", "BY_NAME", "BY_KEY", "Option", "OPTIONS", "OPTION_BY_KEY", "problems",
            "unlimited", "limit", "cli_value", "from_cli", "from_options", "manifest_keys", "label_of", "option_of",
            "FORMATS", "BITS", "MAX_THREADS"]
 
-#: The most threads a bake may ask for: far above any machine's cores, far below what would exhaust
-#: the process starting them.
-MAX_THREADS = 1024
-_SEED_FALLBACK = (1 << 64) - 1  # the core's random streams take the seed as one uint64 word
+#: The most threads a bake may ask for (the core's).
+MAX_THREADS = request.MAX_THREADS
 
 
 @dataclass(frozen=True)
@@ -37,8 +46,8 @@ class Setting:
         scene), "collections" (collection names; a list of collection pointers on the scene) or "flags"
         (a set of an enum's identifiers: a tuple here, an enum-flag property on the scene).
     default, label (the UI's name), help (the UI's tooltip and the option's help).
-    lo, hi : limits of an int or float (a float with ``lo`` None takes any finite number); ``hi`` may
-        name a core.base.request constant ("MAX_SAMPLES").
+    lo, hi : limits of an int or float (a float with ``lo`` None takes any finite number); None: the
+        core option's (``core``).
     zero : what 0 means, said in messages ("every core").
     items : an enum's ``(identifier, UI name, description)``; the script's choice for an identifier is
         it in lower case with '-' for '_' (``VERTEX_COLORS`` -> ``vertex-colors``).
@@ -53,6 +62,8 @@ class Setting:
     cli_help : the option's help where ``help``'s words are the panel's (a click, a panel-only
         setting); absent, the option's help is ``help`` with other settings' names as their options
         (mc_ao.cli.options.script_help).
+    core : the option of core.base.request.OPTIONS that this setting gives (through
+        BakeSettings.bake_kwargs), or None.
     """
 
     name: str
@@ -70,6 +81,7 @@ class Setting:
     flag: object = None
     sets: tuple = ()
     cli_help: str = ""
+    core: object = None
 
     @property
     def option_key(self):
@@ -128,31 +140,33 @@ def from_options(namespace):
 
 SETTINGS = (
     Setting("samples", "int", 128, "Samples", "Rays per texel (the most, when adaptive sampling stops early)",
-            lo=1, hi="MAX_SAMPLES", ui={"soft_max": 4096}),
+            core="samples", ui={"soft_max": 4096}),
     Setting("min_samples", "int", 16, "Min Samples", "Rays per texel before adaptive sampling may stop a texel",
-            lo=1, hi="MAX_SAMPLES", ui={"soft_max": 1024}),
+            hi=request.MAX_SAMPLES, core="min_samples", ui={"soft_max": 1024}),
     Setting("target_error", "float", 0.0, "Noise Threshold",
             "Adaptive sampling: stop a texel once its AO is known to within this, 95% of the time (0.01: "
             "+-0.01). Open and fully occluded areas stop at Min Samples, noisy ones take up to Samples. 0 "
-            "turns adaptive sampling off", lo=0.0, zero="adaptive sampling off",
+            "turns adaptive sampling off", zero="adaptive sampling off", core="target_error",
             ui={"max": 1.0, "soft_max": 0.1, "step": 0.1, "precision": 4}),
     Setting("resolution", "int", 1024, "Size",
             "Width of the image in pixels. An existing image of another size is resized to this size (and "
-            "put back as it was if its bake is cancelled or fails)", lo=1, hi="MAX_RESOLUTION", key=None,
+            "put back as it was if its bake is cancelled or fails)", lo=1, hi=request.MAX_RESOLUTION, key=None,
+            core="resolution",
             targets=("image",), ui={"soft_min": 16, "soft_max": 8192, "subtype": "PIXEL"}),
     Setting("height", "int", 0, "Height", "Height of the image in pixels; 0 makes it square", lo=0,
-            hi="MAX_RESOLUTION", zero="as wide as high", key=None, targets=("image",),
+            hi=request.MAX_RESOLUTION, zero="as wide as high", key=None, targets=("image",), core="resolution",
             ui={"soft_max": 8192, "subtype": "PIXEL"}),
     Setting("max_distance", "distance", 0.0, "Distance",
             "Occluders farther than this do not count; 0 (or inf) = no limit (a thickness map then looks a "
-            "twentieth of the object's size into it)",
+            "twentieth of the object's size into it)", core="max_distance",
             ui={"soft_max": 100.0, "subtype": "DISTANCE", "unit": "LENGTH"}),
-    Setting("source", "enum", "SOBOL", "Sampler", "Where each texel's sample points come from", items=(
+    Setting("source", "enum", "SOBOL", "Sampler", "Where each texel's sample points come from", core="source", items=(
         ("SOBOL", "Sobol'", "Owen-scrambled Sobol' points over position and direction (least noise)"),
         ("HALTON", "Halton", "Scrambled Halton points"),
         ("STRATIFIED", "Stratified", "Jittered strata"),
         ("INDEPENDENT", "Independent", "Independent uniform random points"))),
     Setting("distribution", "enum", "COSINE", "Directions", "How ray directions are spread over the hemisphere",
+            core="distribution",
             items=(("COSINE", "Cosine", "Cosine-weighted: no noise on open surfaces"),
                    ("UNIFORM", "Uniform", "Uniform over the hemisphere"))),
     # "VISIBLE" (the script's "visible") is the stored value of All Rendered: files and manifests that
@@ -178,14 +192,14 @@ SETTINGS = (
             "other object darkens it (Occluders and the collections are then not used)"),
     Setting("ground", "enum", "OFF", "Ground",
             "A ground plane that occludes as an endless floor mesh would, without a mesh: contact shadow for "
-            "props baked without their floor", flag="AUTO", items=(
+            "props baked without their floor", flag="AUTO", core="ground", items=(
                 ("OFF", "Off", "No ground"),
                 ("AUTO", "Lowest Point", "At each baked object's own lowest point (each prop of a batch "
                                          "gets its own contact)"),
                 ("HEIGHT", "Height", "At the height below (world Z)"))),
     Setting("ground_height", "float", 0.0, "Height",
             "World Z of the ground plane when Ground is Height (the script's --ground-height H sets both)",
-            lo=None, sets=("ground", "HEIGHT"),
+            lo=None, sets=("ground", "HEIGHT"), core="ground",
             cli_help="A ground plane at world Z = X, which occludes as an endless floor mesh would "
                      "(instead of --ground's, at each object's lowest point)",
             ui={"soft_min": -100.0, "soft_max": 100.0, "subtype": "DISTANCE", "unit": "LENGTH"}),
@@ -194,14 +208,15 @@ SETTINGS = (
             "(rays into the mesh up to Distance: black is thin, white thick), or both (shift-click)",
             cli_help="What to bake: ambient occlusion into \"{object}_AO\", thickness into \"{object}_Thickness\" "
                      "(rays into the mesh up to --max-distance: black is thin, white thick), or both "
-                     "(--quantity ao thickness)", items=(
+                     "(--quantity ao thickness)", core="quantity", items=(
                 ("AO", "AO", "Ambient occlusion, into \"{object}_AO\""),
                 ("THICKNESS", "Thickness", "How thick the mesh is behind each point (black thin, white thick), "
                                            "into \"{object}_Thickness\"; only the object itself counts"))),
     Setting("uv_map", "str", "", "UV Map", "UV map to bake into; empty for each mesh's active render UV map",
             targets=("image", "udim", "bent")),
     Setting("margin", "int", 16, "Margin", "Extend the baked islands by this many pixels, against seams",
-            lo=0, hi="MAX_RESOLUTION", targets=("image", "udim", "bent"), ui={"soft_max": 64, "subtype": "PIXEL"}),
+            hi=request.MAX_RESOLUTION, targets=("image", "udim", "bent"), core="margin",
+            ui={"soft_max": 64, "subtype": "PIXEL"}),
     Setting("image_name", "str", "", "Image",
             'Image to bake into; empty for "{object}_AO"; {object} is replaced by the object name. An '
             "existing image is reused, resized to the bake's size; files are named after it, made safe",
@@ -253,7 +268,7 @@ SETTINGS = (
             "file stays small and needs the file beside it. Off, or without Save to File, the image's pixels "
             "are packed into the .blend file", key=None, targets=("image", "udim", "bent")),
     Setting("seed", "int", 0, "Seed", "Seed of the random scrambling; the same seed gives the same image",
-            lo=0, hi="MAX_SEED", ui={"max": (1 << 31) - 1}),
+            core="seed", ui={"max": (1 << 31) - 1}),
     Setting("threads", "int", 0, "Threads",
             "Threads of each process that bakes; 0 uses the add-on preferences' default (all cores). With "
             "Processes 0, as many processes bake as the cores hold at this many threads each (on 2 cores, "
@@ -261,7 +276,7 @@ SETTINGS = (
             cli_help="Threads of each process that bakes; 0: all cores. With --processes 0, as many processes "
                      "bake as the cores hold at this many threads each (on 2 cores, --threads 2 bakes in this "
                      "process)",
-            lo=0, hi=MAX_THREADS, zero="every core", ui={"soft_max": 256}),
+            lo=0, hi=MAX_THREADS, zero="every core", core="threads", ui={"soft_max": 256}),
     Setting("processes", "int", 0, "Processes",
             "Worker processes the bake's tiles are baked in, each with its own copy of the scene; 1 bakes in "
             "Blender's own process on threads. 0, with Threads 0, bakes where this machine is predicted to "
@@ -274,13 +289,14 @@ SETTINGS = (
                      "many worker processes as the cores and the memory hold, which each set up the scene again "
                      "and must start first unless they are running (--summary-json says which and why). The "
                      "image is the same either way",
-            lo=0, hi=MAX_THREADS, zero="threads or processes, whichever is sooner", ui={"soft_max": 64}),
+            lo=0, hi=MAX_THREADS, zero="threads or processes, whichever is sooner", core="workers", ui={"soft_max": 64}),
     Setting("denoise", "bool", False, "Denoise",
             "Filter the baked AO over the surface, across UV seams, each texel weighed by its own error: much "
             "less noise at few samples (16 denoised samples beat 128 raw ones on the bench), for about a "
             "third of a 64-sample bake's time more; the error map then shows the denoised map's error",
-            targets=("image", "udim", "vertex")),
-    Setting("ignore_backfaces", "bool", False, "Ignore Backfaces", "Rays that hit the back of a face pass through it"),
+            targets=("image", "udim", "vertex"), core="denoise"),
+    Setting("ignore_backfaces", "bool", False, "Ignore Backfaces", "Rays that hit the back of a face pass through it",
+            core="ignore_backfaces"),
     Setting("target", "enum", "IMAGE_TEXTURES", "Target", "Where the AO goes", items=(
         ("IMAGE_TEXTURES", "Image Textures", "Bake into an image per object, over its UV map"),
         ("VERTEX_COLORS", "Color Attributes",
@@ -301,7 +317,7 @@ SETTINGS = (
             "tile, and saved files are named <image>.<tile>.<ext>", key="udim", targets=("udim",)),
     Setting("bent_normals", "bool", False, "Bent Normals",
             "Also bake each texel's mean unoccluded direction into \"{object}_BentNormal\" (RGB = n / 2 + 1/2, "
-            "Blender's normal map convention), from the same rays", targets=("image", "udim")),
+            "Blender's normal map convention), from the same rays", targets=("image", "udim"), core="bent_normals"),
     Setting("bent_space", "enum", "TANGENT", "Space", "Space of the bent normal map", items=(
         ("TANGENT", "Tangent", "Tangent space of the bake's UV map (MikkTSpace, as Blender's normal bake)"),
         ("OBJECT", "Object", "Object space")), targets=("bent",)),
@@ -320,12 +336,12 @@ SETTINGS = (
     Setting("cage_extrusion", "float", 0.0, "Cage Extrusion",
             "Inflate the active object by the specified distance for baking. This helps matching to points "
             "nearer to the outside of the selected object meshes. 0 measures it from the meshes: how far the "
-            "high-poly lies outside the low-poly along its normals", lo=0.0, key="extrusion",
+            "high-poly lies outside the low-poly along its normals", lo=0.0, key="extrusion", core="extrusion",
             targets=("selected_to_active",),
             ui={"soft_max": 1.0, "step": 1, "precision": 3, "subtype": "DISTANCE", "unit": "LENGTH"}),
     Setting("max_ray_distance", "distance", 0.0, "Max Ray Distance",
             "The maximum ray distance for matching points between the active and selected objects. If zero, "
-            "there is no limit", targets=("selected_to_active",),
+            "there is no limit", targets=("selected_to_active",), core="max_ray_distance",
             ui={"soft_max": 1.0, "step": 1, "precision": 3, "subtype": "DISTANCE", "unit": "LENGTH"}),
     Setting("use_cage", "bool", False, "Cage", "Cast rays to active object from a cage", key=None,
             targets=("selected_to_active",)),
@@ -334,6 +350,55 @@ SETTINGS = (
             "it must be a copy of the active object with its vertices moved", key=None,
             targets=("selected_to_active",)),
 )
+
+#: The core's options the add-on sets itself, with why (none of them is a setting).
+CORE_INTERNAL = {
+    "replicates": "from the settings that use the error (BakeSettings.replicates)",
+    "quantities": "from Quantity (several quantities are baked together)",
+    "falloff": "not offered: AO here is Cycles' (a hit counts whole)",
+    "thickness_distance": "Distance's (max_distance): the core decides it where Distance is unlimited",
+    "tiles": "every UDIM tile the UVs touch is baked",
+    "empty_ok": "a bake that covers no texel is an error",
+    "merge": "the core's default",
+    "tile_size": "chosen by the core",
+    "chunk_rays": "chosen by the core",
+    "constant_answer": "benchmarks only",
+}
+# A core option's kinds of bake -> the settings' targets.
+_TARGETS = {"image": "image", "udim": "udim", "corners": "vertex"}
+# A core option's kind -> the kind of the setting made of it (other kinds need a setting of their own).
+_KINDS = {"int": "int", "float": "float", "distance": "distance", "bool": "bool", "choice": "enum"}
+
+
+def _from_core(setting):
+    """``setting`` with the limits of the core option it gives where it sets none."""
+    option = request.BY_NAME[setting.core] if setting.core else None
+    if option is None or setting.kind not in ("int", "float", "distance"):
+        return setting
+    return dataclasses.replace(setting, lo=option.lo if setting.lo is None else setting.lo,
+                               hi=option.hi if setting.hi is None else setting.hi)
+
+
+def setting_of(option):
+    """The setting of a core option that no setting of the add-on maps: its name, a label and help
+    from its name and meaning, its default, limits and choices (an enum of the choices in capitals)."""
+    kind = _KINDS.get(option.kind)
+    if kind is None:
+        raise AssertionError(f"the core's option {option.name!r} (kind {option.kind!r}) needs a setting in "
+                             "mc_ao.schema that gives it, or a reason in CORE_INTERNAL")
+    items = tuple((c.upper(), c.replace("_", " ").title(), c) for c in option.choices)
+    default = option.default.upper() if kind == "enum" else option.default
+    targets = tuple(dict.fromkeys(_TARGETS[k] for k in option.kinds)) if set(option.kinds) != set(request.KINDS) \
+        else ("all",)
+    return Setting(option.name, kind, default, option.name.replace("_", " ").capitalize(),
+                   option.meaning[:1].upper() + option.meaning[1:], lo=option.lo, hi=option.hi, items=items,
+                   targets=targets, core=option.name)
+
+
+_MAPPED = {s.core for s in SETTINGS if s.core}
+#: The core's options that became settings of their own (setting_of), in the core's order.
+FROM_CORE = tuple(setting_of(o) for o in request.OPTIONS if o.name not in _MAPPED and o.name not in CORE_INTERNAL)
+SETTINGS = tuple(_from_core(s) for s in SETTINGS) + FROM_CORE
 
 BY_NAME = {s.name: s for s in SETTINGS}
 BY_KEY = {s.option_key: s for s in SETTINGS if s.option_key is not None}
@@ -467,13 +532,7 @@ def unlimited(distance):
 
 
 def limit(setting):
-    """``setting.hi`` as a number (a core.base.request constant read from the core), or None."""
-    if isinstance(setting.hi, str):
-        from . import corelink
-
-        if setting.hi == "MAX_SEED":
-            return getattr(corelink.load("base.request"), "MAX_SEED", _SEED_FALLBACK)
-        return getattr(corelink.load("base.request"), setting.hi)
+    """``setting.hi`` (a number, the core's where the setting gives a core option), or None."""
     return setting.hi
 
 

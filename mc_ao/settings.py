@@ -9,7 +9,7 @@ import os
 from types import SimpleNamespace
 
 from . import corelink, schema
-from .schema import BY_NAME, OPTIONS, SETTINGS, unlimited
+from .schema import BY_NAME, FROM_CORE, OPTIONS, SETTINGS, unlimited
 
 _TYPES = {"int": int, "float": float, "distance": float, "bool": bool, "enum": str, "str": str, "object": str,
           "image": str, "collections": tuple, "flags": tuple}
@@ -202,7 +202,8 @@ class _BakeSettingsMethods:
         return bits_float if self.float_buffer else bits8
 
     def bake_kwargs(self, threads=None):
-        """Keyword arguments of core.bake_ao (without target and occluders).
+        """The options of the core's bake request (core.base.request.BakeRequest; core.bake_ao's keywords),
+        without target and occluders.
 
         threads: the number of worker threads, None for all cores; it replaces ``self.threads`` so that
         the caller resolves the preferences' default.
@@ -227,6 +228,8 @@ class _BakeSettingsMethods:
             **({"denoise": True} if self.denoise else {}),
             # the ground only when on: a bake without one passes what it passed before
             **({"ground": self.ground_value()} if self.ground != "OFF" else {}),
+            # the core's options that are settings of their own (mc_ao.schema.FROM_CORE), as they are
+            **{s.core: _core_value(s, getattr(self, s.name)) for s in FROM_CORE},
         )
 
 
@@ -239,6 +242,11 @@ BakeSettings = dataclasses.make_dataclass(
 BakeSettings.__module__ = __name__
 BakeSettings.__doc__ = ("Everything one bake needs besides the objects; one field per mc_ao.schema setting "
                         "(the scene.mc_ao properties' names).")
+
+
+def _core_value(setting, value):
+    """A setting's value as its core option takes it (an enum's identifier in lower case: the core's choice)."""
+    return value.lower() if setting.kind == "enum" else value
 
 
 def _clip_utf8(text, limit):

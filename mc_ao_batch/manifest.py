@@ -56,6 +56,11 @@ _NO_EFFECT = {"threads", "processes", "quiet", "output", "summary_json", "blend"
 _ADDED_AT_DEFAULT = {"denoise": False, "occluder_collections": [], "exclude_collections": [], "only_local": False,
                      "ground": False, "ground_height": None, "quantity": ["ao"], "channel": "none", "into": "",
                      "images": "own", "atlas": None, "id_map": False, "match_collections": False}
+# The settings made of a core option by themselves (mc_ao.schema.FROM_CORE: a core option that the add-on
+# does not map), at their defaults as the script's parser gives them: left out of fingerprints at their
+# default too, so that a new option of the core finds a library baked before it done.
+_FROM_CORE_AT_DEFAULT = {s.option_key: (False if s.kind == "bool" else schema.cli_value(s.default) if s.kind == "enum"
+                                        else s.default) for s in schema.FROM_CORE}
 _ENTRY_KEYS = {"blend"}
 # Keys of [defaults] and [[bake]] entries that are the batch's own, not bake_ao.py settings: never on
 # the bake's command line, never in a fingerprint.
@@ -269,8 +274,9 @@ def _fingerprint(blend_given, identity, namespace, output_version=OUTPUT_VERSION
     """The hash of everything that decides a task's output: the .blend file, the settings and the output
     version (``output_version`` 1: the record of the versions before output versions, which named the
     mc_ao version instead, so that their libraries are found)."""
+    at_default = {**_ADDED_AT_DEFAULT, **_FROM_CORE_AT_DEFAULT}
     settings = {k: v for k, v in vars(namespace).items()
-                if k not in _NO_EFFECT and not (k in _ADDED_AT_DEFAULT and v == _ADDED_AT_DEFAULT[k])}
+                if k not in _NO_EFFECT and not (k in at_default and v == at_default[k])}
     made_by = {"mc_ao": _LEGACY_MC_AO} if output_version == 1 else {"output_version": int(output_version)}
     record = dict(made_by, blend=blend_given, file=identity, settings=settings)
     text = json.dumps(record, sort_keys=True, default=lambda v: list(v) if isinstance(v, tuple) else str(v))

@@ -82,7 +82,8 @@ def scene(bpy, addon):
 
 @pytest.fixture
 def hold_bake(monkeypatch):
-    """core.bake_ao that, after the first finished tile of the named objects, waits until cancelled.
+    """core.bake (the add-on's one core call) that, after the first finished tile of the named objects,
+    waits until cancelled.
 
     A bake caught in the middle, deterministically: the live image already has tiles in it, the bake
     has not finished, and only Esc (or an undo) lets the worker go on, into core's cancellation.
@@ -90,12 +91,12 @@ def hold_bake(monkeypatch):
     """
     import core
 
-    real = core.bake_ao
+    real = core.bake
 
     def hold(*names):
         held = threading.Event()
 
-        def bake_ao(target, *args, on_tile=None, cancel=None, **kwargs):
+        def bake(target, *args, on_tile=None, cancel=None, **kwargs):
             def tile(*tile_args):
                 if on_tile is not None:
                     on_tile(*tile_args)
@@ -105,7 +106,7 @@ def hold_bake(monkeypatch):
 
             return real(target, *args, on_tile=tile, cancel=cancel, **kwargs)
 
-        monkeypatch.setattr(core, "bake_ao", bake_ao)
+        monkeypatch.setattr(core, "bake", bake)
         return held
 
     return hold

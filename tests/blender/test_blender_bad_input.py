@@ -250,7 +250,7 @@ def test_an_image_of_another_size_is_put_back_when_its_bake_fails(bpy, scene, mo
     old = pattern_image(bpy, "Ground_AO", 8, 6)
     scene.mc_ao.resolution = 64
     scene.mc_ao.threads = 1
-    real = core.bake_ao
+    real = core.bake
 
     def failing(target, *args, on_tile=None, **kwargs):
         def tile(*tile_args):
@@ -259,7 +259,7 @@ def test_an_image_of_another_size_is_put_back_when_its_bake_fails(bpy, scene, mo
 
         return real(target, *args, on_tile=tile, **kwargs)
 
-    monkeypatch.setattr(core, "bake_ao", failing)
+    monkeypatch.setattr(core, "bake", failing)
     select_only(bpy, ground)
     session, reports = new_session()
     assert session.start(bpy.context, live=True)
@@ -465,7 +465,7 @@ def test_an_unexpected_exception_in_the_core_is_reported_not_raised(bpy, scene, 
     def broken(*args, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(core, "bake_ao", broken)
+    monkeypatch.setattr(core, "bake", broken)
     ground = add_plane(bpy, "Ground", size=4)
     old = pattern_image(bpy, "Ground_AO", 8, 8)
     select_only(bpy, ground)

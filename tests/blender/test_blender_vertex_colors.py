@@ -165,7 +165,7 @@ def test_esc_leaves_the_mesh_as_it_was_and_a_finished_bake_is_one_undo_step(bpy,
     add_cube(bpy, "Block", size=1.0, location=(0, 0, 0.7))
     select_only(bpy, obj)
     held = threading.Event()
-    real = core.bake_vertex_ao
+    real = core.bake
 
     def holding(*args, progress=None, cancel=None, **kwargs):
         def step(fraction):
@@ -175,13 +175,13 @@ def test_esc_leaves_the_mesh_as_it_was_and_a_finished_bake_is_one_undo_step(bpy,
                 progress(fraction)
         return real(*args, progress=step, cancel=cancel, **kwargs)
 
-    monkeypatch.setattr(core, "bake_vertex_ao", holding)
+    monkeypatch.setattr(core, "bake", holding)
     session, reports = new_session()
     assert session.start(bpy.context, live=True)
     tick_until(bpy, session, held.is_set)
     assert session.on_event(bpy.context, "ESC") == {"CANCELLED"}
     assert obj.data.color_attributes.get("AO") is None
-    monkeypatch.setattr(core, "bake_vertex_ao", real)
+    monkeypatch.setattr(core, "bake", real)
 
     bpy.ops.ed.undo_push(message="before the bake")
     assert bpy.ops.object.mc_ao_bake("EXEC_DEFAULT", True) == {"FINISHED"}

@@ -81,10 +81,10 @@ def hold_first_bake():
     import importlib
 
     core = importlib.import_module(ADDON + ".core")
-    real = core.bake_ao
+    real = core.bake  # the add-on's one core call
     state["held"] = False
 
-    def bake_ao(target, *args, on_tile=None, cancel=None, **kwargs):
+    def bake(target, *args, on_tile=None, cancel=None, **kwargs):
         first = not state.get("hold_used")
         state["hold_used"] = True
 
@@ -97,7 +97,7 @@ def hold_first_bake():
 
         return real(target, *args, on_tile=tile, cancel=cancel, **kwargs)
 
-    core.bake_ao = bake_ao
+    core.bake = bake
 
 
 def scene_setup():

@@ -17,8 +17,8 @@ and runs the modes of $MC_AO_LAT_MODES one after another:
   and beside the busy processes of ``burn``;
 - ``gil``: no bake, one busy Python thread inside Blender for as long (what the GIL costs the UI);
 - ``threads``: Bake AO as the add-on runs it (its worker thread, the core's threads);
-- ``workers``: the same, with the installed core's ``bake_ao`` given ``workers=$MC_AO_LAT_WORKERS``
-  (the operator reaches the core as ``corelink.load().bake_ao``, so the package attribute is what
+- ``workers``: the same, with the installed core's ``bake`` given a request of ``workers=$MC_AO_LAT_WORKERS``
+  (the operator reaches the core as ``corelink.load().bake``, so the package attribute is what
   is replaced); the first such bake starts the pool (cold), later ones reuse it (warm);
 - ``threads-nice``, ``workers-nice``: the same bakes with the baking threads, or the worker
   processes, at nice $MC_AO_LAT_NICE (the pool is made before the bake, so that its workers are reniced);
@@ -218,18 +218,18 @@ def draw_counter(name):
 
 
 def patch_core():
-    """Replace the installed core's bake_ao (what the operator calls) by one that records each bake
+    """Replace the installed core's bake (the operator's one core call) by one that records each bake
     and, while state['inject_workers'], bakes in worker processes."""
     c = core()
-    orig = c.bake_ao
+    orig = c.bake
 
-    def bake_ao(*args, **kw):
+    def bake(target, occluders, request, **kw):
         if state["inject_workers"]:
-            kw["workers"] = WORKERS
+            request = request.replace(workers=WORKERS)
         nice = state.get("nice")
         if nice and state["inject_workers"]:
             # The pool the bake will use (threads=None: one thread a worker), its workers made nice.
-            pool = c.pipeline.run.pool(WORKERS, 1 if kw.get("threads") is None else kw["threads"])
+            pool = c.pipeline.run.pool(WORKERS, 1 if request.threads is None else request.threads)
             for w in pool.workers:
                 os.setpriority(os.PRIO_PROCESS, w.process.pid, nice)
         elif nice:
@@ -238,9 +238,10 @@ def patch_core():
         before = pool_state()
         cpu0 = resource.getrusage(resource.RUSAGE_SELF)
         t0 = time.perf_counter()
-        record = {"kwargs": {k: v for k, v in kw.items() if k in ("workers", "threads", "resolution", "samples")}}
+        record = {"kwargs": {k: getattr(request, k) for k in ("workers", "threads", "resolution", "samples")}}
         try:
-            r = orig(*args, **kw)
+            results = orig(target, occluders, request, **kw)
+            r = next(iter(results.values()))
         except BaseException as e:
             record["error"] = f"{type(e).__name__}: {e}"
             state["bakes"].append(record)
@@ -261,10 +262,10 @@ def patch_core():
                       rays=r.rays, warnings=r.report.get("warnings"), pool=after, worker_cpu_s=worker_cpu,
                       blender_cpu_s=(cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime))
         state["bakes"].append(record)
-        return r
+        return results
 
-    c.bake_ao = bake_ao
-    log("patched", c.__name__ + ".bake_ao")
+    c.bake = bake
+    log("patched", c.__name__ + ".bake")
 
 
 # -- worker processes from inside Blender, without the operator ------------------------------------
