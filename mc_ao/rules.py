@@ -31,7 +31,8 @@ class Rule:
     """One rule between settings.
 
     field : the setting (or script option) the problem is said of; the message follows its name.
-    broken : ``values -> bool``, or a list of cases (each one problem, ``{c}`` in the message).
+    broken : ``values -> bool`` (or a value taken as one), or a list of cases (each one problem, ``{c}``
+        in the message).
     message : the problem (see the module's docstring for its placeholders).
     script : a rule of the script's own options (``--format``, ``--save``, ``--match-suffix``, ...)
         or of settings that the panel hides where they do not apply (the operator leaves those
@@ -199,7 +200,7 @@ def broken(values, naming, *, script=False, poll=False):
         if (rule.script and not script) or (poll and not rule.poll):
             continue
         cases = rule.broken(values)
-        if isinstance(cases, bool):
+        if not isinstance(cases, list):  # broken or not (a bool, or a value that says it)
             cases = [None] if cases else []
         for case in cases:
             out.append((rule.field, Formatter().vformat(rule.message, (), _Fields(naming, values, case))))

@@ -27,6 +27,7 @@ class PlaneJob:
     image_name = "Plane_AO"
     selected_to_active = False
     highpoly = ()
+    quantity = "ao"
 
     def __init__(self, name="Plane"):
         self.object_name, self.image_name = name, f"{name}_AO"
@@ -48,7 +49,7 @@ SETTINGS = BakeSettings(resolution=8, samples=4, margin=1, threads=1, processes=
 
 def test_every_kind_is_registered_and_has_a_file_of_its_own():
     names = [k.name for k in outputs.KINDS]
-    assert names == ["image", "error_map", "bent_normals", "channel", "color_attribute"]
+    assert names == ["image", "error_map", "bent_normals", "id_map", "channel", "color_attribute"]
     for kind in outputs.KINDS:
         assert issubclass(kind, base.OutputKind)
         assert (PACKAGE / f"{kind.__module__.rpartition('.')[2]}.py").is_file()
