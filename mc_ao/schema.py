@@ -390,7 +390,7 @@ def setting_of(option):
     default = option.default.upper() if kind == "enum" else option.default
     targets = tuple(dict.fromkeys(_TARGETS[k] for k in option.kinds)) if set(option.kinds) != set(request.KINDS) \
         else ("all",)
-    return Setting(option.name, kind, default, option.name.replace("_", " ").capitalize(),
+    return Setting(option.name, kind, default, option.name.replace("_", " ").title(),
                    option.meaning[:1].upper() + option.meaning[1:], lo=option.lo, hi=option.hi, items=items,
                    targets=targets, core=option.name)
 

@@ -43,7 +43,7 @@ def test_a_core_option_alone_becomes_a_setting():
     setting = schema.setting_of(option)
     assert (setting.name, setting.kind, setting.default, setting.core) == ("dummy_level", "enum", "LOW", "dummy_level")
     assert setting.identifiers == ("LOW", "HIGH") and setting.targets == ("image", "udim")
-    assert (setting.label, setting.help, setting.option) == ("Dummy level", "A test's option", "--dummy-level")
+    assert (setting.label, setting.help, setting.option) == ("Dummy Level", "A test's option", "--dummy-level")
 
 
 def test_loading_the_settings_loads_no_numpy():
