@@ -179,3 +179,48 @@ def test_udim_and_corner_bakes_report_where_they_ran():
 
     v = bake_vertex_ao(target, occ, samples=4, max_distance=1.0, workers="auto")
     assert v.report.parallel["processes"] >= 1 and "predicted_seconds" in v.report.parallel
+
+
+def test_a_workers_set_up_repeats_the_checks_not_the_layout_that_comes_in_its_job():
+    work = WORKS[2]
+    target, every = work.triangles[0], sum(work.triangles)
+    kept = cost.parallel_seconds(work, 2, 1, 0.0, True)
+    built = cost.parallel_seconds(work, 2, 1, 0.0, False)
+    own = cost.NS_WORKER_SETUP_PER_TRIANGLE + cost.NS_TABLE_PER_TRIANGLE
+    assert kept["workers"] == pytest.approx(cost.WORKER_BAKE_SECONDS
+                                            + 1e-9 * (cost.NS_RECEIVE_PER_BYTE * work.job_bytes + own * target))
+    assert built["workers"] - kept["workers"] == pytest.approx(1e-9 * cost.NS_EMBREE_PER_TRIANGLE * every)
+    # the parent lays the UVs out (UV triangles, bins); a worker repeats only its checks and prologue
+    assert 0 < cost.NS_WORKER_SETUP_PER_TRIANGLE < cost.NS_SETUP_PER_TRIANGLE
+    assert kept["parent"] == cost.parallel_seconds(work, 1, 2)["parent"]
+
+
+def test_the_job_bytes_weighed_are_the_arrays_a_worker_is_sent(monkeypatch):
+    target, occ = grid(40), [lid()]
+    seen = {}
+    parallel_of, bake_tiles = run_mod.parallel_of, run_mod.bake_tiles
+
+    def weigh(*a, **kw):
+        seen["work"] = a[4]
+        return parallel_of(*a, **kw)
+
+    def sent(remote, bake, keys, processes, threads, job, *a, **kw):
+        seen["job"] = job()
+        return bake_tiles(remote, bake, keys, processes, threads, job, *a, **kw)
+
+    monkeypatch.setattr(run_mod, "parallel_of", weigh)
+    monkeypatch.setattr(run_mod, "bake_tiles", sent)
+    bake_ao(target, occ, resolution=256, samples=1, max_distance=1.0, workers="auto")
+
+    def arrays(x):
+        if isinstance(x, np.ndarray):
+            return x.nbytes
+        if isinstance(x, dict):
+            return sum(arrays(v) for v in x.values())
+        if isinstance(x, (list, tuple)):
+            return sum(arrays(v) for v in x)
+        return 0
+
+    job = seen["job"]
+    assert job["target"]["uvs"] is None and len(job["layout"]["bins"]) > 1
+    assert 0.95 < seen["work"].job_bytes / arrays(job) < 1.05

@@ -370,3 +370,62 @@ def test_a_cancel_from_a_tile_ends_the_bake_whatever_each_worker_is_doing():
         t.start()
         t.join(120)  # a bound for a slow machine: a bake left waiting for a stopped worker never ends
         assert out == ["cancelled"], seed
+
+
+def test_a_workers_job_carries_the_parents_layout_not_the_uvs_and_the_worker_lays_out_nothing(monkeypatch):
+    from core.geometry.raster import bin_triangles, prepare
+    from core.pipeline import remote
+    from core.targets import texels
+
+    target, occ = scene()
+    args = dict(resolution=48, samples=16, max_distance=0.7, seed=5, margin=2, tile_size=16, denoise=True)
+    sent = []
+    real_send = pool.send
+
+    def spy(stream, msg):
+        if msg[0] == "setup":
+            sent.append(msg[2])
+        real_send(stream, msg)
+
+    monkeypatch.setattr(pool, "send", spy)
+    r = bake_ao(target, occ, workers=2, threads=1, **args)
+    ref = bake_ao(target, occ, workers=1, threads=1, **args)
+    for name in FIELDS + ("raw_ao",):
+        assert np.array_equal(getattr(ref, name), getattr(r, name)), name
+    assert len(sent) == 2 and all(job is sent[0] for job in sent)  # one job, to each worker
+    job = sent[0]
+    # The target travels without its UVs; its UV triangles and tiles as this process laid them out.
+    assert job["target"]["uvs"] is None and set(job["target"]) == {"positions", "triangles", "uvs", "normals", "name"}
+    tris = prepare(target, 48, 48)
+    lay = job["layout"]
+    assert np.array_equal(lay["corners32"], tris.corners32) and lay["corners32"].dtype == np.float32
+    assert np.array_equal(lay["valid"], tris.valid) and np.array_equal(lay["cw"], tris.cw)
+    assert lay["counts"] == [tris.degenerate, tris.degenerate_space, tris.outside]
+    bins = bin_triangles(tris, 48, 48, 16)
+    assert sorted(lay["bins"]) == sorted(bins) and all(np.array_equal(lay["bins"][k], bins[k]) for k in bins)
+    # The worker's side of that job, here: it never lays out the UVs (no UV triangles, no fitting of the
+    # tiles, no bins), and bakes the tiles of this process's bake.
+    calls = []
+
+    def counted(name, f):
+        def wrapper(*a, **kw):
+            calls.append(name)
+            return f(*a, **kw)
+        return wrapper
+
+    monkeypatch.setattr(texels, "prepare", counted("prepare", texels.prepare))
+    monkeypatch.setattr(texels, "bin_triangles", counted("bin_triangles", texels.bin_triangles))
+    import core.engine.settings as settings_mod
+    monkeypatch.setattr(settings_mod.BakeSettings, "fit_tiles", counted("fit_tiles", settings_mod.BakeSettings.fit_tiles))
+    bake, shared, _ = remote.build(dict(job), threading.Event(), lambda work: None)
+    assert calls == []
+    assert bake.uvtris.corners32 is lay["corners32"] and bake.bins is lay["bins"] and bake.pro.target.uvs is None
+    out = bake.tile((1, 2))
+    rows, cols = out.texels // 48, out.texels % 48
+    assert len(out.texels) and np.array_equal(out.ao, ref.raw_ao[rows, cols])
+    # The same job through the path of a job with UVs (a bake laid out in the worker) lays out once, the same.
+    old = dict(job, target=dict(job["target"], uvs=target.uvs))
+    old.pop("layout")
+    again, _, _ = remote.build(old, threading.Event(), lambda work: None)
+    assert calls.count("prepare") == 1 and calls.count("bin_triangles") == 1
+    assert np.array_equal(again.uvtris.corners32, tris.corners32) and sorted(again.bins) == sorted(bins)

@@ -27,6 +27,8 @@ Cases (all core.bake_ao, 1 thread per worker):
 - ``target``: an N-triangle displaced grid's own AO (UVs over [0, 1]^2, AO distance 0.5) at
   1024^2 x 16 on W workers: each worker's peak beyond its baseline and beyond its Embree scene
   (``embree`` case, scaled), per triangle;
+- ``target-uvs``: the same with the job a worker got before it was sent the parent's layout (the
+  target's UVs, laid out again in each worker): what sending the layout saves;
 - ``large``: an 8192-triangle grid at 8192^2 x 4 spp on 2 workers: the parent and every worker
   together (the image planes dominate).
 
@@ -185,7 +187,7 @@ def child(case, triangles, workers, res, spp):
         tri = np.array([[0, 1, 2], [0, 2, 3]])
         target = Mesh(lowp, tri, uvs=(lowp[tri][:, :, :2] + 2) / 4, name="low")
         kwargs = dict(occluders=[Mesh(P, F, name="occluder")], max_distance=1.0)
-    elif case == "target":
+    elif case in ("target", "target-uvs"):
         P, F, UV = grid(grid_side(triangles), True)
         inputs = [P, F, UV]
         target = Mesh(P, F, uvs=UV, name="grid")
@@ -197,6 +199,18 @@ def child(case, triangles, workers, res, spp):
         kwargs = dict(max_distance=0.5)
     else:
         raise SystemExit(f"unknown case {case!r}")
+    if case == "target-uvs":
+        # The job as it was before workers were sent the parent's layout: the target's UVs, laid out
+        # again in each worker (the same tiles, the same bits).
+        job_of = pipeline_run.Texels.job
+
+        def uv_job(self):
+            job = job_of(self)
+            job["target"]["uvs"] = self.checked.target.uvs
+            job.pop("layout", None)
+            return job
+
+        pipeline_run.Texels.job = uv_job
     out["triangles"] = len(F)
     out["input_bytes"] = int(sum(a.nbytes for a in inputs))
     gc.collect()
@@ -258,7 +272,7 @@ def figures(rows):
             d["worker_peak_gb"] = [h / 1e9 for h in r["worker_hwm"]]
             beyond = [(h - i) / T for h, i in zip(r["worker_hwm"], r["worker_rss_idle"])]
             d["worker_peak_beyond_idle_per_triangle"] = beyond
-            if r["case"] == "target" and per_tri_embree:
+            if r["case"].startswith("target") and per_tri_embree:
                 d["worker_peak_beyond_embree_per_triangle"] = [b - per_tri_embree for b in beyond]
             if r["case"] in ("highpoly", "occluder") and per_tri_embree:
                 d["embree_per_triangle"] = {"occlusion": per_tri_embree, "matching (robust)": per_tri_match}
@@ -321,6 +335,7 @@ def main(argv=None):
     T = args.triangles
     plan = {"embree": ("embree", T, 1, 0, 0), "highpoly1": ("highpoly", T, 1, 256, 16),
             "highpoly": ("highpoly", T, 2, 256, 16), "occluder": ("occluder", T, 2, 256, 16), "target": ("target", T, 2, 1024, 16),
+            "target-uvs": ("target-uvs", T, 2, 1024, 16),
             "large": ("large", 0, 2, 8192, 4)}
     rows = [run_case(*plan[c]) for c in args.cases]
     if args.big:

@@ -12,8 +12,9 @@ columns: the wall times and their ratios need a quiet machine (the choice is abo
 
 Part 2, the model's inputs (``--components``): on the same cases, in this process and one thread,
 the steps a worker process repeats per bake (timed on the job a worker receives: its checks,
-prologue, UV triangles, bins, surface table, Embree scene; with the scene kept and built), the job's
-bytes, and each tile's CPU time at the tiles worker processes get, with the pool's dealing simulated
+prologue, surface table, Embree scene; with the scene kept and built), the job's bytes as written to
+the worker (both against the same job with the target's UVs in place of the parent's layout, which
+each worker then lays out again: UV triangles, tiles and bins), and each tile's CPU time at the tiles worker processes get, with the pool's dealing simulated
 (in order and largest first) against an even split: the tail the last whole tiles leave.
 
 Run: ``.venv/bin/python -m bench.sections.parallel [--cases ...] [--rounds N] [--components]
@@ -168,31 +169,58 @@ def simulate(costs, workers, order):
     return max(t for t, _ in heap)
 
 
-def components(case, scene, cores):
-    """Part 2 for one case (this process, one thread, thread CPU)."""
+def wire_bytes(job):
+    """The bytes of ``job`` as the pool writes it to a worker (core.execution.messages.send: the pickle
+    and its arrays out of band)."""
+    import pickle
+
+    buffers = []
+    data = pickle.dumps(job, protocol=5, buffer_callback=buffers.append)
+    return len(data) + sum(b.raw().nbytes for b in buffers)
+
+
+def uv_job(job, target):
+    """``job`` as a worker got it before it was sent the parent's layout: the target with its UVs, each
+    worker laying them out again (UV triangles, tiles, bins): the same tiles, the same bits."""
+    out = dict(job, target=dict(job["target"], uvs=target.uvs))
+    out.pop("layout", None)
+    return out
+
+
+def components(case, scene, cores, rounds=3):
+    """Part 2 for one case (this process, one thread, thread CPU). A worker's set-up from the job the
+    parent sends (its layout) and from that job with the target's UVs in place of the layout (``uvs``),
+    each with its scene built and kept, alternated over ``rounds`` (medians)."""
     import core.pipeline.remote as remote
     import core.targets.texels as texels
     from core.engine.settings import auto_tile_shape
 
     res, spp = CASES[case]
     job, tiles = _capture_job(scene, res, spp, cores)
-    job_bytes = sum(a.nbytes for m in [job["target"], *job["occluders"]] for a in m.values()
-                    if isinstance(a, np.ndarray))
     job = dict(job, quantum=1 << 62, threads=1)
+    jobs = {"layout": job, "uvs": uv_job(job, scene[0])}
+    job_bytes = {form: wire_bytes(j) for form, j in jobs.items()}
+    runs = {(form, kept): [] for form in jobs for kept in (False, True)}
+    for i in range(rounds):
+        for form in (list(jobs) if i % 2 == 0 else list(jobs)[::-1]):
+            for kept in (False, True):
+                remote._SCENE.clear()
+                if kept:
+                    j = dict(jobs[form])
+                    remote.forget(j)
+                    remote.build(j, threading.Event(), lambda w: None)
+                timer = StageTimer(WORKER_STEPS)
+                j = dict(jobs[form])
+                with timer.run():
+                    remote.forget(j)
+                    remote.build(j, threading.Event(), lambda w: None)
+                runs[form, kept].append((timer.total, {lab: s for lab, s, _ in timer.table() if s > 0}))
     setup = {}
-    for kept in (False, True):
-        remote._SCENE.clear()
-        if kept:
-            j = dict(job, scene_key=None)
-            remote.forget(j)
-            remote.build(j, threading.Event(), lambda w: None)
-        timer = StageTimer(WORKER_STEPS)
-        j = dict(job, scene_key=None)
-        with timer.run():
-            remote.forget(j)
-            remote.build(j, threading.Event(), lambda w: None)
-        setup["kept" if kept else "built"] = {"thread_cpu": timer.total,
-                                              "steps": {lab: s for lab, s, _ in timer.table() if s > 0}}
+    for (form, kept), got in runs.items():
+        total = statistics.median(t for t, _ in got)
+        steps = {lab: statistics.median(st.get(lab, 0.0) for _, st in got) for lab in got[0][1]}
+        setup.setdefault(form, {})["kept" if kept else "built"] = {"thread_cpu": total, "steps": steps,
+                                                                  "runs": [t for t, _ in got]}
     remote._SCENE.clear()
     # Each tile's thread CPU at the tiles worker processes get, on one thread here.
     tw, th = auto_tile_shape(res, res, 2 * cores, spp)
@@ -214,8 +242,9 @@ def components(case, scene, cores):
         texels.TexelBake.tile = original
     keys = sorted(costs)
     even = sum(costs.values()) / cores
-    return {"case": case, "triangles": int(scene[0].triangle_count), "job_bytes": int(job_bytes),
-            "tiles": len(keys), "worker_setup": setup, "one_thread_cpu": total, "rays": int(r.rays),
+    return {"case": case, "triangles": int(scene[0].triangle_count), "job_bytes": job_bytes["layout"],
+            "job_bytes_uvs": job_bytes["uvs"], "tiles": len(keys), "worker_setup": setup["layout"],
+            "worker_setup_uvs": setup["uvs"], "rounds": rounds, "one_thread_cpu": total, "rays": int(r.rays),
             "covered": int(r.mask.sum()), "tile_cpu": sum(costs.values()),
             "tail_in_order": simulate(costs, cores, keys) / even - 1,
             "tail_largest_first": simulate(costs, cores, sorted(keys, key=lambda k: -costs[k])) / even - 1,
@@ -223,14 +252,16 @@ def components(case, scene, cores):
 
 
 def print_components(c, file=sys.stdout):
-    b, k = c["worker_setup"]["built"], c["worker_setup"]["kept"]
     per_tri = 1e9 / max(c["triangles"], 1)
-    print(f"  {c['case']:7s} {c['triangles']} triangles, job {c['job_bytes'] / 1e6:.1f} MB; a worker's set-up "
-          f"{1e3 * b['thread_cpu']:.0f} ms ({per_tri * b['thread_cpu']:.0f} ns a triangle; scene kept "
-          f"{1e3 * k['thread_cpu']:.0f} ms): " + ", ".join(f"{s} {1e3 * v:.0f}" for s, v in b["steps"].items())
-          + f"; one thread {c['one_thread_cpu']:.2f} s ({c['tiles']} tiles {c['tile_cpu']:.2f} s); tail over an even "
-          f"split: dealt in order +{100 * c['tail_in_order']:.0f}%, largest first +{100 * c['tail_largest_first']:.0f}%;"
-          f" load {c['load'][0]:.0f}", file=file)
+    for form, name in (("", "layout sent"), ("_uvs", "UVs sent")):
+        b, k = c["worker_setup" + form]["built"], c["worker_setup" + form]["kept"]
+        print(f"  {c['case']:7s} {name:11s} {c['triangles']} triangles, job {c['job_bytes' + form] / 1e6:.1f} MB; "
+              f"a worker's set-up {1e3 * b['thread_cpu']:.0f} ms ({per_tri * b['thread_cpu']:.0f} ns a triangle; "
+              f"scene kept {1e3 * k['thread_cpu']:.0f} ms): "
+              + ", ".join(f"{s} {1e3 * v:.0f}" for s, v in b["steps"].items()), file=file)
+    print(f"  {c['case']:7s} one thread {c['one_thread_cpu']:.2f} s ({c['tiles']} tiles {c['tile_cpu']:.2f} s); tail "
+          f"over an even split: dealt in order +{100 * c['tail_in_order']:.0f}%, largest first "
+          f"+{100 * c['tail_largest_first']:.0f}%; medians of {c['rounds']} rounds; load {c['load'][0]:.0f}", file=file)
 
 
 def main(argv=None):
@@ -262,7 +293,7 @@ def main(argv=None):
         print("the model's inputs (one thread, thread CPU):", file=tee)
         out["components"] = []
         for case in a.cases:
-            c = components(case, scene_of(case, a.dense_npz), cores)
+            c = components(case, scene_of(case, a.dense_npz), cores, a.rounds)
             out["components"].append(c)
             print_components(c, tee)
     else:

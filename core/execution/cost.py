@@ -45,8 +45,9 @@ WORKER_START_SECONDS = 0.35
 BYTES_PER_TEXEL, BYTES_PER_PROCESS, BYTES_PER_CHUNK_RAY = 26, 150 << 20, 200
 #: Bytes per triangle of a process that bakes tiles, at its peak beyond its idle size
 #: (bench.sections.memory, 2M-triangle grids on 2 workers, bench/results/memory*.txt): a target's
-#: (its float32 UV triangles and surface table, Embree scene, the positions and triangles it was sent:
-#: 283 measured, memory-pss-float32.txt), an occluder's (two Embree scenes, occlusion and contact:
+#: (its float32 UV triangles and bins as the parent laid them out, its surface table, Embree scene, the
+#: positions and triangles it was sent: 281 measured, memory-layout.txt; 316 when it was sent the UVs
+#: and laid them out itself), an occluder's (two Embree scenes, occlusion and contact:
 #: 412) and a high-poly mesh's (one robust scene that matches and occludes: 193; 161 at 10M
 #: triangles), with some headroom.
 BYTES_PER_TRIANGLE, BYTES_PER_OCCLUDER_TRIANGLE, BYTES_PER_HIGHPOLY_TRIANGLE = 340, 450, 220
@@ -60,11 +61,19 @@ BYTES_PER_POOL_POINT, BYTES_PER_UNIT, UNITS_PER_TEXEL = 64, 600, 4
 #: Python: 2 threads 1.71x against 1 thread).
 CORE_CONTENTION, GIL_SHARE = 0.064, 0.10
 #: The part of NS_PER_TRIANGLE that is set-up before the tiles (CPU ns a triangle; the rest is the tiles'
-#: per-triangle work, which the cores share): the prologue, UV triangles and bins (the parent, and each
-#: worker process again), the surface table (each process that bakes tiles) and the Embree scene (each
-#: such process; a worker keeps its scene for the next bake of the same meshes). Measured on
+#: per-triangle work, which the cores share): the prologue, UV triangles and bins (the parent's; worker
+#: processes bake from its layout), the surface table (each process that bakes tiles) and the Embree scene
+#: (each such process; a worker keeps its scene for the next bake of the same meshes). Measured on
 #: dense.blend's 524k triangles (bench.sections.parallel).
 NS_SETUP_PER_TRIANGLE, NS_TABLE_PER_TRIANGLE, NS_EMBREE_PER_TRIANGLE = 270.0, 390.0, 120.0
+#: What a worker process repeats of the parent's set-up (CPU ns a triangle of the target): the checks and
+#: the prologue of the job's meshes; its UV triangles and tiles come laid out in the job
+#: (bench.sections.parallel --components: the worker's steps with the layout sent against the UVs sent).
+NS_WORKER_SETUP_PER_TRIANGLE = 40.0
+#: Bytes a triangle of the target puts in a worker's job in place of its UVs (48): its UV triangle's
+#: float32 corners and two flags (26) and its entry in its tile's bins (8; a few triangles across a
+#: tile's edge are in two).
+LAYOUT_BYTES_PER_TRIANGLE = 36
 #: A worker's job (the meshes as arrays): CPU ns a byte to send it (the parent, worker after worker)
 #: and to receive it (each worker); a bake's fixed cost on a warm pool (messages, the worker's bake set
 #: up, the results assembled); the share of a mean tile the last tiles leave workers idle (tiles go
@@ -194,7 +203,8 @@ def machine_load():
 class Work:
     """What a bake will do, for :func:`choose_parallel`: ``covered`` texels (or points) of ``samples``
     each on a ``width`` x ``height`` image, ``triangles`` (target, occluders, high-poly) and the
-    ``job_bytes`` a worker process is sent (the meshes' arrays)."""
+    ``job_bytes`` a worker process is sent (the meshes' arrays; an image's target with its layout,
+    LAYOUT_BYTES_PER_TRIANGLE, in place of its UVs)."""
 
     covered: float
     samples: int
@@ -222,7 +232,8 @@ def parallel_seconds(work, processes, threads, pool_start=0.0, scene_kept=False,
     this process either way), ``scene`` (a baking process's surface table and Embree scene), ``tiles``
     (the tiles' work shared by the cores) and, in worker processes, ``start`` (a pool not running:
     ``pool_start``), ``send`` (the job to each worker in turn), ``workers`` (each worker's own set-up:
-    receiving the job, its UV triangles, bins, table and, unless ``scene_kept``, its Embree scene) and
+    receiving the job, its checks, table and, unless ``scene_kept``, its Embree scene; its UV triangles
+    and bins come in the job) and
     ``tail`` (the last ``tiles`` whole tiles, which leave other workers idle)."""
     tri = work.triangles
     target, every = tri[0], sum(tri)
@@ -236,7 +247,7 @@ def parallel_seconds(work, processes, threads, pool_start=0.0, scene_kept=False,
         tiles = 2 * processes * threads
     out.update(start=float(pool_start), send=1e-9 * NS_SEND_PER_BYTE * work.job_bytes * processes,
                workers=WORKER_BAKE_SECONDS + 1e-9 * (NS_RECEIVE_PER_BYTE * work.job_bytes
-                                                     + NS_SETUP_PER_TRIANGLE * target) + scene,
+                                                     + NS_WORKER_SETUP_PER_TRIANGLE * target) + scene,
                tiles=tile / speedup(processes, threads),
                tail=TAIL_TILES * tile / max(int(tiles), 1) / speedup(1, threads))
     return out

@@ -84,12 +84,13 @@ class Checked:
     corners: np.ndarray = None
 
 
-def check(request, target, occluders=(), highpoly=None, cage=None, bent_space=None, corners=None):
+def check(request, target, occluders=(), highpoly=None, cage=None, bent_space=None, corners=None, laid_out=False):
     """Check the meshes and arrays of a bake of ``request``; raises the errors :func:`core.bake_ao`
-    lists, before any heavy work. Returns :class:`Checked`."""
+    lists, before any heavy work. Returns :class:`Checked`. ``laid_out``: the target's UV triangles
+    come laid out already (a worker process's bake, from its parent), in place of its UVs."""
     if not isinstance(target, Mesh):
         raise SettingsError(f"the target must be a core.Mesh, got {type(target).__name__}")
-    if request.kind != "corners" and target.uvs is None:
+    if request.kind != "corners" and target.uvs is None and not laid_out:
         raise MeshError(f"mesh {target.name!r} has no UVs: the baker needs a UV map to know where each texel lies")
     occluders = mesh_list(occluders)
     s2a = None

@@ -3,8 +3,10 @@
 The executor (:mod:`core.execution`) knows no bake kinds: a worker process boots into
 :mod:`core.pipeline.entry`, which hands each job to :func:`build`; a Dask worker runs
 :func:`dask_tile`. A job is the request as plain data (:meth:`core.base.request.BakeRequest.to_dict`,
-with the tiles and the extrusion the parent chose) and the meshes as arrays (:func:`mesh_data`); the executor adds ``threads`` (each worker's) and
-``quantum`` (samples per progress message).
+with the tiles and the extrusion the parent chose) and the meshes as arrays (:func:`mesh_data`); an
+image's target travels without its UVs, with the parent's UV triangles and tiles in their place
+(``layout``, :func:`core.targets.texels.layout_data`): a worker lays nothing out again. The executor
+adds ``threads`` (each worker's) and ``quantum`` (samples per progress message).
 
 A worker keeps the last bake's occlusion scenes (Embree's, and the tracer's arrays) and traces in
 them when the next bake sends the same meshes (:func:`scene_key`): an artist baking again after
@@ -93,10 +95,12 @@ def build(job, cancel, progress):
         bake.trace_setup(shared, cancel)
         return bake, shared, s.threads
     highpoly = job.get("highpoly")
-    # Popped: the job holds nothing of the target past its use (its UVs go once the bake has its UV triangles).
+    # An image's UV triangles and tiles come laid out by the parent, in place of the target's UVs.
+    layout = job.pop("layout", None)
+    # Popped: the job holds nothing of the target past its use.
     checked = check(request, _mesh(job.pop("target")), [_mesh(o) for o in job["occluders"]],
                     highpoly=None if highpoly is None else [_mesh(m) for m in highpoly], cage=_mesh(job.get("cage")),
-                    corners=job.get("corners"))
+                    corners=job.get("corners"), laid_out=layout is not None)
     pro = Prologue(checked, request, cancel)
     kept = _SCENE.get("tracer") if key is not None and pro.s2a is None and _SCENE.get("key") == key else None
     if kept is not None:
@@ -106,10 +110,10 @@ def build(job, cancel, progress):
         bake = vertex_bake(pro, s, pro.corners, request.all_quantities, request.merge, request.bent_normals,
                            job["block"])
     else:
-        bake = texel_bake(pro, s, request.all_quantities, request.bent_normals, guide=job.get("guide", False))
-        # The UVs served the UV triangles the bake now holds; a worker bakes tiles from those alone and
-        # lets the UVs go (48 bytes a triangle; the parent keeps them for the images and the denoiser).
-        pro.target.uvs = None
+        bake = texel_bake(pro, s, request.all_quantities, request.bent_normals, guide=job.get("guide", False),
+                          layout=layout)
+        del layout
+        pro.target.uvs = None  # a job with UVs (without a layout): they served the UV triangles the bake holds
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)
     bake.scene_reused = kept is not None and pro.shared_tracer is not None and pro.shared_tracer[1] is kept

@@ -43,7 +43,7 @@ from ..post import denoise as denoise_mod
 from ..base.errors import MeshError, SettingsError
 from ..targets.atlas import Atlas
 from ..targets.corners import vertex_bake
-from ..targets.texels import ImageStore, texel_bake
+from ..targets.texels import ImageStore, layout_data, texel_bake
 from . import remote
 from .prologue import Prologue, check
 from .remote import mesh_data
@@ -114,6 +114,8 @@ def _work(request, checked, s):
                  sum(m.triangle_count for m in others))
     if request.kind == "corners":
         return cost_mod.Work(len(checked.corners), s.samples, triangles, job_bytes=job_bytes)
+    # An image's job carries the target's layout in place of its UVs (Texels.job).
+    job_bytes += cost_mod.LAYOUT_BYTES_PER_TRIANGLE * triangles[0] - checked.target.uvs.nbytes
     return cost_mod.Work(cost_mod.covered_texels(checked.target.uvs, s.width, s.height), s.samples, triangles,
                          s.width, s.height, job_bytes)
 
@@ -174,7 +176,8 @@ class Texels:
         root = self.lanes[self.base]
         plain = request.replace(tile_size=root.s.tile_shape, extrusion=request.extrusion if s2a is None
                                 else s2a.world.extrusion).to_dict()
-        return dict(request=plain, target=mesh_data(checked.target),
+        # The target without its UVs: the workers bake from this process's UV triangles and tiles.
+        return dict(request=plain, target=dict(mesh_data(checked.target), uvs=None), layout=layout_data(root),
                     occluders=[mesh_data(o) for o in checked.occluders],
                     highpoly=None if s2a is None else [mesh_data(m) for m in checked.s2a.highs],
                     cage=None if s2a is None or checked.s2a.cage is None else mesh_data(checked.s2a.cage),

@@ -3,8 +3,8 @@
 :class:`TexelBake` is a bake set up after its prologue (:class:`core.pipeline.prologue.Prologue`): the
 target's UV triangles and surface table, its tiles, and after :meth:`TexelBake.trace_setup` the
 tracing (scene, pattern, kernel, start stage, tile baker). The same object bakes tiles in this
-process and in a worker process, which builds it again from the same request: the same tiles, the
-same bits. :class:`ImageStore` holds one quantity's images, filled tile by tile. UDIM tiles are
+process and in a worker process, which builds it again from the same request and this process's
+layout (:func:`layout_data`): the same tiles, the same bits. :class:`ImageStore` holds one quantity's images, filled tile by tile. UDIM tiles are
 images of their own (:mod:`core.geometry.uvtiles`), baked one after another.
 """
 
@@ -32,13 +32,17 @@ class TexelBake:
     """A texel bake set up after its prologue: the layout (UV triangles, surface table, tiles), and after
     :meth:`trace_setup` the tracing (scene, pattern, kernel, start stage, tile baker). The same object
     bakes tiles in this process and in a worker process (:mod:`core.execution.pool`), which builds it again
-    from the same input and settings: the same tiles, the same bits."""
+    from the same input and settings and this process's UV triangles and tiles (``layout``): the same
+    tiles, the same bits."""
 
-    def __init__(self, pro, s, bent_normals=False, guide=False):
+    def __init__(self, pro, s, bent_normals=False, guide=False, layout=None):
         self.pro, self.bent_normals, self.guide = pro, bool(bent_normals), bool(guide)
-        self.uvtris = prepare(pro.target, s.width, s.height)
-        self.s = s.fit_tiles(R.uv_centres(self.uvtris))  # automatic tiles of dense meshes: fewer triangles each
-        self.bins = bin_triangles(self.uvtris, s.width, s.height, self.s.tile_shape)
+        if layout is not None:  # a worker process's bake: the parent's UV triangles and tiles (the same bits)
+            self.uvtris, self.s, self.bins = layout_of(layout), s, layout["bins"]
+        else:
+            self.uvtris = prepare(pro.target, s.width, s.height)
+            self.s = s.fit_tiles(R.uv_centres(self.uvtris))  # automatic tiles of dense meshes: fewer triangles each
+            self.bins = bin_triangles(self.uvtris, s.width, s.height, self.s.tile_shape)
         # Planned work: a tile's texels are unknown before rasterising, so count each tile's bounding
         # rectangle's texels times samples, and credit what it did not cover as it is rasterised.
         self.planned = sum(self.rect(key)[2] for key in self.bins) * self.s.samples
@@ -124,16 +128,33 @@ class TexelBake:
         out.sums = out.tri = out.weights = None
 
 
-def texel_bake(pro, s, quantities, bent_normals=False, guide=False):
+def texel_bake(pro, s, quantities, bent_normals=False, guide=False, layout=None):
     """The bake of ``quantities`` over ``pro`` with settings ``s`` (the base quantity's,
     :func:`core.base.request.base_quantity`): a :class:`TexelBake`, or for several quantities a
     :class:`core.targets.maps.MapsBake` of lanes over its layout. The same in this process and in a worker.
-    ``guide``: the base quantity's tiles also return the denoiser's guide of their texels."""
-    root = TexelBake(pro, s, bent_normals and s.quantity == "ao", guide=guide)
+    ``guide``: the base quantity's tiles also return the denoiser's guide of their texels. ``layout``:
+    the UV triangles and tiles laid out already (:func:`layout_data` of the parent's bake; ``s`` then has
+    its tiles), in place of the target's UVs."""
+    root = TexelBake(pro, s, bent_normals and s.quantity == "ao", guide=guide, layout=layout)
     if tuple(quantities) == (s.quantity,):
         return root
     return MapsBake({q: root if q == s.quantity else root.lane(quantity_settings(root.s, q), bent_normals and q == "ao")
                      for q in quantities})
+
+
+def layout_data(bake):
+    """What a worker process bakes a texel bake's tiles from in place of the target's UVs, as plain data:
+    the UV triangles (their float32 texel-space corners, which can be baked, which are clockwise, the
+    counts of the others) and the triangles of each tile (26 bytes a triangle and the bins' 8, against
+    the UVs' 48 and each worker's own layout of them)."""
+    t = bake.uvtris
+    return {"corners32": t.corners32, "valid": t.valid, "cw": t.cw,
+            "counts": [int(t.degenerate), int(t.degenerate_space), int(t.outside)], "bins": bake.bins}
+
+
+def layout_of(data):
+    """:class:`core.geometry.raster.UVTriangles` of :func:`layout_data`'s plain data."""
+    return R.UVTriangles(data["corners32"], data["valid"], data["cw"], *data["counts"])
 
 
 class ImageStore:
@@ -174,4 +195,4 @@ class ImageStore:
                 self.on_tile(r, c, self.ao[r, c].copy())
 
 
-__all__ = ["TexelBake", "texel_bake", "ImageStore"]
+__all__ = ["TexelBake", "texel_bake", "layout_data", "layout_of", "ImageStore"]
