@@ -18,7 +18,7 @@ bpy at import: storing into Blender (``store``) imports it.
 
 from dataclasses import dataclass, field
 
-from . import bakerun, baking, filewriter, interrupts, outputs
+from . import bakerun, filewriter, interrupts, outputs, summaries
 from .extract import ExtractError
 
 
@@ -235,7 +235,7 @@ class Bake:
         if self.store is not None:
             self.store.finished(i)
             self.store.notes = None
-        outcome.notes.extend(baking.input_notes(results[None]))
+        outcome.notes.extend(summaries.input_notes(results[None]))
         if getattr(job, "atlas", False):  # several objects in one image: their overlaps, an unlimited reach
             from . import atlas
 

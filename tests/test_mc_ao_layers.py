@@ -1,7 +1,7 @@
 """mc_ao's modules import each other in one direction only: no import cycle (also through imports
 inside functions), nothing imports a module of a layer above its own (the layers of mc_ao/README.md),
-and nothing below the operator imports the operator, the panel or the preview. Subpackages
-(mc_ao/outputs/) count module by module. No bpy needed: the imports are read from the source.
+nothing below the operator imports the operator, the panel or the preview, and no module is over
+MAX_LINES lines (mc_ao_batch's neither). Subpackages (mc_ao/outputs/) count module by module. No bpy needed: the imports are read from the source.
 
 ``python tests/test_mc_ao_layers.py`` prints the graph: each module, its lines, what it imports."""
 
@@ -9,6 +9,7 @@ import ast
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent.parent / "mc_ao"
+MAX_LINES = 700
 # The Blender UI: only register() (mc_ao/__init__.py) and each other may import these.
 UI = {"operators", "panel", "preview", "properties"}
 # mc_ao/README.md's layers, top to bottom: a module imports modules of its own layer or below.
@@ -19,7 +20,7 @@ LAYERS = [
     {"outputs", "outputs.*"},
     {"precheck", "choose", "selected_to_active", "baking", "occluders", "atlas"},
     {"udim", "vertex_colors", "bent"},
-    {"bakerun", "filewriter", "filecheck"},
+    {"bakerun", "filewriter", "filecheck", "summaries"},
     {"images", "undo_images"},
     {"schema", "settings", "rules"},
     {"extract", "corelink", "terminal", "interrupts"},
@@ -110,6 +111,12 @@ def test_nothing_below_the_ui_imports_it():
     for module, imported in imports().items():
         if module not in UI and module != "__init__":
             assert not imported & UI, f"mc_ao.{module} imports {sorted(imported & UI)}"
+
+
+def test_no_module_is_over_the_line_limit():
+    paths = sorted(PACKAGE.rglob("*.py")) + sorted((PACKAGE.parent / "mc_ao_batch").rglob("*.py"))
+    long = {str(p.relative_to(PACKAGE.parent)): n for p in paths if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not long, f"modules over {MAX_LINES} lines: {long}"
 
 
 if __name__ == "__main__":

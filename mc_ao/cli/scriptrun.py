@@ -4,7 +4,7 @@ summary, the --save file at the end, and the result table; the exit status."""
 import sys
 import time
 
-from .. import baking, interrupts, service
+from .. import interrupts, service, summaries
 from ..outputs.store import Store
 from ..terminal import escape
 from . import table
@@ -69,11 +69,11 @@ class ScriptRun:
 
             print(f"bake_ao: {name}: {escape(atlas_summary(job, result))}", file=sys.stderr)
         if result is not None and getattr(job, "quantity", "ao") == "thickness" and outcome.baked:
-            text = baking.thickness_summary(settings, result).replace("set Distance", "set --max-distance")
+            text = summaries.thickness_summary(settings, result).replace("set Distance", "set --max-distance")
             print(f"bake_ao: {name}: thickness map: {text}", file=sys.stderr)
         if result is not None and job.selected_to_active:
             print(f"bake_ao: {name}: from {', '.join(escape(h.name) for h in job.highpoly)}"
-                  f"{baking.miss_summary(result)}", file=sys.stderr)
+                  f"{summaries.miss_summary(result)}", file=sys.stderr)
         if not outcome.baked or outcome.file_error:
             error = outcome.error if not outcome.baked else service.not_written(outcome.file_error)
             if outcome.trace:
@@ -84,11 +84,11 @@ class ScriptRun:
                 seconds = time.monotonic() - self.run.started.get(outcome.index, time.monotonic())
                 self.summary.add(job.object_name, "failed", seconds, error=error, **s2a_record(job))
             else:
-                per_texel, _ = baking.throughput(result)
+                per_texel, _ = summaries.throughput(result)
                 self.summary.add(job.object_name, "failed", result.seconds, result.rays, per_texel, outcome.files,
                                  error, **s2a_record(job, result))
         else:
-            per_texel, _ = baking.throughput(result)
+            per_texel, _ = summaries.throughput(result)
             self.summary.add(job.object_name, "ok", result.seconds, result.rays, per_texel, outcome.files,
                              **s2a_record(job, result), **parallel_record(result))
             label = name if len(self.quantities[job.object_name]) == 1 else (

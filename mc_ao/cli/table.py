@@ -1,7 +1,7 @@
 """The table the script prints at the end of a run: one row per object baked (its size, time,
 samples per texel, ray throughput and files)."""
 
-from .. import baking
+from .. import summaries
 from ..terminal import escape
 
 HEADER = ("object", "size", "seconds", "samples/texel", "Mrays/s", "files")
@@ -11,7 +11,7 @@ QUANTITY_WORDS = {"ao": "AO", "thickness": "thickness"}
 
 def row(name, result, settings, files):
     """The row of one baked object (``name`` escaped already)."""
-    per_texel, rate = baking.throughput(result)
+    per_texel, rate = summaries.throughput(result)
     return (name, size_text(result, settings), f"{result.seconds:.2f}", f"{per_texel:.0f}", f"{rate:.2f}",
             escape(", ".join(files)))
 

@@ -3,7 +3,7 @@ of the mesh with it (named like its image would be)."""
 
 import os
 
-from .. import baking, corelink
+from .. import corelink, summaries
 from ..extract import ExtractError
 from .base import FileWrite, OutputKind
 
@@ -48,9 +48,9 @@ class ColorAttributeOutput(OutputKind):
 
     def summarise(self, job, results):
         result = results[self.quantity]
-        per, rate = baking.throughput(result)
+        per, rate = summaries.throughput(result)
         settings = self.settings
         domain = "per vertex" if settings.attribute_domain == "POINT" else "per face corner"
         return (f"{job.object_name}: {len(result.ao)} face corners into color attribute "
-                f"{settings.attribute_name!r} ({domain}) in {result.seconds:.2f} s{baking.parallel_words(result)}, "
+                f"{settings.attribute_name!r} ({domain}) in {result.seconds:.2f} s{summaries.parallel_words(result)}, "
                 f"{per:.0f} samples per corner, {rate:.2f} M rays/s")

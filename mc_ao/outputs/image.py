@@ -1,6 +1,6 @@
 """The AO image: "<object>_AO" (or the Image name setting's), its files, the summary line of its object."""
 
-from .. import baking
+from .. import summaries
 from .maps import MapOutput
 
 
@@ -17,13 +17,13 @@ class ImageOutput(MapOutput):
 
     def summarise(self, job, results):
         result = results[self.quantity]
-        per, rate = baking.throughput(result)
+        per, rate = summaries.throughput(result)
         w, h = self.settings.size
         if self.settings.use_udim:
             tiles = sorted(result.tiles)
             listed = ", ".join(map(str, tiles))
             return (f"{job.object_name}: {len(tiles)} UDIM tile{'s' if len(tiles) != 1 else ''} ({listed}) of {w}x{h} "
-                    f"into {job.image_name!r} in {result.seconds:.2f} s{baking.parallel_words(result)}, {per:.0f} "
+                    f"into {job.image_name!r} in {result.seconds:.2f} s{summaries.parallel_words(result)}, {per:.0f} "
                     f"samples per texel, {rate:.2f} M rays/s{self.occlusion_words(job, result)}")
         h, w = result.ao.shape
         if getattr(job, "atlas", False):
@@ -33,8 +33,8 @@ class ImageOutput(MapOutput):
                     f"{result.seconds:.2f} s, {per:.0f} samples per texel, {rate:.2f} M rays/s")
         sources = f" from {', '.join(s.name for s in job.highpoly)}" if getattr(job, "highpoly", None) else ""
         return (f"{job.object_name}: {w}x{h}{sources} into {job.image_name!r}{self.channel_words(job)} in "
-                f"{result.seconds:.2f} s{baking.parallel_words(result)}, {per:.0f} samples per texel, {rate:.2f} M rays/s"
-                f"{self.occlusion_words(job, result)}{baking.miss_summary(result)}")
+                f"{result.seconds:.2f} s{summaries.parallel_words(result)}, {per:.0f} samples per texel, {rate:.2f} M rays/s"
+                f"{self.occlusion_words(job, result)}{summaries.miss_summary(result)}")
 
     def channel_words(self, job):
         """" and the red channel of 'ORM'" where the map also goes into Channel of Into."""
@@ -44,7 +44,7 @@ class ImageOutput(MapOutput):
         return f" and the {CHANNELS[s.channel]} channel of {s.into!r}"
 
     def occlusion_words(self, job, result):
-        text = baking.occlusion_summary(job, self.settings, result)
+        text = summaries.occlusion_summary(job, self.settings, result)
         return f"; {text}" if text else ""
 
 

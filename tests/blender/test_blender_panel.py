@@ -271,13 +271,13 @@ def test_the_summary_names_the_channel_packing_target(bpy, scene, capfd):
 
 
 def test_lengths_are_in_the_scenes_units(bpy, scene):
-    from mc_ao import baking
+    from mc_ao import summaries
 
-    assert baking.length_text(0.1234) == "12.3 cm"
+    assert summaries.length_text(0.1234) == "12.3 cm"
     scene.unit_settings.system = "IMPERIAL"
-    assert baking.length_text(0.3048).replace(" ", "") in ("1'", "1ft")
+    assert summaries.length_text(0.3048).replace(" ", "") in ("1'", "1ft")
     scene.unit_settings.system = "NONE"
-    assert baking.length_text(0.1234) == "0.123 units"
+    assert summaries.length_text(0.1234) == "0.123 units"
     scene.unit_settings.system = "METRIC"
 
 

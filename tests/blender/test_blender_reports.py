@@ -31,18 +31,18 @@ pytestmark = pytest.mark.blender
     ("degenerate_triangles", 1, "1 triangle has no area in space and was skipped"),
 ])
 def test_input_notes_are_sentences(addon, key, count, sentence):
-    from mc_ao import baking
+    from mc_ao import summaries
 
     report = {"covered_texels": 500, "overlapping_texels": 0, "uv_outside_triangles": 0,
               "degenerate_uv_triangles": 0, "degenerate_triangles": 0}
     report[key] = count
-    assert baking.input_notes(types.SimpleNamespace(report=report)) == [sentence]
+    assert summaries.input_notes(types.SimpleNamespace(report=report)) == [sentence]
 
 
 def test_each_note_is_about_a_count_the_core_reports(addon):
     """The notes are keyed by core.BakeResult.report's keys: a key renamed in the core must fail here."""
     import core
-    from mc_ao import baking
+    from mc_ao import summaries
 
     plane = core.Mesh(
         positions=np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float),
@@ -50,8 +50,8 @@ def test_each_note_is_about_a_count_the_core_reports(addon):
         uvs=np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], float),
     )
     result = core.bake_ao(plane, resolution=(8, 8), samples=4, threads=1)
-    assert set(baking._INPUT_NOTES) <= set(result.report)
-    assert baking.input_notes(result) == []  # a clean plane: nothing to say
+    assert set(summaries._INPUT_NOTES) <= set(result.report)
+    assert summaries.input_notes(result) == []  # a clean plane: nothing to say
 
 
 # -- the order of the reports ---------------------------------------------------------------------

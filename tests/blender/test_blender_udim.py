@@ -186,15 +186,15 @@ def test_the_panel_and_the_report_say_udim(bpy, udim_scene):
 def test_report_keys_of_the_new_bakes_are_the_cores(addon):
     """The notes of UDIM and colour-attribute bakes are keyed by their reports' keys."""
     import core
-    from mc_ao import baking
+    from mc_ao import summaries
 
     P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     F = np.array([[0, 1, 2], [0, 2, 3]])
     mesh = core.Mesh(P, F, uvs=P[F][:, :, :2] * 2 - 0.5)
     udim = core.bake_udim(mesh, resolution=8, samples=4, threads=1)
     vertex = core.bake_vertex_ao(mesh, samples=4, threads=1)
-    assert set(baking._TARGET_NOTES) <= set(udim.report) | set(vertex.report)
-    assert baking.input_notes(udim) == [
+    assert set(summaries._TARGET_NOTES) <= set(udim.report) | set(vertex.report)
+    assert summaries.input_notes(udim) == [
         "2 triangles reach outside the UDIM tiles (u in [0, 10], v in [0, 100]); the parts outside are not baked"]
 
 
