@@ -532,7 +532,8 @@ def test_every_texel_in_contact_is_found_split_texels_too(resolution):
     touching = [((0.2, 0.55, 0.0), (0.45, 0.8, 0.3)), ((0.7, 0.1, 1e-6), (0.9, 0.3, 0.3))]
     occluders = [box(lo, hi) for lo, hi in touching] + [_rotated_box(turned[0], turned[1], 0.3, turned[2]),
                                                          box((0.1, 0.05, 0.05), (0.3, 0.25, 0.3))]
-    kw = dict(resolution=resolution, samples=32, max_distance=0.2, margin=0, threads=2, tile_size=32)
+    # The bake's own estimates (Fix Seams, after it, may move texels along the diagonal seam).
+    kw = dict(resolution=resolution, samples=32, max_distance=0.2, margin=0, threads=2, tile_size=32, fix_seams=False)
     r = bake_ao(halves, occluders, **kw)
 
     def under(p):

@@ -75,7 +75,7 @@ def baked(name, seed, **kw):
     key = (name, seed)
     if key not in _BAKES:
         target, occ, _ = scene(name)
-        _BAKES[key] = (bake_ao(target, occ, resolution=W, samples=SAMPLES, margin=0, seed=seed),
+        _BAKES[key] = (bake_ao(target, occ, resolution=W, samples=SAMPLES, margin=0, seed=seed, fix_seams=False),
                        D.surface_guide(target, W))
     r, g = _BAKES[key]
     return (r, g) + D.denoise(r.ao, r.stderr, r.mask, g, **kw)

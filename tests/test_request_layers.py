@@ -25,8 +25,8 @@ OTHER = {"samples": 8, "min_samples": 4, "target_error": 0.05, "distribution": "
          "replicates": 3, "max_distance": 2.5, "falloff": 1.0, "ignore_backfaces": True, "ground": -0.25,
          "quantity": "thickness", "quantities": ("thickness", "ao"), "thickness_distance": 0.25, "resolution": (24, 16), "margin": 3,
          "tiles": (1001, 1002), "empty_ok": True, "merge": False, "extrusion": 0.05, "max_ray_distance": 0.5,
-         "bent_normals": True, "denoise": True, "threads": 2, "workers": 2, "tile_size": (32, 16), "chunk_rays": 4096,
-         "constant_answer": True}
+         "bent_normals": True, "denoise": True, "fix_seams": False, "threads": 2, "workers": 2, "tile_size": (32, 16),
+         "chunk_rays": 4096, "constant_answer": True}
 
 
 def lid():

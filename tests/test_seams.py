@@ -256,3 +256,122 @@ def test_the_fixed_map_error_is_honest_on_exact_scenes(occluder, layout):
     assert 0.85 <= z_all.std() <= 1.15, z_all.std()
     assert 0.85 <= z_changed.std() <= z_raw.std() + 0.05, (z_changed.std(), z_raw.std())
     assert abs(z_changed.mean()) < 0.15, z_changed.mean()
+
+
+# --- in the bake ----------------------------------------------------------------------------------
+
+def test_a_bake_fixes_its_seams_after_the_margin_as_fix_seams_does():
+    target, occ, _, _ = charts()
+    raw = bake_ao(target, occ, resolution=W, samples=16, seed=5, fix_seams=False)
+    r = bake_ao(target, occ, resolution=W, samples=16, seed=5)
+    L = G.seam_lookups(target, W)
+    ao, se, info = F.fix_seams(raw.ao, raw.stderr, raw.mask, L)
+    assert np.array_equal(r.ao.view(np.uint32), ao.view(np.uint32))
+    assert np.array_equal(r.stderr.view(np.uint32), se.view(np.uint32))
+    assert np.array_equal(r.samples, raw.samples) and np.array_equal(r.mask, raw.mask)
+    assert r.metadata["fix_seams"] is True and "fix_seams" not in raw.metadata
+    assert r.report["seam_points"] == L.points and r.report["seam_texels"] == info.unknowns
+    assert r.report["seam_mismatch_after"] == info.after < 0.05 * r.report["seam_mismatch_before"]
+    assert "seam_points" not in raw.report
+
+
+def test_the_fixed_map_is_the_same_bits_for_any_threads_tiles_and_processes():
+    target, occ, _, _ = charts()
+    kw = dict(resolution=W, samples=8, seed=2)
+    base = bake_ao(target, occ, threads=1, **kw)
+    for other in (dict(threads=2, tile_size=16), dict(threads=1, tile_size=(32, 16)), dict(workers=2, threads=1)):
+        r = bake_ao(target, occ, **kw, **other)
+        assert np.array_equal(r.ao.view(np.uint32), base.ao.view(np.uint32)), other
+        assert np.array_equal(r.stderr.view(np.uint32), base.stderr.view(np.uint32)), other
+
+
+def test_the_denoiser_comes_first_and_the_raw_map_stays_raw():
+    target, occ, _, _ = charts()
+    kw = dict(resolution=W, samples=16, seed=3, denoise=True)
+    plain = bake_ao(target, occ, fix_seams=False, **kw)
+    r = bake_ao(target, occ, **kw)
+    assert np.array_equal(r.raw_ao, plain.raw_ao) and np.array_equal(r.raw_stderr, plain.raw_stderr)
+    ao, se, _ = F.fix_seams(plain.ao, plain.stderr, plain.mask, G.seam_lookups(target, W))
+    assert np.array_equal(r.ao, ao) and np.array_equal(r.stderr, se)
+
+
+def test_each_quantity_of_a_maps_bake_is_fixed_on_its_own():
+    from core import bake_maps
+
+    target, occ, _, _ = charts()
+    kw = dict(resolution=W, samples=8, seed=4, max_distance=0.5)
+    maps = bake_maps(target, occ, quantities=("ao", "thickness"), **kw)
+    for q in ("ao", "thickness"):
+        alone = bake_ao(target, occ, quantity=q, **kw)
+        assert np.array_equal(maps[q].ao, alone.ao) and np.array_equal(maps[q].stderr, alone.stderr), q
+        assert maps[q].metadata["fix_seams"] is True
+
+
+def test_udim_tiles_are_fixed_together_across_their_shared_edge():
+    # The unit plane's halves in tiles 1001 and 1002, the UVs running on across u = 1: every tile a
+    # bake of its own, the tile border a seam between them (a lookup just left of it reads its tile's
+    # column 0, wrapped); fixed together once both are baked.
+    from core import bake_udim
+
+    P = np.array([[0, 0, 0], [.5, 0, 0], [1, 0, 0], [0, 1, 0], [.5, 1, 0], [1, 1, 0]], float)
+    F_ = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]])
+    UV = P[F_][:, :, :2] * [2.0, 1.0]
+    plane = Mesh(P, F_, UV, name="two tiles")
+    from seam_scenes import lid
+    kw = dict(resolution=32, samples=16, seed=6)
+    raw = bake_udim(plane, [lid()], fix_seams=False, **kw)
+    r = bake_udim(plane, [lid()], **kw)
+    L = G.seam_lookups(plane, 32, tiles=(1001, 1002))
+    assert L.edges == 1 and not L.crease.any()
+    assert L.mismatch(r.ao) < 0.05 * L.mismatch(raw.ao)
+    ao, se, _ = F.fix_seams(raw.ao, raw.stderr, raw.mask, L)
+    assert np.array_equal(r.ao, ao) and np.array_equal(r.stderr, se)
+    for i, t in enumerate((1001, 1002)):
+        assert np.array_equal(r.tiles[t].ao, r.ao[i]) and r.tiles[t].metadata["fix_seams"] is True
+    assert r.report["seam_points"] == L.points
+
+
+def test_in_an_atlas_a_targets_seams_never_move_another_targets_texels():
+    # Two targets in one image: the charts squeezed into the left half (their seams), a plane in the
+    # right half touching them (no seam of its own). Every texel the plane owns (covered or margin)
+    # keeps its bits; the charts' seams are fixed.
+    target, occ, _, _ = charts()
+    left = Mesh(target.positions, target.triangles, target.uvs * [0.5, 1.0], name="charts")
+    P = np.array([[2, 0, 0], [3, 0, 0], [3, 1, 0], [2, 1, 0]], float)
+    F_ = np.array([[0, 1, 2], [0, 2, 3]])
+    right = Mesh(P, F_, (P[F_][:, :, :2] - [2, 0]) * [0.5, 1.0] + [0.5, 0.0], name="plane")
+    kw = dict(resolution=W, samples=16, seed=8)
+    raw = bake_ao([left, right], occ, fix_seams=False, **kw)
+    r = bake_ao([left, right], occ, **kw)
+    assert r.report["seam_points"] > 0 and r.metadata["fix_seams"] is True
+    plane_owned = r.owner == 1
+    assert plane_owned.sum() > 0.3 * W * W and np.array_equal(r.owner, raw.owner)
+    assert np.array_equal(r.ao[plane_owned], raw.ao[plane_owned])
+    L = G.seam_lookups([left, right], W)
+    assert L.mismatch(r.ao) < 0.1 * L.mismatch(raw.ao)
+
+
+def test_texels_beyond_the_margin_keep_what_the_image_had():
+    # The seam lookups read texels just outside the charts; the fix may move those the margin filled,
+    # never the ones beyond it: with no margin every uncovered texel stays 0, as without Fix Seams (at
+    # margin 1 the lookups here read no texel past it). The covered texels still take the fix, and
+    # UDIM tiles keep the same rule.
+    from core import bake_udim
+    from core.geometry.margin import margin_texels
+
+    target, occ, _, _ = charts()
+    margin = 0
+    kw = dict(resolution=W, samples=16, seed=9, margin=margin)
+    raw = bake_ao(target, occ, fix_seams=False, **kw)
+    r = bake_ao(target, occ, **kw)
+    region = raw.mask.copy()
+    region.reshape(-1)[margin_texels(raw.ao, raw.mask, margin)[0]] = True
+    L = G.seam_lookups(target, W)
+    read = np.zeros(W * W, bool)
+    read[L.index.reshape(-1)] = True
+    beyond = ~region & read.reshape(W, W)
+    assert beyond.sum() > 20  # the lookups do read texels past this margin
+    assert np.array_equal(r.ao[~region], raw.ao[~region])
+    assert L.mismatch(r.ao) < 0.5 * L.mismatch(raw.ao)
+    u = bake_udim(target, occ, **kw)
+    assert np.array_equal(u.tiles[1001].ao[~region], raw.ao[~region])

@@ -129,6 +129,10 @@ OPTIONS = (
     Option("bent_normals", "bool", False, "outputs", "also estimate each texel's bent normal from the same rays"),
     Option("denoise", "bool", False, "outputs", "filter the estimate over the surface; the result's error is the "
            "denoised map's (needs replicates >= 2)"),
+    Option("fix_seams", "bool", True, "outputs", "after the bake (and the denoiser): make both sides of every "
+           "smooth UV seam agree as Blender's Linear interpolation reads them (least squares, each texel held "
+           "by its error; texels no seam lookup reads keep their bits, the error covers what changed)",
+           kinds=IMAGE),
     # execution
     Option("threads", "threads", None, "execution", "threads of this process, or of each worker process "
            "(None: every core, or one per worker)"),

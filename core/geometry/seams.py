@@ -49,8 +49,8 @@ class SeamLookups:
         in the order of ``tiles``.
     index : (K, 8) int32 (int64 from 2^31 texels), flat texel indices into the N * H * W planes: the four texels side A's
         lookup reads, then side B's.
-    weight : (K, 8) float64, their bilinear weights, side B's negated: a row times the texel values
-        is lookup A - lookup B.
+    weight : (K, 8) float32, their bilinear weights, side B's negated: a row times the texel values
+        is lookup A - lookup B (float32 as Blender's own lookup computes them).
     length : (K,) float64, the length of seam (texels, the longer side's) each point stands for.
     edge : (K,) int64, the seam edge each point lies on (0 .. edges - 1).
     target : (K,) int32, the mesh (of those given) the point belongs to.
@@ -92,8 +92,11 @@ class SeamLookups:
         flat = np.asarray(planes).reshape(-1)
         if flat.size != int(np.prod(self.shape)):
             raise ValueError(f"planes of {flat.size} texels; the lookups address {self.shape}")
-        vals = flat[self.index].astype(np.float64)
-        return np.einsum("kj,kj->k", vals, self.weight)
+        # Column by column, in order: no (K, 8) temporary, and the same bits on every numpy.
+        out = flat[self.index[:, 0]] * self.weight[:, 0].astype(np.float64)
+        for j in range(1, 8):
+            out += flat[self.index[:, j]] * self.weight[:, j].astype(np.float64)
+        return out
 
     def mismatch(self, planes, creases=True):
         """The mean |lookup A - lookup B| over every seam point (``creases`` False: over the smooth
@@ -101,7 +104,8 @@ class SeamLookups:
         d = self.difference(planes)
         if not creases:
             d = d[~self.crease]
-        return float(np.mean(np.abs(d))) if len(d) else 0.0
+        # a running sum, in order (numpy's pairwise sums unroll differently from one version to another)
+        return float(np.cumsum(np.abs(d))[-1] / len(d)) if len(d) else 0.0
 
 
 def _weld(positions):
@@ -173,7 +177,8 @@ def _bilinear(uv, width, height, wrap):
     return rows, cols, w
 
 
-def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel=POINTS_PER_TEXEL, keep_points=True):
+def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel=POINTS_PER_TEXEL, keep_points=True,
+                 creases=True):
     """The seam points of ``meshes`` (one core.Mesh or a list: the targets of one image) and their
     two bilinear lookups in a ``resolution`` image.
 
@@ -185,6 +190,7 @@ def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel
         numbers: one plane per tile in this order, each point looked up in its own tile.
     wrap : 'repeat' (the Image Texture node's default Extension) or 'extend'.
     keep_points : False: no ``triangle`` and ``uv`` (None; what the fix does not need, 48 bytes a point).
+    creases : False: the smooth seams' points alone (what the fix works on).
 
     Returns
     -------
@@ -218,13 +224,15 @@ def seam_lookups(meshes, resolution, tiles=None, wrap="repeat", points_per_texel
         differ = np.any(a0 != b0, axis=1) | np.any(a1 != b1, axis=1)
         if tiles is not None:  # the same UVs in two tiles: a tile border, looked up in each tile
             differ |= np.any(np.floor(cA) != np.floor(cB), axis=1)
+        if not creases:
+            differ &= ~crease
         sel = np.flatnonzero(differ)
         length = np.maximum(np.hypot(*((a1 - a0)[sel] * scale).T), np.hypot(*((b1 - b0)[sel] * scale).T))
         n = np.maximum(1, np.ceil(points_per_texel * length)).astype(np.int64)
         per_mesh.append((a0[sel], a1[sel], b0[sel], b1[sel], cA[sel], cB[sel], np.stack([tA[sel], tB[sel]], 1),
                          crease[sel], length, n))
     total = sum(int(m[-1].sum()) for m in per_mesh)
-    out = dict(index=np.empty((total, 8), itype), weight=np.empty((total, 8)), length=np.empty(total),
+    out = dict(index=np.empty((total, 8), itype), weight=np.empty((total, 8), np.float32), length=np.empty(total),
                edge=np.empty(total, np.int64), target=np.empty(total, np.int32),
                triangle=np.empty((total, 2), np.int64) if keep_points else None,
                uv=np.empty((total, 2, 2)) if keep_points else None, crease=np.empty(total, bool))

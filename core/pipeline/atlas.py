@@ -42,7 +42,7 @@ from ..targets.atlas import AtlasBake, digest, fingerprint, occluder_digest, set
 from ..targets.texels import texel_bake
 from .prologue import Prologue, check, frame_of
 from .remote import mesh_data
-from .result import BakeReport, BakeResult, empty_reason
+from .result import BakeReport, BakeResult, empty_reason, seam_report
 
 #: Why a target is baked again, by what changed in its fingerprint.
 _WHY = {"own": "its mesh, UVs or transform changed", "settings": "the settings changed"}
@@ -475,12 +475,11 @@ def finish(q, img, parts, todo, record, all_names, held_names, rank, owner, own,
             r2 = raw_ao.reshape(h, w)
             dilate(r2, mask2, s.margin, threads=s.threads, out=r2, owner=covered_owner.copy(), rank=rank)
     se2 = img.se.reshape(h, w)
-    if getattr(request, "fix_seams", False):  # after the margins, over the whole image, each seam its target's
-        from ..geometry.seams import seam_lookups
-        from ..post.fixseams import fix_seams
+    fix = None
+    if request.fix_seams:  # after the margins, over the whole image, each seam its target's
+        from ..post.fixseams import fix_baked
 
-        lookups = seam_lookups([p.checked.target for p in parts], (w, h))
-        fix_seams(ao2, se2, mask2, lookups, owner=out_owner, out=ao2, stderr_out=se2)
+        fix = fix_baked([p.checked.target for p in parts], ao2, se2, mask2, owner=out_owner)
     bent = None
     if img.bent is not None:
         bent, _ = bent_mod.dilate_directions(img.bent.reshape(h, w, 3), mask2, s.margin, s.threads,
@@ -491,6 +490,8 @@ def finish(q, img, parts, todo, record, all_names, held_names, rank, owner, own,
         metadata["quantities"] = ",".join(request.all_quantities)
     if request.denoise:
         metadata["denoise"] = True
+    if fix is not None:
+        metadata["fix_seams"] = True
     if ground is not None:
         metadata["ground_height"] = ground
     baked = [parts[i].name for i in todo]
@@ -507,7 +508,7 @@ def finish(q, img, parts, todo, record, all_names, held_names, rank, owner, own,
                         "owned": {name: int(np.count_nonzero(owner == k)) for k, name in enumerate(all_names)},
                         "shared_texels": own.shared, "unlimited_reach": bool(unlimited)},
                         atlas_overlaps=[{"a": all_names[i], "b": all_names[j], "texels": c}
-                                        for i, j, c in own.overlaps])
+                                        for i, j, c in own.overlaps], **seam_report(fix))
     warnings = []
     for k, name in enumerate(all_names[:n]):
         if not own.covered[k]:
@@ -601,7 +602,9 @@ def run_udim_atlas(request, atlas, occluders=(), *, highpoly=None, cage=None, be
     weight = np.array([sum(c.area.get(t, 0.0) for c in coverage) for t in todo]) + 1e-12
     weight /= weight.sum()
     done = np.concatenate([[0.0], np.cumsum(weight)])
-    tile_request = request.replace(kind="image", tiles=None, empty_ok=True)
+    # Fix Seams once over every tile, after they are stacked: the tiles' shared edges too, and a tile's
+    # own bake would look up the seams of the targets' other tiles in its image.
+    tile_request = request.replace(kind="image", tiles=None, empty_ok=True, fix_seams=False)
     quantities = request.all_quantities
     maps = request.quantities is not None
     results = {q: {} for q in quantities}
@@ -633,12 +636,14 @@ def run_udim_atlas(request, atlas, occluders=(), *, highpoly=None, cage=None, be
                           on_tile=None if on_tile is None else tile_block, on_rays=on_rays, remote=remote)
         for q in quantities:
             results[q][tile] = baked[q]
-    return {q: _stack_tiles(results[q], names, todo, coverage) for q in quantities}
+    return {q: _stack_tiles(results[q], names, todo, coverage, targets if request.fix_seams else None)
+            for q in quantities}
 
 
-def _stack_tiles(results, names, todo, coverage):
+def _stack_tiles(results, names, todo, coverage, fix_targets=None):
     """One quantity's UDIM atlas from its tiles' atlases: the planes stacked, the owner maps indexing
-    one list of names, the reports merged."""
+    one list of names, the reports merged; with ``fix_targets`` (the targets, in the order of
+    ``names``) the seams fixed over all the tiles at once."""
     all_names = list(names)
     for r in results.values():
         all_names += [x for x in r.targets if x not in all_names]
@@ -651,6 +656,16 @@ def _stack_tiles(results, names, todo, coverage):
     def stack(name):
         return np.stack([getattr(r, name) for r in parts])
 
+    fix = None
+    if fix_targets is not None:
+        from ..post.fixseams import fix_baked
+
+        ao, se = stack("ao"), stack("stderr")
+        fix = fix_baked(list(fix_targets), ao, se, stack("mask"), tiles=list(results), owner=np.stack(owners))
+        for i, r in enumerate(parts):
+            r.ao, r.stderr = ao[i], se[i]
+            r.metadata["fix_seams"] = True
+
     report = BakeReport(covered_texels=sum(r.report.covered_texels or 0 for r in parts),
                         overlapping_texels=sum(r.report.overlapping_texels or 0 for r in parts),
                         degenerate_uv_triangles=parts[0].report.degenerate_uv_triangles,
@@ -662,7 +677,7 @@ def _stack_tiles(results, names, todo, coverage):
                                "kept": [x for x in all_names if all(x not in r.report.atlas["baked"] for r in parts)],
                                "tiles": {t: r.report.atlas for t, r in results.items()}},
                         atlas_overlaps=[dict(o, tile=t) for t, r in results.items()
-                                        for o in (r.report.atlas_overlaps or [])])
+                                        for o in (r.report.atlas_overlaps or [])], **seam_report(fix))
     warnings = [w for r in parts for w in (r.report.warnings or []) if "covers no texel" not in w]
     if warnings:
         report.warn(*dict.fromkeys(warnings))

@@ -28,6 +28,10 @@ class BakeReport:
     targets an earlier bake held that this one does not name), each target's ``reach`` and ``owned`` texels, ``shared_texels``,
     ``unlimited_reach`` and its ``note``) and ``atlas_overlaps`` ([{``a``, ``b``, ``texels``}] per pair
     of targets whose UVs overlap).
+    Fix Seams (images and UDIM tiles, once for all tiles): ``seam_points`` (points along the smooth UV
+    seams, both sides looked up), ``seam_texels`` (texels solved for), ``seam_iterations`` (conjugate
+    gradients, all bound rounds), ``seam_mismatch_before`` and ``seam_mismatch_after`` (mean |lookup A -
+    lookup B| over the points: :mod:`core.geometry.seams`).
     Every bake: ``parallel`` (where its tiles ran, and why: ``processes`` (1: this process), ``threads``
     each, ``why`` (a sentence) and ``predicted_seconds`` (the model's time of each option weighed, when
     the bake chose between this process's threads and worker processes itself), from
@@ -65,6 +69,11 @@ class BakeReport:
     atlas: dict = None
     atlas_overlaps: list = None
     parallel: dict = None
+    seam_points: int = None
+    seam_texels: int = None
+    seam_iterations: int = None
+    seam_mismatch_before: float = None
+    seam_mismatch_after: float = None
     worker_memory: list = None
     warnings: list = None
 
@@ -196,4 +205,14 @@ def empty_reason(no_area=0, no_uv_area=0, outside=0, outside_udim=0):
     return "; ".join(reasons) or "its UV triangles are too small to cover a texel centre at this resolution"
 
 
-__all__ = ["BakeResult", "BakeReport", "empty_reason"]
+
+
+def seam_report(fix):
+    """The report's Fix Seams fields of a :class:`core.post.fixseams.SeamFix` (none for None)."""
+    if fix is None:
+        return {}
+    return dict(seam_points=fix.points, seam_texels=fix.unknowns, seam_iterations=fix.iterations,
+                seam_mismatch_before=fix.before, seam_mismatch_after=fix.after)
+
+
+__all__ = ["BakeResult", "BakeReport", "empty_reason", "seam_report"]

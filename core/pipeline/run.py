@@ -9,12 +9,12 @@
    :class:`Corners`: face corners' sample points), its stores, and the job a worker rebuilds it from;
 4. execute: the tiles on this process's threads, on worker processes or on a Dask cluster
    (:func:`core.execution.executor.bake_tiles`, which knows no bake kinds);
-5. finish: per quantity, the denoiser, the margin, the bent normals, the metadata, the report and its
-   warnings (:func:`finish`).
+5. finish: per quantity, the denoiser, the margin, Fix Seams, the bent normals, the metadata, the report
+   and its warnings (:func:`finish`).
 
 UDIM tiles are images of their own, each through steps 2 to 5 with its own seed
-(:mod:`core.geometry.uvtiles`), then denoised together across the tiles' seams and stacked
-(:func:`_udim`). Several quantities (``request.quantities``) share every step but their rays
+(:mod:`core.geometry.uvtiles`), then denoised and their seams fixed together across the tiles, and
+stacked (:func:`_udim`). Several quantities (``request.quantities``) share every step but their rays
 (:mod:`core.targets.maps`).
 """
 
@@ -40,6 +40,7 @@ from ..geometry.uvtiles import covered_tiles, shifted, tile_seed
 from ..highpoly.stage import finish_report
 from ..post import bent as bent_mod
 from ..post import denoise as denoise_mod
+from ..post import fixseams
 from ..base.errors import MeshError, SettingsError
 from ..targets.atlas import Atlas
 from ..targets.corners import vertex_bake
@@ -47,7 +48,7 @@ from ..targets.texels import ImageStore, layout_data, texel_bake
 from . import remote
 from .prologue import Prologue, check
 from .remote import mesh_data
-from .result import BakeReport, BakeResult, empty_reason
+from .result import BakeReport, BakeResult, empty_reason, seam_report
 
 
 def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=None, corners=None, progress=None,
@@ -196,7 +197,9 @@ class Texels:
         return self.request.all_quantities
 
     def result(self, q, counters, t_start):
-        """Quantity ``q``'s BakeResult from its filled images: denoise, margin, bent normals."""
+        """Quantity ``q``'s BakeResult from its filled images: denoise, margin, Fix Seams (on the map and
+        its error, after the margin, whose texels it may change), bent normals (not fixed: tangent frames
+        differ across seams)."""
         img, s, pro = self.images[q], self.lanes[q].s, self.pro
         ao, se, mask, bent = img.ao, img.se, img.mask, img.bent
         w, h = s.width, s.height
@@ -207,8 +210,12 @@ class Texels:
                 dilate(raw_ao, mask, s.margin, threads=s.threads, out=raw_ao)
             guide = denoise_mod.surface_guide(pro.target, (w, h), texels=self.guide, tris=self.uvtris)
             ao, se, info = denoise_mod.denoise(ao, se, mask, guide, threads=s.threads)
+        # Fix Seams moves the covered texels and the margin's, never those beyond it: the margin's
+        # ring walk marks its texels (one owner: the same bits as without).
+        region = np.where(mask, 0, -1).astype(np.int32) if self.request.fix_seams else None
         if s.margin > 0:
-            dilate(ao, mask, s.margin, threads=s.threads, out=ao)
+            dilate(ao, mask, s.margin, threads=s.threads, out=ao, owner=region)
+        fix = fixseams.fix_baked(pro.target, ao, se, mask, owner=region) if self.request.fix_seams else None
         if bent is not None:
             bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, s.threads)
         seconds = time.perf_counter() - t_start
@@ -217,7 +224,9 @@ class Texels:
         report = BakeReport(covered_texels=int(mask.sum()), degenerate_uv_triangles=self.uvtris.degenerate,
                             degenerate_triangles=self.uvtris.degenerate_space,
                             uv_outside_triangles=self.uvtris.outside, overlapping_texels=img.overlap,
-                            worker_memory=counters.get("worker_memory", []))
+                            worker_memory=counters.get("worker_memory", []), **seam_report(fix))
+        if fix is not None:
+            metadata["fix_seams"] = True
         return BakeResult(ao=ao, mask=mask, stderr=se, samples=img.count, rays=rays, seconds=seconds,
                           trace_seconds=counters["trace_seconds"], threads=s.threads, metadata=metadata, report=report,
                           trace_cpu_seconds=counters["trace_cpu_seconds"], bent=bent, miss=img.miss,
@@ -343,7 +352,7 @@ def _udim(request, target, occluders, highpoly, cage, bent_space, progress, canc
     # Denoised across the tiles' seams once every tile is baked (each tile alone would stop at its border).
     denoise, margin = request.denoise, request.margin
     tile_request = request.replace(kind="image", tiles=None, empty_ok=True, denoise=False,
-                                   margin=0 if denoise else margin)
+                                   margin=0 if denoise else margin, fix_seams=False)
     coverage = covered_tiles(target, request.resolution)
     todo = coverage.tiles if request.tiles is None else list(request.tiles)
     weight = np.array([coverage.area.get(t, 0.0) for t in todo]) + 1e-12
@@ -368,7 +377,8 @@ def _udim(request, target, occluders, highpoly, cage, bent_space, progress, canc
                     on_tile=None if on_tile is None else tile_block, on_rays=on_rays)
         for q in quantities:
             results[q][tile] = baked[q]
-    return {q: _assemble(target, request.resolution, results[q], todo, coverage, denoise, margin) for q in quantities}
+    return {q: _assemble(target, request.resolution, results[q], todo, coverage, denoise, margin, request.fix_seams)
+            for q in quantities}
 
 
 def _denoise_tiles(target, resolution, results, margin):
@@ -387,10 +397,24 @@ def _denoise_tiles(target, resolution, results, margin):
         r.metadata.update(denoise=True, margin=margin)
 
 
-def _assemble(target, resolution, results, todo, coverage, denoise, margin):
+def _fix_tiles(target, results, margin):
+    """Fix the seams of the tiles' maps together (the tiles' shared edges too), each tile's ``ao`` and
+    ``stderr`` in place, over their covered texels and ``margin``; the :class:`core.post.fixseams.SeamFix`."""
+    tiles = sorted(results)
+    ao = np.stack([results[t].ao for t in tiles])
+    se = np.stack([results[t].stderr for t in tiles])
+    fix = fixseams.fix_baked(target, ao, se, np.stack([results[t].mask for t in tiles]), tiles=tiles, margin=margin)
+    for i, t in enumerate(tiles):
+        results[t].ao, results[t].stderr = ao[i], se[i]
+        results[t].metadata["fix_seams"] = True
+    return fix
+
+
+def _assemble(target, resolution, results, todo, coverage, denoise, margin, fix_seams):
     """One quantity's UDIM result from its tiles' results."""
     if denoise and results:
         _denoise_tiles(target, resolution, results, margin)
+    fix = _fix_tiles(target, results, margin) if fix_seams and results else None
     report = {}
     for r in results.values():
         for key, value in r.report.items():
@@ -410,6 +434,7 @@ def _assemble(target, resolution, results, todo, coverage, denoise, margin):
                 report[key] = report.get(key, 0) + value
     report["uv_outside_udim_triangles"] = coverage.outside
     report["tiles"] = list(todo)
+    report.update(seam_report(fix))
     parts = list(results.values())
     if not any(r.mask.any() for r in parts):
         reason = empty_reason(report.get("degenerate_triangles", 0), report.get("degenerate_uv_triangles", 0), 0,
