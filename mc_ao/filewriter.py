@@ -57,6 +57,8 @@ def settings_record(settings):
             "domain": settings.attribute_domain.lower()} if settings.target == "VERTEX_COLORS" else {}),
         **({"bent_normals": settings.bent_space.lower()} if settings.bent_normals else {}),
         **({"denoise": True} if settings.denoise else {}),
+        # Fix Seams is on for every image bake unless turned off: recorded only then
+        **({"fix_seams": False} if not settings.fix_seams and settings.target != "VERTEX_COLORS" else {}),
         # which objects occlude, the ground and the quantities: recorded only where not the default
         **({"occluder_collections": ", ".join(settings.occluder_collections)}
            if settings.occluder_collections else {}),

@@ -476,6 +476,7 @@ class VIEW3D_PT_mc_ao_image(_McAoPanel, bpy.types.Panel):
         col.prop(settings, "height")
         col = layout.column()
         col.prop(settings, "margin")
+        col.prop(settings, "fix_seams")
         obj = context.active_object
         if obj is not None and obj.type == "MESH":
             col.prop_search(settings, "uv_map", obj.data, "uv_layers", text="UV Map", icon="GROUP_UVS")

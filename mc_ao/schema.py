@@ -217,6 +217,11 @@ SETTINGS = (
     Setting("margin", "int", 16, "Margin", "Extend the baked islands by this many pixels, against seams",
             hi=request.MAX_RESOLUTION, targets=("image", "udim", "bent"), core="margin",
             ui={"soft_max": 64, "subtype": "PIXEL"}),
+    Setting("fix_seams", "bool", True, "Fix Seams",
+            "After the bake, adjust the texels along UV seams (and the margin beside them) so that both sides "
+            "of every seam look the same under Linear interpolation, each texel by as much as its own noise "
+            "allows; creases, where the shading changes anyway, are left as they are. Costs a few percent of "
+            "the bake", targets=("image", "udim"), core="fix_seams"),
     Setting("image_name", "str", "", "Image",
             'Image to bake into; empty for "{object}_AO"; {object} is replaced by the object name. An '
             "existing image is reused, resized to the bake's size; files are named after it, made safe",
@@ -486,12 +491,15 @@ _GIVEN_BY = {name: o for o in OPTIONS for name in o.sets}
 
 def manifest_keys():
     """The keys a batch manifest may set: ``{key: (its option, its shape)}`` ("value", "value?", "list",
-    "pair", "flag"), every setting's with an option and the script's own that a task may take."""
+    "pair", "flag", "switch": a setting that is on unless --no-<option>), every setting's with an option
+    and the script's own that a task may take."""
     keys = {}
     for setting in SETTINGS:
         if setting.option_key is None:
             continue
-        if setting.kind == "bool" or setting.flag is not None:
+        if setting.kind == "bool" and setting.default is True:
+            shape = "switch"
+        elif setting.kind == "bool" or setting.flag is not None:
             shape = "flag"
         elif setting.kind in ("flags", "collections"):
             shape = "list"

@@ -59,7 +59,7 @@ GREYED = {
     "ground_height": lambda v: v.ground != "HEIGHT",
     # the Image section: a color-attribute bake has no image
     "resolution": _vertex, "height": _vertex, "margin": _vertex, "uv_map": _vertex,
-    "error_map": _vertex, "channel": _vertex, "images": _vertex,
+    "error_map": _vertex, "channel": _vertex, "images": _vertex, "fix_seams": _vertex,
     # which image: the Image name for one image per object, the Atlas name for one for all
     "image_name": lambda v: _vertex(v) or v.images != "OWN",
     "atlas": lambda v: _vertex(v) or v.images != "ATLAS",
@@ -226,6 +226,8 @@ class _BakeSettingsMethods:
             # 0: from the cores and the memory (core.execution.executor.auto_workers); the same bits for any count
             workers="auto" if self.processes == 0 else self.processes,
             **({"denoise": True} if self.denoise else {}),
+            # image bakes only (a color attribute has no seams); off goes to the core as off
+            **({"fix_seams": bool(self.fix_seams)} if not self.vertex_colors else {}),
             # the ground only when on: a bake without one passes what it passed before
             **({"ground": self.ground_value()} if self.ground != "OFF" else {}),
             # the core's options that are settings of their own (mc_ao.schema.FROM_CORE), as they are

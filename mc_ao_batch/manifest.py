@@ -55,11 +55,12 @@ _NO_EFFECT = {"threads", "processes", "quiet", "output", "summary_json", "blend"
 # library baked before them is still found done.
 _ADDED_AT_DEFAULT = {"denoise": False, "occluder_collections": [], "exclude_collections": [], "only_local": False,
                      "ground": False, "ground_height": None, "quantity": ["ao"], "channel": "none", "into": "",
-                     "images": "own", "atlas": None, "id_map": False, "match_collections": False}
+                     "images": "own", "atlas": None, "id_map": False, "match_collections": False,
+                     "fix_seams": True}
 # The settings made of a core option by themselves (mc_ao.schema.FROM_CORE: a core option that the add-on
 # does not map), at their defaults as the script's parser gives them: left out of fingerprints at their
 # default too, so that a new option of the core finds a library baked before it done.
-_FROM_CORE_AT_DEFAULT = {s.option_key: (False if s.kind == "bool" else schema.cli_value(s.default) if s.kind == "enum"
+_FROM_CORE_AT_DEFAULT = {s.option_key: (bool(s.default) if s.kind == "bool" else schema.cli_value(s.default) if s.kind == "enum"
                                         else s.default) for s in schema.FROM_CORE}
 _ENTRY_KEYS = {"blend"}
 # Keys of [defaults] and [[bake]] entries that are the batch's own, not bake_ao.py settings: never on
@@ -148,7 +149,7 @@ def check_settings(namespace):
 
 def settings_spec():
     """bake_ao.py's settings a manifest may set, from mc_ao.schema: ``key -> (option, shape)``, the
-    shape one of "value", "value?", "list", "pair", "flag" (mc_ao.schema.manifest_keys)."""
+    shape one of "value", "value?", "list", "pair", "flag", "switch" (mc_ao.schema.manifest_keys)."""
     return schema.manifest_keys()
 
 
@@ -156,10 +157,11 @@ def _value_args(where, key, value, spec):
     """The command-line words for one manifest setting (``spec``: its option and shape)."""
     flag, shape = spec
     nargs = {"list": "+", "pair": 2, "value?": "?"}.get(shape)
-    if shape == "flag":
+    if shape in ("flag", "switch"):
         if not isinstance(value, bool):
             raise ManifestError(f"{where}: {key} must be true or false, not {value!r}")
-        return [flag] if value else []
+        # a switch is on unless said otherwise: false is its --no- option
+        return [flag] if value else ([] if shape == "flag" else ["--no-" + flag[2:]])
     if isinstance(value, dict):
         raise ManifestError(f"{where}: {key} must be a value or a list, not a table")
     if nargs == "+":

@@ -110,8 +110,10 @@ def test_the_manifest_keys_are_the_schemas_and_match_the_scripts_parser():
     for key, (option, shape) in keys.items():
         action = actions[key]
         assert option in action.option_strings
-        want = {"flag": 0, "list": "+", "pair": 2, "value?": "?", "value": None}[shape]
+        want = {"flag": 0, "switch": 0, "list": "+", "pair": 2, "value?": "?", "value": None}[shape]
         assert (0 if action.nargs == 0 else action.nargs) == want, key
+        # a switch (a setting on by default) is turned off by its --no- option, a flag has none
+        assert ("--no-" + option[2:] in action.option_strings) == (shape == "switch"), key
     batch_set = {"output", "summary_json", "quiet", "help"}
     assert set(actions) - set(keys) == batch_set | {"save", "overwrite_input"}
 

@@ -74,6 +74,10 @@ def _add_setting(parser, setting):
     option, dest = setting.option, setting.option_key
     default = setting.default
     help_text = script_help(setting).replace("%", "%%")  # argparse formats help with %
+    if setting.kind == "bool" and setting.default is True:  # on unless --no-<option>
+        parser.add_argument(option, dest=dest, action=argparse.BooleanOptionalAction, default=True,
+                            help=f"{help_text} (default: on)")
+        return
     if setting.kind == "bool" or setting.flag is not None:
         parser.add_argument(option, dest=dest, action="store_true", help=help_text)
         return
