@@ -17,6 +17,7 @@ script and the batch runner alike:
   case-insensitive filesystems of Windows and macOS).
 - :func:`path_inside` joins a folder and a file name and checks that the resolved path lies inside
   the resolved folder, the last line of defence.
+- :func:`same_file` compares two paths by the file they reach, never by how they are spelt.
 """
 
 import hashlib
@@ -25,7 +26,7 @@ import unicodedata
 
 from ..base.errors import SettingsError
 
-__all__ = ["MAX_STEM_BYTES", "safe_file_stem", "unique_file_stems", "path_inside", "UnsafePathError"]
+__all__ = ["MAX_STEM_BYTES", "safe_file_stem", "unique_file_stems", "path_inside", "same_file", "UnsafePathError"]
 
 #: Longest stem in UTF-8 bytes. 255 (ext4, APFS, NTFS in UTF-16 units) minus room for the longest
 #: suffix a bake appends (``_BentNormal_stderr.1001.tiff`` is 28 bytes) and a margin.
@@ -159,3 +160,21 @@ def path_inside(folder, file_name):
             f"{file_name!r} would be written to {path!r}, outside the output folder {root!r}; refusing"
         )
     return os.path.join(os.path.abspath(os.fspath(folder)), file_name)
+
+
+def same_file(a, b):
+    """True when the paths ``a`` and ``b`` reach one file: two existing files by their device and
+    inode (a symlink, a hard link, ``..``, a folder reached through a link, another case on a
+    case-insensitive disk are seen through); otherwise each path's folder's real path joined with its
+    name, compared without case (two names that differ only in case are one file on Windows' and
+    macOS's disks, so they are one everywhere). The add-on's mc_ao.filecheck.same_file is the same
+    rule for its inputs and outputs."""
+    def key(path):
+        try:
+            st = os.stat(path)
+            return ("file", st.st_dev, st.st_ino)
+        except (OSError, ValueError):
+            folder, name = os.path.split(os.path.abspath(os.fspath(path)))
+            return ("path", os.path.normcase(os.path.join(os.path.realpath(folder), name)).casefold())
+
+    return key(a) == key(b)

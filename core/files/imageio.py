@@ -48,6 +48,7 @@ import numpy as np
 
 from .._version import OUTPUT_VERSION, __version__
 from .atomicfile import PendingFile, backup_of, io_error, remove_quietly, roll_back
+from .filenames import same_file
 from ..base.errors import McAoError, SettingsError, ImageWriteError
 
 __all__ = [
@@ -484,8 +485,10 @@ def write_ao(path, result, *, bits=None, stderr_path=None, stderr_bits=None, met
         return write_image(path, result.ao, bits=bits, metadata=ao_meta, overwrite=overwrite,
                            make_dirs=make_dirs)
 
-    if os.path.abspath(os.fspath(path)) == os.path.abspath(os.fspath(stderr_path)):
-        raise SettingsError(f"the AO and standard-error images have the same path {os.fspath(path)!r}")
+    if same_file(path, stderr_path):  # by the file they reach: one would replace the other
+        raise SettingsError(f"the AO and standard-error images have the same path {os.fspath(path)!r}"
+                            + ("" if os.fspath(path) == os.fspath(stderr_path)
+                               else f" (as {os.fspath(stderr_path)!r} reaches it)"))
     # Validate the second file's settings before any file is written.
     _check_bits(_format_of(stderr_path), stderr_bits)
     first = _prepare(path, result.ao, bits, ao_meta, overwrite, make_dirs)
