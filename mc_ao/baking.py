@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 from . import corelink
 from .extract import GEOMETRY_TYPES, ExtractError, MeshArrays, object_arrays
+from .settings import bake_kind
 
 
 def can_be_target(obj, needs_uvs=True):
@@ -171,7 +172,7 @@ def core_bake(settings, threads, quantities, maps, own, target, occluders, *, hi
     ``max_ray_distance``): Selected to Active. Returns {quantity: result} with ``maps``, else the one
     result. Needs no bpy."""
     core = corelink.load()
-    kind = "corners" if settings.vertex_colors else "udim" if settings.use_udim else "image"
+    kind = bake_kind(settings)
     main = "ao" if maps else quantities[0]  # the quantity whose options the bake takes: a bake of maps takes the AO's
     kw = settings.bake_kwargs(threads)
     if resolution is not None:

@@ -333,9 +333,12 @@ class VIEW3D_PT_mc_ao_sampling(_McAoPanel, bpy.types.Panel):
         col.prop(settings, "threads")
         col.prop(settings, "processes")
         col.prop(settings, "denoise")
-        # The core's options that are settings by themselves (mc_ao.schema.FROM_CORE): each as it comes.
+        # The core's options that are settings by themselves (mc_ao.schema.FROM_CORE): each as it comes,
+        # greyed out where the bake's kind does not take it.
         for setting in schema.FROM_CORE:
-            col.prop(settings, setting.name)
+            sub = col.row()
+            sub.active = not v.greyed(setting.name)
+            sub.prop(settings, setting.name)
 
 
 # The scene settings that are lists of collections (Include, Exclude).

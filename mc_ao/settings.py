@@ -71,6 +71,17 @@ GREYED = {
 }
 
 
+def bake_kind(v):
+    """The core's kind of the bake of settings ``v``: "corners" (a colour attribute), "udim" or "image"."""
+    return "corners" if _vertex(v) else "udim" if v.use_udim else "image"
+
+
+# The core's options that are settings by themselves (mc_ao.schema.FROM_CORE): greyed out where the bake's
+# kind does not take them, as the core call leaves them out there (mc_ao.baking.core_bake).
+GREYED.update({s.name: (lambda v, kinds=schema.request.BY_NAME[s.core].kinds: bake_kind(v) not in kinds)
+               for s in FROM_CORE if set(schema.request.BY_NAME[s.core].kinds) != set(schema.request.KINDS)})
+
+
 class _BakeSettingsMethods:
     """What a BakeSettings does with its values; its fields come from mc_ao.schema (see below)."""
 

@@ -7,7 +7,8 @@ request it makes, with the process's id, in a log (the test's instrument, append
 so a value is seen where it arrives. Then, each in a process of its own that imports the copy:
 
 - the panel's properties: ``scene.mc_ao.dummy_level`` with the core's default, limits and meaning, and
-  the Sampling panel draws it;
+  the Sampling panel draws it, greyed out for a colour-attribute bake (the option is for images and UDIM
+  tiles), whose core call leaves it out;
 - the operator's core call: a value set on the scene reaches the core's request in Blender's process
   and in the bake's worker processes (another process id);
 - the script's options: ``--dummy-level`` in its help, a value out of the core's limits refused (exit 2)
@@ -30,7 +31,7 @@ from blender_helpers import ROOT
 pytestmark = pytest.mark.blender
 
 OPTION = ('    Option("dummy_level", "int", 3, "sampling", "a test\'s option, which changes nothing in the bake", '
-          'lo=1, hi=9),\n')
+          'lo=1, hi=9, kinds=("image", "udim")),\n')
 ANCHOR = "\n)\nBY_NAME = {o.name: o for o in OPTIONS}\n"
 # The test's instrument: every request made (in any process) is noted with its process id.
 LOG_HOOK = '''
@@ -104,9 +105,14 @@ def test_the_panel_and_the_operator(copy, tmp_path):
         scene.mc_ao.resolution, scene.mc_ao.samples, scene.mc_ao.processes = 64, 4, 2
         scene.mc_ao.dummy_level = 7
         result = bpy.ops.object.mc_ao_bake()
+        # A colour-attribute bake, a kind the option is not for: greyed out, left out of the core call.
+        from mc_ao.settings import BakeSettings
+        greyed = [BakeSettings(target=t).greyed("dummy_level") for t in ("IMAGE_TEXTURES", "VERTEX_COLORS")]
+        scene.mc_ao.target, scene.mc_ao.samples, scene.mc_ao.processes = "VERTEX_COLORS", 5, 1
+        corners = bpy.ops.object.mc_ao_bake()
         bpy.ops.wm.save_as_mainfile(filepath={str(tmp_path / "plane.blend")!r})
         print("RESULT", json.dumps({{"default": prop.default, "min": prop.hard_min, "max": prop.hard_max,
-                                    "description": prop.description, "drawn": drawn, "result": sorted(result),
+                                    "description": prop.description, "drawn": drawn, "result": sorted(result), "corners": sorted(corners), "greyed": greyed,
                                     "pid": os.getpid()}}))
         mc_ao.unregister()  # ends its worker processes
         sys.stdout.flush()
@@ -122,6 +128,8 @@ def test_the_panel_and_the_operator(copy, tmp_path):
     assert seen and {r["dummy_level"] for r in seen} == {7}, seen
     assert out["pid"] in {r["pid"] for r in seen}  # the core call in Blender's process
     assert {r["pid"] for r in seen} - {out["pid"]}, seen  # and the request a worker process rebuilt
+    assert out["corners"] == ["FINISHED"] and out["greyed"] == [False, True]
+    assert [(r["kind"], r["dummy_level"]) for r in requests(log, 5)] == [("corners", 3)]
 
 
 def test_the_script_and_the_manifest(copy, tmp_path):
