@@ -145,8 +145,9 @@ SETTINGS = (
             hi=request.MAX_SAMPLES, core="min_samples", ui={"soft_max": 1024}),
     Setting("target_error", "float", 0.0, "Noise Threshold",
             "Adaptive sampling: stop a texel once its AO is known to within this, 95% of the time (0.01: "
-            "+-0.01). Open and fully occluded areas stop at Min Samples, noisy ones take up to Samples. 0 "
-            "turns adaptive sampling off", zero="adaptive sampling off", core="target_error",
+            "+-0.01). Open and fully occluded areas stop at Min Samples, noisy ones take up to Samples. With "
+            "Denoise on, the denoised AO: texels the denoiser can average stop sooner, detailed ones take more. "
+            "0 turns adaptive sampling off", zero="adaptive sampling off", core="target_error",
             ui={"max": 1.0, "soft_max": 0.1, "step": 0.1, "precision": 4}),
     Setting("resolution", "int", 1024, "Size",
             "Width of the image in pixels. An existing image of another size is resized to this size (and "

@@ -169,7 +169,7 @@ def multiscale(ao, se, mask, guide, levels=4, bias_scale=1.0, use_fine=True, ver
     return out.astype(np.float32), np.where(mask, se_o, 0).astype(np.float32)
 
 
-def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
+def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3, gradient_range=False):
     """Today's filter's candidates with everything the selection may need: per bandwidth (F, V, B,
     Lii) with Lii = 1 / W the weight of the texel's own value (weights held fixed), plus the trusted
     variance and the exact texels. A copy of core.post.denoise.denoise's steps."""
@@ -208,13 +208,45 @@ def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3):
     Gf, vGf = G[r:r + h, r:r + w].reshape(-1), vG[r:r + h, r:r + w].reshape(-1)
     k2 = np.float32(2.0 * D.RANGE_SIGMAS ** 2)
     flat, eps = np.float32(D.RANGE_FLAT), np.float32(1e-12)
+    if gradient_range:
+        # the pilot's gradient per texel (central differences on the island, one-sided at its border)
+        from bench.prototypes.denoise_eval import gradient  # noqa: F401
+        Gin0 = G[r:r + h, r:r + w].astype(np.float64)
+        isl = np.where(mask, guide.island, -1)
+        grads = []
+        for axis in (1, 0):
+            f = np.pad(Gin0, 1)
+            ip = np.pad(isl, 1, constant_values=-1)
+            cc = (slice(1, h + 1), slice(1, w + 1))
+            if axis == 1:
+                lo, hi = (slice(1, h + 1), slice(0, w)), (slice(1, h + 1), slice(2, w + 2))
+            else:
+                lo, hi = (slice(0, h), slice(1, w + 1)), (slice(2, h + 2), slice(1, w + 1))
+            a, b = ip[lo] == isl, ip[hi] == isl
+            fwd, bwd = f[hi] - f[cc], f[cc] - f[lo]
+            # minmod: the smaller one-sided difference where both agree in sign, else 0 (a step has
+            # one side flat: no gradient across it, so the range term still stops there)
+            mm = np.where(fwd * bwd > 0, np.sign(fwd) * np.minimum(np.abs(fwd), np.abs(bwd)), 0.0)
+            d = np.where(a & b, mm, 0.0)
+            grads.append(P(d.astype(np.float32)))
+        GX, GY = grads
 
     def candidates(valid, d2, dot, c, o):
         if valid is None:
             gi, gj, vi, vj = Gf[c], Gf[o], vGf[c], vGf[o]
+            diff = gi - gj
         else:
             gi, gj, vi, vj = G[c], G[o], vG[c], vG[o]
-        base = beta * (1.0 - dot) + np.maximum((gi - gj) ** 2 / (k2 * (vi + vj) + eps) - flat, zero)
+            diff = gi - gj
+            if gradient_range:
+                dy = o[0].start - c[0].start
+                dx = o[1].start - c[1].start
+                pred = np.float32(0.5) * ((GX[c] + GX[o]) * np.float32(dx) + (GY[c] + GY[o]) * np.float32(dy))
+                diff = gj - gi - pred
+                # the prediction's own noise: each one-sided difference has about 2 v, over |offset|
+                vi = vi * np.float32(1 + (dx * dx + dy * dy) / 2.0)
+                vj = vj * np.float32(1 + (dx * dx + dy * dy) / 2.0)
+        base = beta * (1.0 - dot) + np.maximum(diff ** 2 / (k2 * (vi + vj) + eps) - flat, zero)
         if valid is not None:
             base = np.where(valid, base, np.float32(np.inf))
         return [np.exp(-(d2 * inv + base)) for inv in inv2h2]

@@ -84,7 +84,8 @@ OPTIONS = (
     Option("min_samples", "int", 16, "sampling", "with adaptive sampling, what every texel takes before it may stop",
            lo=1),
     Option("target_error", "float", 0.0, "sampling", "adaptive sampling when > 0: a texel stops once the "
-           "half-width of its 95% confidence interval is at most this (AO units); 0 turns it off", lo=0.0),
+           "half-width of its 95% confidence interval is at most this (AO units); with denoise, of the "
+           "denoised map's (image bakes: core.post.denoise.aim); 0 turns it off", lo=0.0),
     Option("distribution", "choice", "cosine", "sampling", "directions: 'cosine' (importance sampling) or "
            "'uniform' (weight 2 cos theta)", choices=DISTRIBUTIONS),
     Option("source", "choice", "sobol", "sampling", "the point set of each texel's samples", choices=SOURCES),

@@ -73,8 +73,19 @@ class SamplingPlan:
             elif c > 0:
                 yield r, texels, start, c
 
-    def rounds(self, est, texels, x, y):
+    def rounds(self, est, texels, x, y, goal=None):
+        """Yields the rounds (start, count, texels) of ``texels`` (see the class). ``goal``: per texel
+        the samples each replicate takes (0: none), in one round from the first sample: a bake whose
+        counts were decided before it (:func:`core.post.denoise.aim.goal_counts`)."""
         if not len(texels):
+            return
+        if goal is not None:
+            goal = np.minimum(np.asarray(goal, np.int64), self.cap)
+            some = goal > 0
+            texels, goal = texels[some], goal[some]
+            for s in range(0, int(goal.max(initial=0)), SAMPLE_PIECE):
+                more = goal > s
+                yield np.full(int(more.sum()), s, np.int64), np.minimum(SAMPLE_PIECE, goal[more] - s), texels[more]
             return
         first = min(self.first, self.cap)
         for s in range(0, first, SAMPLE_PIECE):

@@ -113,6 +113,8 @@ def build(job, cancel, progress):
         bake = texel_bake(pro, s, request.all_quantities, request.bent_normals, guide=job.get("guide", False),
                           layout=layout)
         del layout
+        if job.get("goal") is not None:  # counts decided before the bake (adaptive sampling aimed at the denoised map)
+            bake.aim(job["goal"], again=job.get("again", False))
         pro.target.uvs = None  # a job with UVs (without a layout): they served the UV triangles the bake holds
     shared = CountingScheduler(bake.planned, progress, cancel, job["quantum"])
     bake.trace_setup(shared, cancel)

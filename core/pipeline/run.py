@@ -41,6 +41,7 @@ from ..highpoly.stage import finish_report
 from ..post import bent as bent_mod
 from ..post import denoise as denoise_mod
 from ..post import fixseams
+from ..post.denoise import aim as aim_mod
 from ..base.errors import MeshError, SettingsError
 from ..targets.atlas import Atlas
 from ..targets.corners import vertex_bake
@@ -77,8 +78,11 @@ def run(request, target, occluders=(), *, highpoly=None, cage=None, bent_space=N
     made.parallel, made.scene = choice, scene
     pro.check_memory(made.planned)
     pro.check_cancel()
-    rays, trace_s, trace_cpu, counters, fallback = bake_tiles(REMOTE, made.bake, made.keys, processes, per_worker,
-                                                              made.job, made.store, progress, cancel, on_rays)
+    if getattr(made, "aims", False):
+        rays, trace_s, trace_cpu, counters, fallback = _aimed(made, processes, per_worker, progress, cancel, on_rays)
+    else:
+        rays, trace_s, trace_cpu, counters, fallback = bake_tiles(REMOTE, made.bake, made.keys, processes, per_worker,
+                                                                  made.job, made.store, progress, cancel, on_rays)
     quantities = request.all_quantities
     if len(quantities) == 1:
         counters = {quantities[0]: dict(counters, rays=rays, trace_seconds=trace_s, trace_cpu_seconds=trace_cpu)}
@@ -130,6 +134,45 @@ def _scene_token(checked):
     return functools.lru_cache(maxsize=1)(functools.partial(remote.scene_key_of, [checked.target, *checked.occluders]))
 
 
+def _merged(a, b):
+    """Two passes' counters as one: numbers added, lists joined, dicts merged key by key."""
+    if isinstance(a, dict):
+        return {k: _merged(a[k], b[k]) if k in a and k in b else a.get(k, b.get(k)) for k in {**a, **b}}
+    if isinstance(a, list):
+        return a + b
+    if isinstance(a, (int, float, np.integer, np.floating)) and not isinstance(a, bool):
+        return a + b
+    return a
+
+
+def _aimed(made, processes, per_worker, progress, cancel, on_rays):
+    """A denoised bake with a noise target (:mod:`core.post.denoise.aim`): every texel's first round,
+    the denoiser's error of that map, then the texels whose denoised error misses the target baked
+    again with the counts it asks. Returns :func:`core.execution.executor.bake_tiles`' tuple for
+    both passes together."""
+    s = made.lanes[made.base].s
+    first = -(-min(s.min_samples, s.samples) // s.replicates)
+    cap = -(-s.samples // s.replicates)
+    share = first / cap  # the first pass's part of the progress
+    w, h = s.width, s.height
+    made.bake.aim(np.full(h * w, first, np.int32))
+    one = bake_tiles(REMOTE, made.bake, made.keys, processes, per_worker, made.job, made.store,
+                     None if progress is None else (lambda f: progress(share * f)), cancel, on_rays)
+    img = made.images[made.base]
+    guide = denoise_mod.surface_guide(made.pro.target, (w, h), texels=made.guide, tris=made.uvtris)
+    _, _, info = denoise_mod.denoise(img.ao, img.se, img.mask, guide, threads=s.threads)
+    rate = 0.5 if s.source == "independent" else 0.75
+    goal = aim_mod.goal_counts(info.variance, info.bias, img.se.astype(np.float64) ** 2, img.mask, first,
+                               s.target_error, cap, rate)
+    keys = [k for k in made.keys if goal[made.bake.rect(k)[:2]].any()]
+    if not keys:
+        return one
+    made.bake.aim(goal.reshape(-1), again=True)
+    two = bake_tiles(REMOTE, made.bake, keys, processes, per_worker, made.job, made.store,
+                     None if progress is None else (lambda f: progress(share + (1 - share) * f)), cancel, on_rays)
+    return (one[0] + two[0], one[1] + two[1], one[2] + two[2], _merged(one[3], two[3]), one[4] or two[4])
+
+
 class Texels:
     """The target of an image bake: its layout (:func:`core.targets.texels.texel_bake`: UV triangles,
     tiles, surface table), one :class:`core.targets.texels.ImageStore` per quantity, and its job."""
@@ -162,6 +205,14 @@ class Texels:
                                      self.guide if q == self.base else None)
                        for q, b in self.lanes.items()}
 
+    @property
+    def aims(self):
+        """Whether the bake aims its samples at the denoised map's error (:mod:`core.post.denoise.aim`):
+        denoise with a noise target (not selected to active: its tiles give no guide)."""
+        s = self.lanes[self.base].s
+        return (self.request.denoise and s.target_error > 0 and self.guide is not None
+                and min(s.min_samples, s.samples) < s.samples)
+
     def store(self, out):
         """Put a tile's values (:class:`core.engine.tilebaker.TileOut`) in each quantity's images."""
         if len(self.lanes) > 1:
@@ -182,7 +233,8 @@ class Texels:
                     occluders=[mesh_data(o) for o in checked.occluders],
                     highpoly=None if s2a is None else [mesh_data(m) for m in checked.s2a.highs],
                     cage=None if s2a is None or checked.s2a.cage is None else mesh_data(checked.s2a.cage),
-                    guide=self.guide is not None, scene_key=None if self.scene is None else self.scene())
+                    guide=self.guide is not None and not root.again, goal=root.goal, again=root.again,
+                    scene_key=None if self.scene is None else self.scene())
 
     def checked_order(self, counters):
         """The quantities in order, after refusing a bake that covered nothing (or, with selected to

@@ -82,6 +82,11 @@ class MapsBake:
             raise AttributeError(name)
         return getattr(self.first, name)
 
+    def aim(self, goal, again=False):
+        """Every lane bakes the same decided counts (:meth:`core.targets.texels.TexelBake.aim`)."""
+        for b in self.lanes.values():
+            b.aim(goal, again)
+
     def trace_setup(self, shared, cancel, on_rays=None):
         pattern = None
         for q, b in self.lanes.items():

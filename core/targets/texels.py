@@ -37,6 +37,7 @@ class TexelBake:
 
     def __init__(self, pro, s, bent_normals=False, guide=False, layout=None):
         self.pro, self.bent_normals, self.guide = pro, bool(bent_normals), bool(guide)
+        self.goal, self.again = None, False
         if layout is not None:  # a worker process's bake: the parent's UV triangles and tiles (the same bits)
             self.uvtris, self.s, self.bins = layout_of(layout), s, layout["bins"]
         else:
@@ -53,7 +54,19 @@ class TexelBake:
         out = object.__new__(TexelBake)
         out.pro, out.uvtris, out.bins, out.planned = self.pro, self.uvtris, self.bins, self.planned
         out.s, out.bent_normals, out.root, out.guide = s, bool(bent_normals), self, False
+        out.goal, out.again = None, False
         return out
+
+    def aim(self, goal, again=False):
+        """Bake each texel's count decided before the bake: ``goal`` (H * W,) int, the samples each
+        replicate of a texel takes (0: the texel is not baked, and its tile leaves it out). ``again``:
+        a second pass over texels baked before (its tiles return no guide, count no overlaps)."""
+        self.goal = None if goal is None else np.asarray(goal, np.int32).reshape(-1)
+        self.again = bool(again)
+        if again:
+            self.guide = False
+        if "baker" in self.__dict__:
+            self.baker.goal = self.goal
 
     @functools.cached_property
     def table(self):
@@ -87,6 +100,7 @@ class TexelBake:
                       if stage is None else stage.start())
         self.baker = TileBaker(self.uvtris, self.table, kernel, tracer, pattern, s, shared, self.start,
                                bent=self.bent_normals)
+        self.baker.goal = self.goal
         self.errors = ErrorModel(s, grouped=self.start.grouped)
         self.shared = shared
 
@@ -110,15 +124,23 @@ class TexelBake:
         se = self.errors.stderr(est, cols, rows).astype(np.float32)
         se[lost] = 0.0
         out = TileOut(key, t, np.clip(est.mean, 0.0, 1.0).astype(np.float32), se, est.n.astype(np.int32), lost,
-                      int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum()))
+                      0 if self.again else int((frag.coverage > 1.0 + R.OVERLAP_REPORT_AREA).sum()))
         if self.guide:  # what the denoiser needs of these texels, from their fragments
             out.guide = tile_guide(frag, self.uvtris, self.pro.target, w)
         if sums is not None:
             out.sums = sums
             out.tri = bent_mod.primary_pieces(frag, w)
             out.weights = bent_mod.barycentric(self.table.corners_xy, out.tri, cols + 0.5, rows + 0.5)
-            if directions:
-                self.directions(out)
+        if self.goal is not None:
+            # A bake of decided counts: the tile's texels that took none are not in its output.
+            keep = out.samples > 0
+            if not keep.all():
+                for name in ("texels", "ao", "stderr", "samples", "lost", "sums", "tri", "weights"):
+                    v = getattr(out, name)
+                    if v is not None:
+                        setattr(out, name, v[keep])
+        if sums is not None and directions:
+            self.directions(out)
         return out
 
     def directions(self, out):
