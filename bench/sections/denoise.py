@@ -498,13 +498,16 @@ def _load():
 
 def done_when(res=512, scenes=CYCLES_SCENES, threads=2, ref_samples=2048, cycles_ref_samples=2048, cache=None,
               cycles_samples=(32, 64, 128, 256), raw_samples=(16, 32, 64, 128, 256), dn_samples=(8, 16, 32, 64),
-              seed=1):
+              aimed_targets=(0.06, 0.04, 0.03, 0.02), aimed_samples=256, seed=1):
     """The equal-error figures in one run, per scene: Cycles' AO bake at ``cycles_samples`` against a Cycles
     bake of ``cycles_ref_samples``; the add-on's operator (bpy.ops.object.mc_ao_bake, Processes =
     ``threads``) with Denoise on at ``dn_samples`` and off at ``raw_samples``, against a core bake of
     ``ref_samples`` that no filter touched; Open Image Denoise RTLightmap on the same noisy bake as a
     denoised one (core, two replicates, its margin dilated 16 texels). Each baker against its own
     converged image, over the texels both cover away from island borders (interior); borders apart.
+    The "aimed" series: the operator with Denoise on and a Noise Threshold at each of ``aimed_targets``
+    (Min Samples 16, Samples ``aimed_samples``): adaptive sampling aimed at the denoised map's error
+    (core.post.denoise.aim).
 
     - time to Cycles 128's RMSE over Cycles 128's time (CPU seconds of Blender's process and the
       operator's worker processes; log-log interpolation between sample counts);
@@ -544,6 +547,11 @@ def done_when(res=512, scenes=CYCLES_SCENES, threads=2, ref_samples=2048, cycles
             for n in counts:
                 ao, wall = mcao.operator_bake(bpy, obj, res, n, threads, dist, margin=0, seed=seed + n, denoise=dn)
                 rows.append(dict(kind=kind, samples=n, ao=ao, cpu=mcao.LAST["cpu"], wall=wall))
+        for target_error in aimed_targets:
+            ao, wall = mcao.operator_bake(bpy, obj, res, aimed_samples, threads, dist, margin=0, seed=seed + 1000,
+                                          denoise=True, target_error=target_error, min_samples=16)
+            rows.append(dict(kind="aimed", samples=aimed_samples, target_error=target_error, ao=ao,
+                             cpu=mcao.LAST["cpu"], wall=wall))
         # The core's denoised bake at 16 samples: its error for z, its raw estimate for OIDN.
         c0, w0 = mcao.process_cpu(), time.perf_counter()
         r16 = bake_ao(target, occ, resolution=res, samples=16, max_distance=dist, seed=seed + 16, threads=threads,
@@ -574,18 +582,21 @@ def done_when(res=512, scenes=CYCLES_SCENES, threads=2, ref_samples=2048, cycles
         goal_row = next(x for x in rows if x["kind"] == "Cycles" and x["samples"] == 128)
         goal = goal_row["rmse"]
         matched = {}
-        for kind in ("raw", "denoised"):
+        for kind in ("raw", "denoised", "aimed"):
             pts = [x for x in rows if x["kind"] == kind]
+            if not pts:
+                continue
             t = interp_time_at([p["cpu"] for p in pts], [p["rmse"] for p in pts], goal)
             matched[kind] = {"cpu": t, "ratio": None if t is None else t / goal_row["cpu"]}
         raw_pts = [x for x in rows if x["kind"] == "raw"]
         steep_check = []
-        for x in (r for r in rows if r["kind"] == "denoised"):
+        for x in (r for r in rows if r["kind"] in ("denoised", "aimed")):
             # the raw series' steep RMSE at the denoised bake's CPU time (log-log between its counts)
             ts = np.log([p["cpu"] for p in raw_pts])
             es = np.log([p["rmse_steep"] for p in raw_pts])
             at = float(np.exp(np.interp(np.log(x["cpu"]), ts, es)))
-            steep_check.append({"samples": x["samples"], "cpu": x["cpu"], "denoised": x["rmse_steep"],
+            steep_check.append({"kind": x["kind"], "samples": x["samples"], "target_error": x.get("target_error"),
+                                "cpu": x["cpu"], "denoised": x["rmse_steep"],
                                 "raw_at_same_cpu": at, "ok": x["rmse_steep"] <= at,
                                 "extrapolated": not (ts.min() <= np.log(x["cpu"]) <= ts.max())})
         sel = inner & (r16.stderr > 0)
@@ -608,12 +619,14 @@ def done_table(name, c):
              f"{c['cycles128_cpu']:.1f} CPU s; load {c['load_before']} -> {c['load_after']}",
              "", "| map | samples | RMSE (interior) | border | steepest 10% | CPU s | wall s |", "|---|---|---|---|---|---|---|"]
     for x in c["rows"]:
-        lines.append(f"| {x['kind']} | {x['samples']} | {x['rmse']:.4f} | {x['rmse_border']:.4f} | "
+        kind = x["kind"] if x.get("target_error") is None else f"{x['kind']} (threshold {x['target_error']})"
+        lines.append(f"| {kind} | {x['samples']} | {x['rmse']:.4f} | {x['rmse_border']:.4f} | "
                      f"{x['rmse_steep']:.4f} | {x['cpu']:.2f} | {x['wall']:.2f} |")
     lines += ["", "Time to Cycles 128's RMSE over Cycles 128's (CPU): " + "; ".join(
         f"{k} {fmt(v['ratio'])}x" for k, v in c["matched"].items()),
         "Steepest 10%, denoised against raw at the same CPU time: " + "; ".join(
-        f"{s['samples']}: {s['denoised']:.4f} vs {s['raw_at_same_cpu']:.4f}{' (extrapolated)' if s['extrapolated'] else ''}"
+        f"{s.get('kind', 'denoised')} {s['samples'] if s.get('target_error') is None else s['target_error']}: "
+        f"{s['denoised']:.4f} vs {s['raw_at_same_cpu']:.4f}{' (extrapolated)' if s['extrapolated'] else ''}"
         for s in c["steep_check"]),
         f"z sd (core, denoised 16, against the reference): {c['z_sd']:.3f} (mean {c['z_mean']:+.3f})"]
     return "\n".join(lines)
