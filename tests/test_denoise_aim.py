@@ -54,16 +54,23 @@ def test_the_denoised_map_meets_the_target_with_fewer_rays(name):
     r = bake_ao(target, occ, seed=2, **AIMED)
     plain = bake_ao(target, occ, seed=2, **dict(AIMED, denoise=False))
     m = r.mask
-    # The denoised map's error is within the target at 95% of the texels (its interval's confidence).
+    # The denoised map's error is within the target at 95% of the texels (its interval's confidence:
+    # each texel's predicted half-width is at most the target; measured 99.4-100% over seeds 0-27).
     assert np.mean(np.abs(r.ao - truth)[m] <= TARGET) >= 0.95
-    # Fewer rays than the raw estimate's adaptive sampling for the same target (measured: about half).
+    # Fewer rays than the raw estimate's adaptive sampling for the same target (measured: 0.35-0.38x on
+    # the box, 0.15-0.20x on the polygon, seeds 0-7).
     assert r.rays < 0.75 * plain.rays, (r.rays, plain.rays)
-    # Every texel took the first round; the texels beside a contact or penumbra (steep AO), where the
-    # filter can average little, took more than the smooth ones.
+    # Every texel took the first round.
     assert r.samples[m].min() >= 16
-    steep = m & (grad >= np.quantile(grad[m], 0.9))
-    smooth = m & (grad <= np.quantile(grad[m], 0.5))
-    assert r.samples[steep].mean() > 1.5 * r.samples[smooth].mean()
+    if name == "box on plane":
+        # Beside the box's contact edge (the steepest AO), where the filter can average nothing across
+        # the edge, the texels took more than the smooth ones (about 6x over seeds 0-27). Not asserted
+        # for the polygon: its penumbra is smooth at 64^2, the filter averages it, and whether its
+        # steepest texels take more than the open plane depends on the first round's noise (0.96-3.7x
+        # over seeds 0-27).
+        steep = m & (grad >= np.quantile(grad[m], 0.9))
+        smooth = m & (grad <= np.quantile(grad[m], 0.5))
+        assert r.samples[steep].mean() > 1.5 * r.samples[smooth].mean()
     # The raw estimate kept beside it is the bake of those counts, its error honest.
     sel = m & (r.raw_stderr > 0)
     z = (r.raw_ao - truth)[sel] / r.raw_stderr[sel]
