@@ -19,7 +19,7 @@ to a 64-sample bake at N^2, and with ``--cost-against COMMIT`` that commit's cor
                                              [--picture docs/denoise.png] [--equal-error]
     .venv/bin/python -m bench.sections.denoise --cycles --resolution 512 --reference-samples 2048
     .venv/bin/python -m bench.sections.denoise --resolution 0 --cost-resolution 4096 --cost-against COMMIT
-                                             --cost-repeats 2
+                                             --cost-repeats 2 [--cost-samples 16]
     .venv/bin/python -m bench.sections.denoise --done-when --resolutions 256 512 --reference-samples 2048
                                              --reference-cache DIR --json bench/results/denoise-done.json
 
@@ -182,7 +182,7 @@ def compare(res, samples, ref_samples, seed=1, threads=2, cache=None, picture_pa
 
 
 #: What one cost measurement runs, in a process of its own whose ``core`` is the tree measured (this
-#: one, or an earlier commit's, unpacked): a 64-sample bake, the same bake with denoise=True, and the
+#: one, or an earlier commit's, unpacked): a bake of argv[5] samples, the same bake with denoise=True, and the
 #: guide and the filter on their own (surface_guide from the mesh, then denoise of the plain bake).
 #: Prints one JSON line of CPU seconds (process time: every thread, steadier than wall time on a
 #: shared machine).
@@ -195,17 +195,17 @@ from core.post import denoise as D
 z = np.load(sys.argv[2])
 target = Mesh(z["P"], z["F"], z["UV"], z["N"], name="Suzanne")
 occ = [Mesh(z[f"O{i}P"], z[f"O{i}F"], name=f"occluder{i}") for i in range(int(z["occluders"]))]
-res, threads, dist = int(sys.argv[3]), int(sys.argv[4]), float(z["distance"])
+res, threads, dist, samples = int(sys.argv[3]), int(sys.argv[4]), float(z["distance"]), int(sys.argv[5])
 out = {}
 def clock(name, f):
     c, w = time.process_time(), time.perf_counter()
     r = f()
     out[name + "_cpu"], out[name + "_wall"] = time.process_time() - c, time.perf_counter() - w
     return r
-bake = lambda dn: bake_ao(target, occ, resolution=res, samples=64, max_distance=dist, seed=3, threads=threads,
+bake = lambda dn: bake_ao(target, occ, resolution=res, samples=samples, max_distance=dist, seed=3, threads=threads,
                           denoise=dn)
-raw = clock("bake64", lambda: bake(False))
-clock("bake64_denoise", lambda: bake(True))
+raw = clock("bake", lambda: bake(False))
+clock("bake_denoise", lambda: bake(True))
 guide = clock("guide", lambda: D.surface_guide(target, res))
 clock("filter", lambda: D.denoise(raw.ao, raw.stderr, raw.mask, guide, threads=threads))
 print(json.dumps(out))
@@ -225,8 +225,8 @@ def _tree(commit, into):
     return into
 
 
-def cost(res, threads=2, against=None, repeats=1):
-    """CPU seconds of the denoiser against a 64-sample bake of the same map, on the same cores: the
+def cost(res, threads=2, against=None, repeats=1, samples=64):
+    """CPU seconds of the denoiser against a bake of ``samples`` of the same map, on the same cores: the
     bake with denoise=True less the plain bake (what denoising adds to a bake), and the guide and
     filter alone. With ``against`` (a commit), that commit's core is measured in the same run, the
     two alternating ``repeats`` times; the least of the repeats counts (the others measure the
@@ -243,7 +243,7 @@ def cost(res, threads=2, against=None, repeats=1):
     try:
         for _ in range(repeats):
             for name, root in trees:
-                p = subprocess.run([sys.executable, "-c", _COST_RUN, root, str(SCENE), str(res), str(threads)],
+                p = subprocess.run([sys.executable, "-c", _COST_RUN, root, str(SCENE), str(res), str(threads), str(samples)],
                                    check=True, capture_output=True, text=True)
                 runs[name].append(json.loads(p.stdout.strip().splitlines()[-1]))
                 print(f"  cost {res}^2, {name}: {runs[name][-1]}", flush=True)
@@ -251,25 +251,27 @@ def cost(res, threads=2, against=None, repeats=1):
         if tmp is not None:
             tmp.cleanup()
     mt = res * res / 1e6
-    out = {"resolution": res, "threads": threads, "samples": 64, "repeats": repeats, "versions": {}}
+    out = {"resolution": res, "threads": threads, "samples": samples, "repeats": repeats, "versions": {}}
     for name, rs in runs.items():
         best = {k: min(r[k] for r in rs) for k in rs[0]}
-        added = best["bake64_denoise_cpu"] - best["bake64_cpu"]
+        added = best["bake_denoise_cpu"] - best["bake_cpu"]
         out["versions"][name] = dict(
-            best, runs=rs, added_cpu=added, ratio_cpu=added / best["bake64_cpu"],
-            ratio_parts_cpu=(best["guide_cpu"] + best["filter_cpu"]) / best["bake64_cpu"],
+            best, runs=rs, added_cpu=added, ratio_cpu=added / best["bake_cpu"],
+            ratio_parts_cpu=(best["guide_cpu"] + best["filter_cpu"]) / best["bake_cpu"],
+            ratio_filter_cpu=best["filter_cpu"] / best["bake_cpu"],
             cpu_per_megatexel=added / mt, filter_cpu_per_megatexel=best["filter_cpu"] / mt)
     return out
 
 
 def cost_table(c):
-    lines = [f"Cost at {c['resolution']}^2 (Suzanne, {c['threads']} threads, 64 samples; CPU s, least of "
+    lines = [f"Cost at {c['resolution']}^2 (Suzanne, {c['threads']} threads, {c['samples']} samples; CPU s, least of "
              f"{c['repeats']} runs):", "",
-             "| core | 64-sample bake | with denoise=True | added | added / bake | guide alone | filter alone | "
-             "added per megatexel |", "|---|---|---|---|---|---|---|---|"]
+             f"| core | {c['samples']}-sample bake | with denoise=True | added | added / bake | guide alone | "
+             "filter alone | filter / bake | added per megatexel |", "|---|---|---|---|---|---|---|---|---|"]
     for name, v in c["versions"].items():
-        lines.append(f"| {name} | {v['bake64_cpu']:.1f} | {v['bake64_denoise_cpu']:.1f} | {v['added_cpu']:.1f} | "
+        lines.append(f"| {name} | {v['bake_cpu']:.1f} | {v['bake_denoise_cpu']:.1f} | {v['added_cpu']:.1f} | "
                      f"{100 * v['ratio_cpu']:.0f}% | {v['guide_cpu']:.1f} | {v['filter_cpu']:.1f} | "
+                     f"{100 * v['ratio_filter_cpu']:.0f}% | "
                      f"{v['cpu_per_megatexel']:.2f} |")
     return "\n".join(lines)
 
@@ -675,6 +677,7 @@ def main(argv=None):
     ap.add_argument("--cost-resolution", type=int, default=0, help="also measure the cost at this size (0: skip)")
     ap.add_argument("--cost-against", default=None, help="a commit whose core's cost is measured in the same run")
     ap.add_argument("--cost-repeats", type=int, default=1)
+    ap.add_argument("--cost-samples", type=int, default=64, help="the samples of the bake the cost is measured against")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--reference-cache", type=Path, default=None, help="folder to keep the reference bake in")
@@ -704,7 +707,8 @@ def main(argv=None):
                                  cache=a.reference_cache, picture_path=a.picture)
         print(table(out["compare"]))
     if a.cost_resolution:
-        c = cost(a.cost_resolution, threads=a.threads, against=a.cost_against, repeats=a.cost_repeats)
+        c = cost(a.cost_resolution, threads=a.threads, against=a.cost_against, repeats=a.cost_repeats,
+                 samples=a.cost_samples)
         out["cost"] = c
         print("\n" + cost_table(c))
     if a.equal_error:
