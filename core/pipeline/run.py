@@ -262,12 +262,10 @@ class Texels:
                 dilate(raw_ao, mask, s.margin, threads=s.threads, out=raw_ao)
             guide = denoise_mod.surface_guide(pro.target, (w, h), texels=self.guide, tris=self.uvtris)
             ao, se, info = denoise_mod.denoise(ao, se, mask, guide, threads=s.threads)
-        # Fix Seams moves the covered texels and the margin's, never those beyond it: the margin's
-        # ring walk marks its texels (one owner: the same bits as without).
-        region = np.where(mask, 0, -1).astype(np.int32) if self.request.fix_seams else None
         if s.margin > 0:
-            dilate(ao, mask, s.margin, threads=s.threads, out=ao, owner=region)
-        fix = fixseams.fix_baked(pro.target, ao, se, mask, owner=region) if self.request.fix_seams else None
+            dilate(ao, mask, s.margin, threads=s.threads, out=ao)
+        # over the covered texels and the margin's, never those beyond it
+        fix = fixseams.fix_baked(pro.target, ao, se, mask, margin=s.margin) if self.request.fix_seams else None
         if bent is not None:
             bent, _ = bent_mod.dilate_directions(bent, mask, s.margin, s.threads)
         seconds = time.perf_counter() - t_start

@@ -63,7 +63,7 @@ class _System:
     every numpy, and no temporary larger than a column). Held texels (no error, another target's) are
     constants in b; texels pinned at a bound later are masked out of the solve (:meth:`solve`)."""
 
-    def __init__(self, flat_v, flat_s, flat_m, lookups, owner, seam_weight, margin_weight):
+    def __init__(self, flat_v, flat_s, flat_m, lookups, owner, margin, seam_weight, margin_weight):
         # The texels the lookups read: marked in one byte a texel (not sorted out of the 8 K indices).
         mark = np.zeros(flat_v.size, bool)
         for j in range(8):
@@ -78,9 +78,11 @@ class _System:
         s = flat_s[touched].astype(np.float64)
         covered = flat_m[touched]
         free = ~(covered & (s <= 0))
+        if margin is not None:  # beyond the margin: the image as it was
+            free &= within_margin(flat_m.reshape(lookups.shape), touched, margin)
         if owner is not None:
             own = np.asarray(owner).reshape(-1)[touched]
-            free &= covered | (own >= 0)  # beyond the margin: the image as it was
+            free &= covered | (own >= 0)  # beyond every target's margin
             for j in range(8):
                 other = (own[pos[j]] >= 0) & (own[pos[j]] != lookups.target)
                 free[pos[j][other]] = False
@@ -149,7 +151,7 @@ class _System:
         return x, it, math.sqrt(rz / rz0) if rz0 > 0 else 0.0, rz0
 
 
-def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.0), seam_weight=SEAM_WEIGHT,
+def fix_seams(values, stderr, mask, lookups, *, owner=None, margin=None, value_range=(0.0, 1.0), seam_weight=SEAM_WEIGHT,
               margin_weight=MARGIN_WEIGHT, tolerance=TOLERANCE, max_iterations=MAX_ITERATIONS, out=None,
               stderr_out=None):
     """Adjust the texels the seam lookups read so that both sides of every seam agree.
@@ -175,8 +177,10 @@ def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.
     lookups : :class:`core.geometry.seams.SeamLookups` of the same shape.
     owner : None, or (H, W) / (N, H, W) int: the target owning each texel, covered or margin (-1:
         none); a texel owned by another target than a lookup's is held, and so is an uncovered
-        texel no target owns (beyond the margin: it keeps what the image had there). None: every
-        texel the lookups read may move.
+        texel no target owns (beyond the margin: it keeps what the image had there).
+    margin : None, or the margin (texels) the map was dilated by: an uncovered texel the margin
+        did not reach (:func:`within_margin`) keeps its value. None (and no ``owner``): every texel
+        the lookups read may move.
     out, stderr_out : arrays to write the fixed map and error into (may be ``values`` and
         ``stderr`` themselves); None: copies.
 
@@ -200,7 +204,7 @@ def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.
         return out, se_out, none
     flat = values.reshape(-1), stderr.reshape(-1), np.asarray(mask).reshape(-1)
     lo, hi = value_range
-    sys_ = _System(*flat, lookups, owner, seam_weight, margin_weight)
+    sys_ = _System(*flat, lookups, owner, margin, seam_weight, margin_weight)
     if sys_.n == 0:
         return out, se_out, none
     # Bounds by an active set: texels the solution takes past a bound are held there and the rest
@@ -233,26 +237,47 @@ def fix_seams(values, stderr, mask, lookups, *, owner=None, value_range=(0.0, 1.
     return out, se_out, SeamFix(texels, total, res, before, after, sys_.n, round_ + 1, lookups.points)
 
 
+def within_margin(mask, index, margin):
+    """Whether each texel of ``index`` (flat indices into ``mask``, (H, W) or (N, H, W) planes) is
+    covered or one :func:`core.geometry.margin.dilate` fills with ``margin`` rings: its rings grow
+    by the 8-neighbourhood inside the plane, so ring r holds the empty texels whose nearest covered
+    texel is r rows or columns away (Chebyshev distance). Looked up ring by ring around the given
+    texels alone (the seams' texels lie next to the islands: nothing the size of the image)."""
+    mask = np.asarray(mask)
+    h, w = mask.shape[-2:]
+    flat = mask.reshape(-1)
+    index = np.asarray(index, np.int64)
+    plane, rest = np.divmod(index, h * w)
+    y, x = np.divmod(rest, w)
+    out = flat[index].copy()
+    todo = np.flatnonzero(~out)
+    for r in range(1, int(margin) + 1):
+        if not len(todo):
+            break
+        py, px, pp = y[todo], x[todo], plane[todo]
+        found = np.zeros(len(todo), bool)
+        for dy in range(-r, r + 1):
+            for dx in (range(-r, r + 1) if abs(dy) == r else (-r, r)):  # the ring's square border
+                yy, xx = py + dy, px + dx
+                ok = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)
+                at = (pp * h + np.where(ok, yy, 0)) * w + np.where(ok, xx, 0)
+                found |= ok & flat[at]
+        out[todo[found]] = True
+        todo = todo[~found]
+    return out
+
+
 def fix_baked(target, ao, stderr, mask, tiles=None, owner=None, margin=None):
     """Fix the seams of a baked map in place: :func:`fix_seams` over the lookups of ``target``'s seams
     (:func:`core.geometry.seams.seam_lookups`, Blender's defaults: Linear, Repeat) in ``ao`` ((H, W), or
     (N, H, W) UDIM tiles in the order of ``tiles``), ``stderr`` and ``mask`` the same shape; ``owner``
-    as :func:`fix_seams` takes it, or, None with a ``margin`` (texels), the covered texels and those
-    the margin filled (:func:`core.geometry.margin.margin_texels`) as one target's, the others held.
-    Returns the :class:`SeamFix`."""
-    from ..geometry.margin import margin_texels
+    and ``margin`` as :func:`fix_seams` takes them. Returns the :class:`SeamFix`."""
     from ..geometry.seams import seam_lookups
-
-    if owner is None and margin is not None:
-        owner = np.where(mask, 0, -1).astype(np.int32)
-        for plane, m in zip(owner.reshape((-1,) + owner.shape[-2:]), np.reshape(mask, (-1,) + owner.shape[-2:])):
-            if margin > 0:
-                plane.reshape(-1)[margin_texels(np.zeros(m.shape, np.float32), m, margin)[0]] = 0
 
     h, w = ao.shape[-2:]
     lookups = seam_lookups(target, (w, h), tiles=tiles, keep_points=False, creases=False)
-    _, _, info = fix_seams(ao, stderr, mask, lookups, owner=owner, out=ao, stderr_out=stderr)
+    _, _, info = fix_seams(ao, stderr, mask, lookups, owner=owner, margin=margin, out=ao, stderr_out=stderr)
     return info
 
 
-__all__ = ["fix_seams", "fix_baked", "SeamFix", "SEAM_WEIGHT", "MARGIN_WEIGHT", "TOLERANCE", "MAX_ITERATIONS", "BOUND_ROUNDS"]
+__all__ = ["fix_seams", "fix_baked", "within_margin", "SeamFix", "SEAM_WEIGHT", "MARGIN_WEIGHT", "TOLERANCE", "MAX_ITERATIONS", "BOUND_ROUNDS"]
