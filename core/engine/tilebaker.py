@@ -187,7 +187,7 @@ class TileBaker:
         self.pattern, self.s, self.shared, self.start = pattern, settings, shared, start
         self.plan = SamplingPlan(settings, grouped=start.grouped)
         #: None, or per texel of the image (its global id) the samples each replicate takes, decided
-        #: before the bake (:meth:`core.engine.adaptive.SamplingPlan.rounds`' goal)
+        #: before the bake (:meth:`core.engine.adaptive.SamplingPlan.rounds`' goal), or one int for all
         self.goal = None
         self.bent = bent
         self.seeds = allocation_seeds(settings)
@@ -242,7 +242,8 @@ class TileBaker:
         if y is not None:  # the texels' windows, set up once for every round's pooling
             x, y = TexelWindows(x, y), None
         done = 0
-        goal = None if self.goal is None else self.goal[texel_ids]
+        goal = (None if self.goal is None else np.full(len(texel_ids), self.goal, np.int64) if np.ndim(self.goal) == 0
+                else self.goal[texel_ids])
         for first, count, texels in self.plan.rounds(est, np.arange(n_tex), x, y, goal=goal):
             keep = start.keep(est, texels)
             if keep is not None:

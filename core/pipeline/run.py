@@ -155,7 +155,7 @@ def _aimed(made, processes, per_worker, progress, cancel, on_rays):
     cap = -(-s.samples // s.replicates)
     share = first / cap  # the first pass's part of the progress
     w, h = s.width, s.height
-    made.bake.aim(np.full(h * w, first, np.int32))
+    made.bake.aim(first)
     one = bake_tiles(REMOTE, made.bake, made.keys, processes, per_worker, made.job, made.store,
                      None if progress is None else (lambda f: progress(share * f)), cancel, on_rays)
     img = made.images[made.base]

@@ -59,9 +59,15 @@ class TexelBake:
 
     def aim(self, goal, again=False):
         """Bake each texel's count decided before the bake: ``goal`` (H * W,) int, the samples each
-        replicate of a texel takes (0: the texel is not baked, and its tile leaves it out). ``again``:
-        a second pass over texels baked before (its tiles return no guide, count no overlaps)."""
-        self.goal = None if goal is None else np.asarray(goal, np.int32).reshape(-1)
+        replicate of a texel takes (0: the texel is not baked, and its tile leaves it out), or one int
+        for every texel. ``again``: a second pass over texels baked before (its tiles return no guide,
+        count no overlaps). The counts are kept (and sent to worker processes) in 16 bits where they fit."""
+        if goal is not None and np.ndim(goal) == 0:
+            goal = int(goal)
+        elif goal is not None:
+            goal = np.asarray(goal).reshape(-1)
+            goal = goal.astype(np.uint16 if goal.max(initial=0) < 2 ** 16 else np.int32)
+        self.goal = goal
         self.again = bool(again)
         if again:
             self.guide = False
