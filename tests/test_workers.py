@@ -302,6 +302,31 @@ def test_a_bake_on_a_dask_cluster_is_the_bits_of_one_process_and_survives_a_lost
         assert np.array_equal(getattr(ref, name), getattr(r, name)), name
 
 
+def test_a_dask_bake_whose_every_worker_ends_sends_its_job_again(dask_client):
+    """Dask keeps one copy of a scattered job once the tiles are under way, and cannot compute it again:
+    with every worker that held it killed after the first tile, the tiles come back cancelled and the
+    bake sends the job again to the workers that replace them; the same bits and rays."""
+    dask_client.wait_for_workers(2, timeout=120)  # the test before this one killed a worker
+    target, occ = scene()
+    args = dict(resolution=48, samples=32, max_distance=0.7, seed=3, margin=2, tile_size=16)
+    ref = bake_ao(target, occ, threads=1, **args)
+    killed = []
+
+    def progress(f):
+        if not killed and f > 0:
+            killed.extend(dask_client.run(os.getpid).values())
+            for pid in killed:
+                os.kill(pid, signal.SIGKILL)
+
+    r = bake_ao(target, occ, workers=dask_client, progress=progress, **args)
+    assert len(killed) == 2
+    for name in FIELDS:
+        assert np.array_equal(getattr(ref, name), getattr(r, name)), name
+    assert r.rays == ref.rays
+    dask_client.wait_for_workers(2, timeout=120)
+    dask_client.run(lambda: None if ROOT in __import__("sys").path else __import__("sys").path.insert(0, ROOT))
+
+
 def test_a_script_without_a_main_guard_runs_once(tmp_path):
     """Workers are not multiprocessing's spawn children: the script that bakes (Blender's --python
     file, a user's script without ``if __name__ == '__main__'``) is never run again in a worker."""
