@@ -164,7 +164,7 @@ def _dense_solution(values, stderr, mask, L, seam_weight, margin_weight):
 
 def test_the_fix_is_the_least_squares_solution_of_its_objective():
     target, occ, _, _ = charts(width=24, grid=2, cell=10, gap=2)
-    r = bake_ao(target, occ, resolution=24, samples=16, seed=3, margin=2)
+    r = bake_ao(target, occ, resolution=24, samples=16, seed=3, margin=2, fix_seams=False)
     L = G.seam_lookups(target, 24)
     out, _, info = F.fix_seams(r.ao, r.stderr, r.mask, L, value_range=(-np.inf, np.inf), tolerance=1e-10)
     free, x = _dense_solution(r.ao, r.stderr, r.mask, L, F.SEAM_WEIGHT, F.MARGIN_WEIGHT)
@@ -174,8 +174,9 @@ def test_the_fix_is_the_least_squares_solution_of_its_objective():
 
 @pytest.fixture(scope="module")
 def lid_bake():
+    """The raw bake (the fix's input) of the lid over the charts."""
     target, occ, truth, covered = charts()
-    r = bake_ao(target, occ, resolution=W, samples=16, seed=0)
+    r = bake_ao(target, occ, resolution=W, samples=16, seed=0, fix_seams=False)
     assert np.array_equal(r.mask, covered)
     return target, r, truth
 
@@ -212,8 +213,9 @@ def test_the_fix_brings_the_mismatch_below_what_the_exact_map_shows(lid_bake):
 
 
 def test_texels_of_another_target_are_held():
+    # (the raw bake: the fix's input; the margin texels belong to no target here, and are held too)
     target, occ, _, _ = charts()
-    r = bake_ao(target, occ, resolution=W, samples=16, seed=1)
+    r = bake_ao(target, occ, resolution=W, samples=16, seed=1, fix_seams=False)
     L = G.seam_lookups(target, W)
     owner = np.where(r.mask, 0, -1)
     owner[:, W // 2:] = np.where(r.mask[:, W // 2:], 1, -1)  # the right-hand charts belong to target 1
@@ -235,7 +237,7 @@ def test_the_fixed_map_error_is_honest_on_exact_scenes(occluder, layout):
     L = G.seam_lookups(target, W)
     z_all, z_changed, z_raw = [], [], []
     for seed in range(8):
-        r = bake_ao(target, occ, resolution=W, samples=64, seed=seed)
+        r = bake_ao(target, occ, resolution=W, samples=64, seed=seed, fix_seams=False)
         out, se, info = F.fix_seams(r.ao, r.stderr, r.mask, L)
         changed = np.zeros(W * W, bool)
         changed[info.texels] = True
