@@ -241,7 +241,10 @@ SETTINGS = (
     Setting("atlas", "str", "Atlas", "Atlas",
             "The image every object bakes into with Images set to One for All (its files: <name>.png, ...). An "
             "existing image keeps its size, depth and colour space, and the texels of objects not baked now",
-            targets=("image",), sets=("images", "ATLAS")),
+            targets=("image",), sets=("images", "ATLAS"),
+            cli_help="The image every object bakes into; giving it sets --images atlas (its files: <name>.png, "
+                     "...). An existing image keeps its size, depth and colour space, and the texels of objects "
+                     "not baked now"),
     Setting("id_map", "bool", False, "ID Map",
             'With several objects in one image, also the image "<image>_ID": each object\'s texels (and its '
             "margin) in a colour of its own, black elsewhere, a mask per object for texturing",

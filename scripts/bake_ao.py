@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Bake ambient occlusion of objects in a .blend file into image files, without the UI.
 
-    blender -b scene.blend --python scripts/bake_ao.py -- --objects A B --samples 128 --resolution 1024 --output out/
+    blender -b -q scene.blend --python scripts/bake_ao.py -- --objects A B --samples 128 --resolution 1024 --output out/
     python scripts/bake_ao.py scene.blend --objects A B --samples 128 --resolution 1024 --output out/
 
 The options, exit status and summary are mc_ao.cli's (``--help``); this file only finds the package.

@@ -30,14 +30,16 @@ def test_local_dask_cluster_is_quiet_beside_another_cluster():
 
 
 def test_script_help_speaks_of_options_not_of_the_panel():
-    """bake_ao.py --help names other settings by their options (--min-samples, not "Min Samples"), and
-    says nothing a script cannot do (shift-click) or set (32-bit Float, Save to File)."""
+    """bake_ao.py --help names other settings by their options (--min-samples, not "Min Samples") and
+    their choices by the option's words (--images atlas, not "One for All"), and says nothing a script
+    cannot do (shift-click) or set (32-bit Float, Save to File)."""
     import re
 
     from mc_ao import schema
     from mc_ao.cli.options import make_parser, script_help
 
     labels = {s.label for s in schema.SETTINGS}
+    choices = {item[1] for s in schema.SETTINGS for item in s.items if " " in item[1]}  # "One for All"
     for setting in schema.SETTINGS:
         if setting.option is None:
             continue
@@ -45,6 +47,8 @@ def test_script_help_speaks_of_options_not_of_the_panel():
         named = [label for label in labels if label != setting.label
                  and re.search(rf"(?<![.] )(?<!^)(?<![\w-]){re.escape(label)}\b", text)]
         assert named == [], f"{setting.option}: {named} in {text!r}"
+        others = [name for name in choices - {item[1] for item in setting.items} if name in text]
+        assert others == [], f"{setting.option}: the panel's choices {others} in {text!r}"
         assert "click" not in text.lower() and "panel" not in text.lower(), text
     shown = " ".join(make_parser(with_blend=True).format_help().split())
     assert "Min Samples" not in shown and "shift-click" not in shown and "Ground is Height" not in shown

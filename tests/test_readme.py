@@ -24,7 +24,8 @@ MOST_LINES = 300
 FEATURES = "Every feature, one command each"
 #: Features that must each have a section with a command there (a word of its title, lower case).
 FEATURE_WORDS = ("blender", "error map", "denois", "udim", "bent normals", "colour attributes",
-                 "selected to active", "thickness", "ground", "occluder collections", "channel packing", "atlas", "python",
+                 "selected to active", "thickness", "ground", "occluder collections", "channel packing", "atlas", "seams",
+                 "python",
                  "library")
 #: What a command line may need that this checkout does not bring (its "# needs ..." comment says
 #: which), and how a line shows it needs it.
@@ -419,6 +420,20 @@ def test_links_lead_somewhere(page):
 def test_docs_are_linked_from_the_readme():
     linked = set(re.findall(r"\]\(docs/([\w.-]+\.md)", README))
     assert set(DOCS) - linked == set(), "pages of docs/ that the README does not link"
+
+
+def test_settings_page_names_every_setting():
+    """docs/settings.md's table has a row for every setting of the panel (mc_ao.schema.SETTINGS: its
+    label, as the panel shows it), which names the setting's script option where it has one."""
+    from mc_ao import schema
+
+    rows = re.findall(r"^\|.*\|\s*$", DOCS["settings.md"], re.M)
+    missing = []
+    for setting in schema.SETTINGS:
+        named = [row for row in rows if re.search(rf"(^|[ ,(]){re.escape(setting.label)}\b", row.strip())]
+        if not named or (setting.option and not any(setting.option in row for row in named)):
+            missing.append(f"{setting.label} ({setting.option})")
+    assert missing == [], "settings that docs/settings.md leaves out"
 
 
 def test_manifest_shown_is_the_sample_manifest():

@@ -3,7 +3,7 @@ in a .blend file into image files, without the UI. No bpy at import.
 
 Run by Blender (its arguments for this script follow "--"):
 
-    blender -b scene.blend --python scripts/bake_ao.py -- --objects A B --samples 128 --resolution 1024 --output out/
+    blender -b -q scene.blend --python scripts/bake_ao.py -- --objects A B --samples 128 --resolution 1024 --output out/
 
 or by a Python that has the bpy module (then the .blend file is the first argument):
 
@@ -152,7 +152,7 @@ def run(argv, in_blender, summary):
     except ImportError:
         raise UsageError(
             "this Python has no bpy module: install it (pip install bpy==5.0.1) or run the script "
-            "with Blender: blender -b scene.blend --python scripts/bake_ao.py -- [options]"
+            "with Blender: blender -b -q scene.blend --python scripts/bake_ao.py -- [options]"
         ) from None
     if not in_blender:
         if not os.path.isfile(args.blend):

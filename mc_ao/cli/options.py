@@ -135,7 +135,7 @@ def make_parser(with_blend):
     parser = Parser(
         prog="bake_ao.py",
         description="Bake ambient occlusion of objects in a .blend file into image files.",
-        epilog="Under Blender: blender -b scene.blend --python scripts/bake_ao.py -- [options]. "
+        epilog="Under Blender: blender -b -q scene.blend --python scripts/bake_ao.py -- [options]. "
                "Exit status: 0 all baked and written, 1 a bake or file failed, 2 bad arguments or "
                "input (nothing baked), 130 Ctrl-C.",
     )

@@ -131,6 +131,8 @@ if filling is not None:
     save(filling[40:stop + min(sh, 640), sx:], "docs_panel_image_editor")
 if os.path.exists(os.path.join(OUT, "occlusion.png")):
     save(crop(pixels("occlusion")), "docs_panel_only_local")
+    # the same shot's lower rows: the Image section, Fix Seams under Margin
+    save(pixels("occlusion")[stop + sh - 363:stop + sh, sx:sx + sw], "docs_panel_fix_seams")
 
 with open(os.path.join(OUT, "verdict.json"), "w") as fh:
     json.dump(results, fh, indent=1)
