@@ -159,8 +159,8 @@ def is_running():
 
 # The last report of the last bake that ended or was refused ("INFO" | "WARNING" | "ERROR", text), or
 # None: the panel shows it under the button until the next bake, since the status bar shows a report
-# for a few seconds only (and Blender 4.3 showed none at all after a finished modal bake, see the
-# README). It belongs to the file it was baked in: opening or starting another file forgets it.
+# for a few seconds only (and Blender 4.3 showed none at all after a finished modal bake). It
+# belongs to the file it was baked in: opening or starting another file forgets it.
 last_outcome = None
 
 
