@@ -224,8 +224,9 @@ def test_suzanne_islands_do_not_overlap_at_1024(fresh):
     (job,) = baking.plan(depsgraph, [bpy.data.objects["Suzanne"]], settings)
     report = job.run(settings, threads=2).report
     assert report["covered_texels"] > 0.3 * 1024 ** 2
-    problems = {key: count for key, count in report.items()
-                if key not in ("covered_texels", "worker_memory", "parallel") and count}
+    problems = {key: count for key, count in report.items()  # (Fix Seams' figures are no problem)
+                if key not in ("covered_texels", "worker_memory", "parallel") and not key.startswith("seam_")
+                and count}
     assert problems == {}
 
 
