@@ -98,3 +98,25 @@ def test_the_manifest_key_leaves_a_librarys_fingerprint_alone_unless_it_turns_th
     off = _task(tmp_path / "c", False, ["--no-fix-seams"])
     assert default.fingerprint == on.fingerprint != off.fingerprint
     assert dict(default.older) == dict(on.older) != dict(off.older)
+
+
+def test_the_image_panel_draws_the_checkbox_under_margin(bpy, scene):
+    import types
+
+    from mc_ao import panel
+
+    drawn = []
+
+    class Layout:  # records the properties the panel draws, in order
+        def __getattr__(self, attr):
+            def call(*args, **kwargs):
+                if attr in ("prop", "prop_search") and len(args) >= 2:
+                    drawn.append(args[1])
+                return self
+            return call
+
+    layout = Layout()
+    panel.VIEW3D_PT_mc_ao_image.draw(types.SimpleNamespace(layout=layout, split_layout=lambda: layout), bpy.context)
+    assert drawn.index("fix_seams") == drawn.index("margin") + 1, drawn
+    prop = type(scene.mc_ao).bl_rna.properties["fix_seams"]
+    assert prop.name == "Fix Seams" and prop.default is True and "seam" in prop.description
