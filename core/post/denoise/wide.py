@@ -60,14 +60,33 @@ def cell_side(shape):
     return 2 if max(shape) <= 12 else 4
 
 
+def _window(c, r, axis):
+    """From running sums ``c`` (n + 1 entries along ``axis``, 0 or 1, the first 0): the sums over index
+    - r .. index + r clipped to the n entries, c[min(j + r + 1, n)] - c[max(j - r, 0)] for j < n.
+    The inner entries by slices (a gather along the rows' axis costs several times a slice), each
+    entry the same subtraction."""
+    n = c.shape[axis] - 1
+    if n <= 2 * r + 1:
+        hi = np.minimum(np.arange(n) + r + 1, n)
+        lo = np.maximum(np.arange(n) - r, 0)
+        return c[hi] - c[lo] if axis == 0 else c[:, hi] - c[:, lo]
+
+    def at(lo, hi):
+        return (slice(lo, hi),) if axis == 0 else (slice(None), slice(lo, hi))
+
+    out = np.empty((n, c.shape[1]) if axis == 0 else (c.shape[0], n))
+    np.subtract(c[at(2 * r + 1, None)], c[at(0, n - 2 * r)], out=out[at(r, n - r)])  # j in [r, n - r)
+    np.subtract(c[at(r + 1, 2 * r + 1)], c[at(0, 1)], out=out[at(0, r)])  # j < r: from the first entry
+    np.subtract(c[at(n, None)], c[at(n - 2 * r, n - r)], out=out[at(n - r, None)])  # j >= n - r: to the last
+    return out
+
+
 def _run(a, r, axis):
     """Sums over index - r .. index + r (clipped to the array) along ``axis`` (0 or 1)."""
     n = a.shape[axis]
     c = np.zeros((n + 1, a.shape[1]) if axis == 0 else (a.shape[0], n + 1))
     np.cumsum(a, axis=axis, out=c[1:] if axis == 0 else c[:, 1:])
-    hi = np.minimum(np.arange(n) + r + 1, n)
-    lo = np.maximum(np.arange(n) - r, 0)
-    return c[hi] - c[lo] if axis == 0 else c[:, hi] - c[:, lo]
+    return _window(c, r, axis)
 
 
 def _rect(q, rx, ry, rows):
@@ -92,11 +111,9 @@ class _Rects:
 
     def sums(self, rx, ry, rows):
         if rx not in self.cols:
-            hi = np.minimum(np.arange(self.w) + rx + 1, self.w)
-            lo = np.maximum(np.arange(self.w) - rx, 0)
             out = {}
             for k, c in self.c.items():
-                a = c[:, hi] - c[:, lo]
+                a = _window(c, rx, 1)
                 cc = np.zeros((a.shape[0] + 1, a.shape[1]))
                 np.cumsum(a, axis=0, out=cc[1:])
                 out[k] = cc
