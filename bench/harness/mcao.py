@@ -48,10 +48,11 @@ def register(bpy):
 
 
 def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=16, seed=0, source="SOBOL",
-                  target_error=0.0, min_samples=16, denoise=False):
+                  target_error=0.0, min_samples=16, denoise=False, fix_seams=None):
     """bpy.ops.object.mc_ao_bake() of ``obj`` alone (every visible object occludes it), on ``threads``
     cores as the operator's defaults use them: ``threads`` worker processes of one thread each (Threads
     is each process's threads; Threads 2 with Processes automatic would bake in Blender's process).
+    ``fix_seams``: True or False, or None for the panel's default (on).
 
     Returns (ao (H, W) float32 from the image's R channel, wall seconds of the operator call).
     """
@@ -73,6 +74,8 @@ def operator_bake(bpy, obj, resolution, samples, threads, max_distance, margin=1
     s.save_to_file = False
     s.seed = seed
     s.denoise = bool(denoise)
+    if fix_seams is not None:
+        s.fix_seams = bool(fix_seams)
     s.processes = threads
     s.threads = 1
     s.image_name = ""

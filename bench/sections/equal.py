@@ -32,11 +32,11 @@ def equal_samples(ctx):
             ao, t = cycles.bake(bpy, obj, res, res, spp, threads, margin=16, sentinel=None)
             cyc_t.append(t)
             cyc_c.append(cycles.LAST["cpu"])
-            _, t = mcao.operator_bake(bpy, obj, res, spp, threads, DISTANCE, margin=16)
+            _, t = mcao.operator_bake(bpy, obj, res, spp, threads, DISTANCE, margin=16, fix_seams=False)
             op_t.append(t)
             op_c.append(mcao.LAST["cpu"])
             r = mcao.core_bake(ctx.target, ctx.occluders, resolution=res, samples=spp, threads=threads,
-                               max_distance=DISTANCE, margin=16)
+                               max_distance=DISTANCE, margin=16, fix_seams=False)
             core_t.append(r.seconds)
             shares.append(r.trace_seconds / (r.seconds * r.threads))
             mc_texels = int(r.mask.sum())
@@ -94,11 +94,11 @@ def dense_equal_samples(ctx):
         _, t = cycles.bake(bpy, obj, res, res, spp, threads, margin=16)
         cyc_t.append(t)
         cyc_c.append(cycles.LAST["cpu"])
-        _, t = mcao.operator_bake(bpy, obj, res, spp, threads, DENSE_DISTANCE, margin=16)
+        _, t = mcao.operator_bake(bpy, obj, res, spp, threads, DENSE_DISTANCE, margin=16, fix_seams=False)
         op_t.append(t)
         op_c.append(mcao.LAST["cpu"])
         r = mcao.core_bake(target, occluders, resolution=res, samples=spp, threads=threads,
-                           max_distance=DENSE_DISTANCE, margin=16)
+                           max_distance=DENSE_DISTANCE, margin=16, fix_seams=False)
         core_t.append(r.seconds)
         shares.append(r.trace_seconds / (r.seconds * r.threads))
     row = {"scene": "sample_scenes/dense.blend, object Terrain", "triangles": int(target.triangle_count),
