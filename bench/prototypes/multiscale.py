@@ -210,7 +210,6 @@ def fine_all(ao, se, mask, guide, bandwidths=(1.25, 2.5), radius=3, gradient_ran
     flat, eps = np.float32(D.RANGE_FLAT), np.float32(1e-12)
     if gradient_range:
         # the pilot's gradient per texel (central differences on the island, one-sided at its border)
-        from bench.prototypes.denoise_eval import gradient  # noqa: F401
         Gin0 = G[r:r + h, r:r + w].astype(np.float64)
         isl = np.where(mask, guide.island, -1)
         grads = []
