@@ -301,7 +301,8 @@ SETTINGS = (
             lo=0, hi=MAX_THREADS, zero="threads or processes, whichever is sooner", core="workers", ui={"soft_max": 64}),
     Setting("denoise", "bool", False, "Denoise",
             "Filter the baked AO over the surface, across UV seams, each texel weighed by its own error: much "
-            "less noise at few samples (16 denoised samples beat 128 raw ones on the bench), for about a "
+            "less noise at few samples (on the bench's Suzanne at 512x512, 16 denoised samples about match 128 raw ones; "
+            "less gain on fine detail such as a dense terrain), for about a "
             "third of a 64-sample bake's time more; the error map then shows the denoised map's error",
             targets=("image", "udim", "vertex"), core="denoise"),
     Setting("ignore_backfaces", "bool", False, "Ignore Backfaces", "Rays that hit the back of a face pass through it",
