@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from importgraph import assert_no_cycle
+
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "bench"
 # A module may import from its own folder and from folders after its own in this order, never before:
@@ -67,22 +69,7 @@ def _folder(module):
 
 def test_no_import_cycles():
     edges = _graph()
-    state, stack = {}, []
-
-    def visit(m):
-        state[m] = "open"
-        stack.append(m)
-        for n in sorted(edges.get(m, ())):
-            if state.get(n) == "open":
-                raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(n):] + [n]))
-            if n not in state:
-                visit(n)
-        stack.pop()
-        state[m] = "done"
-
-    for m in sorted(edges):
-        if m not in state:
-            visit(m)
+    assert_no_cycle(edges)
     assert "bench.harness.run" in edges and "bench.sections.adaptive" in edges
 
 

@@ -8,6 +8,8 @@ MAX_LINES lines (mc_ao_batch's neither). Subpackages (mc_ao/outputs/) count modu
 import ast
 from pathlib import Path
 
+from importgraph import assert_no_cycle
+
 PACKAGE = Path(__file__).resolve().parent.parent / "mc_ao"
 MAX_LINES = 700
 # The Blender UI: only register() (mc_ao/__init__.py) and each other may import these.
@@ -83,22 +85,7 @@ def test_the_graph_reads_subpackages():
 
 
 def test_no_import_cycle():
-    graph = imports()
-    state = {}
-
-    def visit(module, stack):
-        if state.get(module) == "done":
-            return
-        if state.get(module) == "open":
-            cycle = stack[stack.index(module):] + [module]
-            raise AssertionError("import cycle: " + " -> ".join(cycle))
-        state[module] = "open"
-        for other in sorted(graph.get(module, ())):
-            visit(other, stack + [module])
-        state[module] = "done"
-
-    for module in graph:
-        visit(module, [])
+    assert_no_cycle(imports())
 
 
 def test_nothing_imports_a_module_above_it():
