@@ -19,50 +19,18 @@ import io
 import json
 import os
 import sys
-import tempfile
-import traceback
 
 import bpy
 import numpy as np
 
-OUT = os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_atlas")
-ZIP = os.environ["MC_AO_ZIP"]
-REPO = "mc_ao_gui"
-ADDON = f"bl_ext.{REPO}.mc_ao"
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the checks' shared module
+from guikit import ADDON, guarded, install, split_view, start, write  # noqa: E402
+
+OUT = start("check_atlas", os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_atlas"))
 IMAGE = "Atlas"
 GREY = 0.5
 BUTTON_BELOW_TOP = 52  # pixels from the sidebar's top edge to the middle of the Bake AO button
 state = {"phase": "first bake"}
-
-
-def log(*args):
-    print("[check_atlas]", *args, flush=True)
-
-
-def write(name, data):
-    with open(os.path.join(OUT, name + ".tmp"), "w") as fh:
-        json.dump(data, fh, indent=1)
-    os.replace(os.path.join(OUT, name + ".tmp"), os.path.join(OUT, name))
-    log(name, data)
-
-
-def guarded(step):
-    def run(*args):
-        try:
-            return step(*args)
-        except Exception:
-            traceback.print_exc()
-            write("error.json", {"step": step.__name__, "error": traceback.format_exc()})
-            return None
-    return run
-
-
-def install():
-    repos = bpy.context.preferences.extensions.repos
-    directory = tempfile.mkdtemp(prefix="mc_ao_gui_repo_")
-    repos.new(name="MC AO GUI", module=REPO, custom_directory=directory, source="USER")
-    result = bpy.ops.extensions.package_install_files(filepath=ZIP, repo=REPO, enable_on_install=True)
-    log("install:", result, "enabled:", ADDON in bpy.context.preferences.addons)
 
 
 def into_half(obj, right):
@@ -97,15 +65,6 @@ def scene_setup():
     settings.atlas = IMAGE
     settings.resolution = 512
     settings.samples = 64
-
-
-def split_view():
-    window = bpy.context.window_manager.windows[0]
-    area = max((a for a in window.screen.areas if a.type == "VIEW_3D"), key=lambda a: a.width * a.height)
-    region = next(r for r in area.regions if r.type == "WINDOW")
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.screen.area_split(direction="VERTICAL", factor=0.5)
-    return window
 
 
 @guarded

@@ -19,50 +19,25 @@ Nothing here clicks: panel.sh does, with xdotool, as a hand does.
 import json
 import os
 import sys
-import tempfile
 import time
-import traceback
 
 import bpy
 
-OUT = os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_panel")
-ZIP = os.environ["MC_AO_ZIP"]
-REPO = "mc_ao_gui"
-ADDON = f"bl_ext.{REPO}.mc_ao"
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the checks' shared module
+from guikit import ADDON, guarded, install, start, write  # noqa: E402
+
+OUT = start("check_panel", os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_panel"), log_writes=False,
+            json_default=str)
 SCENE = os.path.join(os.getcwd(), "sample_scenes", "props.blend")
 # Pixels from the sidebar's top edge to the middle of the Bake AO button, at UI scale 1.
 BUTTON_BELOW_TOP = 52
 state = {"next": 0, "window": None, "view": None, "free": None, "pinned": None}
 
 
-def write(name, data):
-    with open(os.path.join(OUT, name + ".tmp"), "w") as fh:
-        json.dump(data, fh, indent=1, default=str)
-    os.replace(os.path.join(OUT, name + ".tmp"), os.path.join(OUT, name))
-
-
-def guarded(step):
-    def run(*args):
-        try:
-            return step(*args)
-        except Exception:
-            traceback.print_exc()
-            write("error.json", {"step": step.__name__, "error": traceback.format_exc()})
-            return None
-    return run
-
-
 def addon_module(name):
     """The installed extension's module mc_ao.<name> (bl_ext.<repo>.mc_ao.mc_ao.<name>)."""
     return next(module for key, module in sys.modules.items()
                 if key.startswith(ADDON + ".") and key.endswith(f"mc_ao.{name}"))
-
-
-def install():
-    repos = bpy.context.preferences.extensions.repos
-    directory = tempfile.mkdtemp(prefix="mc_ao_gui_repo_")
-    repos.new(name="MC AO GUI", module=REPO, custom_directory=directory, source="USER")
-    bpy.ops.extensions.package_install_files(filepath=ZIP, repo=REPO, enable_on_install=True)
 
 
 @guarded

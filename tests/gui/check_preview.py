@@ -10,48 +10,16 @@ Image Editor, and writes $MC_AO_GUI_OUT/ready.json with where the sidebar's tabs
 clicks the MC AO tab and takes the screenshot. state.json says what was made (tiles, materials).
 """
 
-import json
 import os
-import tempfile
-import traceback
+import sys
 
 import bpy
 
-OUT = os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_preview")
-ZIP = os.environ["MC_AO_ZIP"]
-REPO = "mc_ao_gui"
-ADDON = f"bl_ext.{REPO}.mc_ao"
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the checks' shared module
+from guikit import guarded, install, log, split_view, start, write  # noqa: E402
+
+OUT = start("check_preview", os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_preview"))
 state = {}
-
-
-def log(*args):
-    print("[check_preview]", *args, flush=True)
-
-
-def write(name, data):
-    with open(os.path.join(OUT, name + ".tmp"), "w") as fh:
-        json.dump(data, fh, indent=1)
-    os.replace(os.path.join(OUT, name + ".tmp"), os.path.join(OUT, name))
-    log(name, data)
-
-
-def guarded(step):
-    def run(*args):
-        try:
-            return step(*args)
-        except Exception:
-            traceback.print_exc()
-            write("error.json", {"step": step.__name__, "error": traceback.format_exc()})
-            return None
-    return run
-
-
-def install():
-    directory = tempfile.mkdtemp(prefix="mc_ao_gui_repo_")
-    bpy.context.preferences.extensions.repos.new(
-        name="MC AO GUI", module=REPO, custom_directory=directory, source="USER")
-    result = bpy.ops.extensions.package_install_files(filepath=ZIP, repo=REPO, enable_on_install=True)
-    log("install:", result, "enabled:", ADDON in bpy.context.preferences.addons)
 
 
 def material(name, colour, checker=False):
@@ -104,20 +72,11 @@ def scene_setup():
     bpy.ops.ed.undo_push(message="scene ready")
 
 
-def split_view():
-    window = bpy.context.window_manager.windows[0]
-    area = max((a for a in window.screen.areas if a.type == "VIEW_3D"), key=lambda a: a.width * a.height)
-    region = next(r for r in area.regions if r.type == "WINDOW")
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.screen.area_split(direction="VERTICAL", factor=0.62)
-    return window
-
-
 @guarded
 def ready():
     install()
     scene_setup()
-    window = split_view()
+    window = split_view(0.62)
     bpy.app.timers.register(lambda: bake(window), first_interval=1.0)
     return None
 

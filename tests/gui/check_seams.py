@@ -17,11 +17,9 @@ third of a texel from it, at five places along it, and the same pairs moved a te
 after the fix, and at least twice the after's before it.
 """
 
-import json
 import math
 import os
-import tempfile
-import traceback
+import sys
 
 import bmesh
 import bpy
@@ -29,46 +27,16 @@ import numpy as np
 from bpy_extras import view3d_utils
 from mathutils import Vector
 
-OUT = os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_seams")
-ZIP = os.environ["MC_AO_ZIP"]
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the checks' shared module
+from guikit import guarded, install, log, start, write  # noqa: E402
+
+OUT = start("check_seams", os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_seams"))
 SCENE = os.path.join(os.environ.get("MC_AO_REPO", os.getcwd()), "sample_scenes", "suzanne.blend")
-REPO = "mc_ao_gui"
-ADDON = f"bl_ext.{REPO}.mc_ao"
 RES, SAMPLES = 256, 64
 TEXEL_PIXELS = 24  # on screen
 STEPS = (0.3, 0.4, 0.5, 0.6, 0.7)  # where along the seam edge the pixels are read
 OFFSET = 1 / 3  # texels from the seam
 state = {}
-
-
-def log(*args):
-    print("[check_seams]", *args, flush=True)
-
-
-def write(name, data):
-    with open(os.path.join(OUT, name + ".tmp"), "w") as fh:
-        json.dump(data, fh, indent=1)
-    os.replace(os.path.join(OUT, name + ".tmp"), os.path.join(OUT, name))
-    log(name, data)
-
-
-def guarded(step):
-    def run(*args):
-        try:
-            return step(*args)
-        except Exception:
-            traceback.print_exc()
-            write("error.json", {"step": step.__name__, "error": traceback.format_exc()})
-            return None
-    return run
-
-
-def install():
-    directory = tempfile.mkdtemp(prefix="mc_ao_gui_repo_")
-    bpy.context.preferences.extensions.repos.new(name="MC AO GUI", module=REPO, custom_directory=directory,
-                                                 source="USER")
-    result = bpy.ops.extensions.package_install_files(filepath=ZIP, repo=REPO, enable_on_install=True)
-    log("install:", result, "enabled:", ADDON in bpy.context.preferences.addons)
 
 
 def scene_setup():

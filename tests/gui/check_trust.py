@@ -10,44 +10,19 @@ file saying what the image is (size, and whether its pixels are those it should 
 """
 
 import hashlib
-import json
 import os
 import sys
-import tempfile
-import traceback
 
 import bpy
 import numpy as np
 
-OUT = os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_trust")
-ZIP = os.environ["MC_AO_ZIP"]
-REPO = "mc_ao_gui"
-ADDON = f"bl_ext.{REPO}.mc_ao"
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the checks' shared module
+from guikit import ADDON, guarded, install, split_view, start, write  # noqa: E402
+
+OUT = start("check_trust", os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_trust"))
 IMAGE = "Ground_AO"
 BUTTON_BELOW_TOP = 52  # pixels from the sidebar's top edge to the middle of the Bake AO button
 state = {"step": 0}
-
-
-def log(*args):
-    print("[check_trust]", *args, flush=True)
-
-
-def write(name, data):
-    with open(os.path.join(OUT, name + ".tmp"), "w") as fh:
-        json.dump(data, fh, indent=1)
-    os.replace(os.path.join(OUT, name + ".tmp"), os.path.join(OUT, name))
-    log(name, data)
-
-
-def guarded(step):
-    def run(*args):
-        try:
-            return step(*args)
-        except Exception:
-            traceback.print_exc()
-            write("error.json", {"step": step.__name__, "error": traceback.format_exc()})
-            return None
-    return run
 
 
 def digest(image):
@@ -64,15 +39,6 @@ def describe(image):
 def running():
     operators = sys.modules.get(f"{ADDON}.mc_ao.operators")
     return operators is not None and bool(operators._RUNS)
-
-
-def install():
-    directory = tempfile.mkdtemp(prefix="mc_ao_gui_repo_")
-    bpy.context.preferences.extensions.repos.new(
-        name="MC AO GUI", module=REPO, custom_directory=directory, source="USER")
-    result = bpy.ops.extensions.package_install_files(filepath=ZIP, repo=REPO, enable_on_install=True)
-    log("install:", result, "enabled:", ADDON in bpy.context.preferences.addons)
-    hold_first_bake()
 
 
 def hold_first_bake():
@@ -142,18 +108,10 @@ def scene_setup():
     bpy.ops.ed.undo_push(message="scene ready")
 
 
-def split_view():
-    window = bpy.context.window_manager.windows[0]
-    area = max((a for a in window.screen.areas if a.type == "VIEW_3D"), key=lambda a: a.width * a.height)
-    region = next(r for r in area.regions if r.type == "WINDOW")
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.screen.area_split(direction="VERTICAL", factor=0.5)
-    return window
-
-
 @guarded
 def ready():
     install()
+    hold_first_bake()
     scene_setup()
     window = split_view()
     bpy.app.timers.register(lambda: arrange(window), first_interval=1.0)

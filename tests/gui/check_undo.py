@@ -16,45 +16,20 @@ one it should be: after Ctrl-Z the first bake's pixels, after Ctrl-Shift-Z the s
 """
 
 import hashlib
-import json
 import os
 import sys
-import tempfile
-import traceback
 
 import bpy
 import numpy as np
 
-OUT = os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_undo")
-ZIP = os.environ["MC_AO_ZIP"]
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the checks' shared module
+from guikit import ADDON, guarded, install, split_view, start, write  # noqa: E402
+
+OUT = start("check_undo", os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_undo"))
 MODE = os.environ.get("MC_AO_UNDO_MODE", "packed")
-REPO = "mc_ao_gui"
-ADDON = f"bl_ext.{REPO}.mc_ao"
 IMAGE = "Ground_AO"
 BUTTON_BELOW_TOP = 52  # pixels from the sidebar's top edge to the middle of the Bake AO button
 state = {"step": 0}
-
-
-def log(*args):
-    print("[check_undo]", *args, flush=True)
-
-
-def write(name, data):
-    with open(os.path.join(OUT, name + ".tmp"), "w") as fh:
-        json.dump(data, fh, indent=1)
-    os.replace(os.path.join(OUT, name + ".tmp"), os.path.join(OUT, name))
-    log(name, data)
-
-
-def guarded(step):
-    def run(*args):
-        try:
-            return step(*args)
-        except Exception:
-            traceback.print_exc()
-            write("error.json", {"step": step.__name__, "error": traceback.format_exc()})
-            return None
-    return run
 
 
 def describe():
@@ -73,14 +48,6 @@ def describe():
 def running():
     operators = sys.modules.get(f"{ADDON}.mc_ao.operators")
     return operators is not None and bool(operators._RUNS)
-
-
-def install():
-    directory = tempfile.mkdtemp(prefix="mc_ao_gui_repo_")
-    bpy.context.preferences.extensions.repos.new(
-        name="MC AO GUI", module=REPO, custom_directory=directory, source="USER")
-    result = bpy.ops.extensions.package_install_files(filepath=ZIP, repo=REPO, enable_on_install=True)
-    log("install:", result, "enabled:", ADDON in bpy.context.preferences.addons)
 
 
 def scene_setup():
@@ -116,15 +83,6 @@ def scene_setup():
         settings.link_to_file = True
         settings.output_dir = os.path.join(OUT, "files")
     bpy.ops.ed.undo_push(message="scene ready")
-
-
-def split_view():
-    window = bpy.context.window_manager.windows[0]
-    area = max((a for a in window.screen.areas if a.type == "VIEW_3D"), key=lambda a: a.width * a.height)
-    region = next(r for r in area.regions if r.type == "WINDOW")
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.screen.area_split(direction="VERTICAL", factor=0.5)
-    return window
 
 
 @guarded

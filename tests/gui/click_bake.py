@@ -11,19 +11,16 @@ pixels). xdotool does the clicking (run.sh); nothing here presses the button.
 """
 
 import hashlib
-import json
 import os
 import sys
-import tempfile
-import traceback
 
 import bpy
 import numpy as np
 
-OUT = os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_gui")
-ZIP = os.environ["MC_AO_ZIP"]
-REPO = "mc_ao_gui"
-ADDON = f"bl_ext.{REPO}.mc_ao"
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the checks' shared module
+from guikit import ADDON, guarded, install, log, split_view, start, write  # noqa: E402
+
+OUT = start("click_bake", os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_gui"), log_writes=False)
 IMAGE = "Ground_AO"
 # Pixels from the sidebar's top edge to the middle of the Bake AO button, at UI scale 1: the panel
 # header (about 26) and half the 1.5-high button (about 15), plus the paddings.
@@ -31,40 +28,10 @@ BUTTON_BELOW_TOP = 52
 state = {"phase": "first bake", "first_digest": None}
 
 
-def guarded(step):
-    """A timer step that, if it fails, writes error.json (run.sh stops on it) instead of hanging."""
-    def run(*args):
-        try:
-            return step(*args)
-        except Exception:
-            traceback.print_exc()
-            write("error.json", {"step": step.__name__, "error": traceback.format_exc()})
-            return None
-    return run
-
-
-def write(name, data):
-    with open(os.path.join(OUT, name + ".tmp"), "w") as fh:
-        json.dump(data, fh, indent=1)
-    os.replace(os.path.join(OUT, name + ".tmp"), os.path.join(OUT, name))
-
-
-def log(*args):
-    print("[click_bake]", *args, flush=True)
-
-
 def digest(image):
     pixels = np.empty(len(image.pixels), dtype=np.float32)
     image.pixels.foreach_get(pixels)
     return hashlib.sha1(pixels.tobytes() + repr(tuple(image.size)).encode()).hexdigest()
-
-
-def install():
-    repos = bpy.context.preferences.extensions.repos
-    directory = tempfile.mkdtemp(prefix="mc_ao_gui_repo_")
-    repos.new(name="MC AO GUI", module=REPO, custom_directory=directory, source="USER")
-    result = bpy.ops.extensions.package_install_files(filepath=ZIP, repo=REPO, enable_on_install=True)
-    log("install:", result, "enabled:", ADDON in bpy.context.preferences.addons)
 
 
 def scene_setup():
@@ -88,16 +55,6 @@ def scene_setup():
     settings = bpy.context.scene.mc_ao
     settings.resolution = 512
     settings.samples = 256
-
-
-def split_view():
-    """Split the 3D Viewport in two; arrange() gives the halves their jobs once they have been drawn."""
-    window = bpy.context.window_manager.windows[0]
-    area = max((a for a in window.screen.areas if a.type == "VIEW_3D"), key=lambda a: a.width * a.height)
-    region = next(r for r in area.regions if r.type == "WINDOW")
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.screen.area_split(direction="VERTICAL", factor=0.5)
-    return window
 
 
 @guarded
