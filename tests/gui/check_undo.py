@@ -50,6 +50,12 @@ def running():
     return operators is not None and bool(operators._RUNS)
 
 
+def started(reference):
+    """Whether a bake has begun since the image was ``reference``: the operator runs, or a bake quicker
+    than the watch's 0.2 s steps has already changed the image."""
+    return running() or describe().get("digest") != reference["digest"]
+
+
 def scene_setup():
     cube = bpy.data.objects["Cube"]
     cube.location = (0.0, 0.0, 1.3)
@@ -136,7 +142,7 @@ def watch():
     if step == 0 and state["sidebar"].active_panel_category == "MC AO":
         write("tab.json", {"category": "MC AO", "before": state["before"]})
         state["step"] = 1
-    elif step == 1 and running():  # the first bake
+    elif step == 1 and started(state["before"]):  # the first bake
         state["step"] = 2
     elif step == 2 and not running():
         state["first"] = describe()
@@ -144,7 +150,7 @@ def watch():
         bpy.context.scene.mc_ao.samples = 16  # another setting for the second bake
         write("changed.json", {"samples": 16})
         state["step"] = 3
-    elif step == 3 and running():  # the second bake
+    elif step == 3 and started(state["first"]):  # the second bake
         state["step"] = 4
     elif step == 4 and not running():
         state["second"] = describe()
