@@ -31,7 +31,7 @@ OUT = start("check_panel", os.environ.get("MC_AO_GUI_OUT", "/tmp/out/mc_ao_panel
 SCENE = os.path.join(os.getcwd(), "sample_scenes", "props.blend")
 # Pixels from the sidebar's top edge to the middle of the Bake AO button, at UI scale 1.
 BUTTON_BELOW_TOP = 52
-state = {"next": 0, "window": None, "view": None, "free": None, "pinned": None}
+state = {"next": 0, "window": None, "view": None, "free": None, "pinned": None, "outcome": None}
 
 
 def addon_module(name):
@@ -186,6 +186,7 @@ def serve():
     for area in state["window"].screen.areas:
         area.tag_redraw()
     data = report_state()
+    state["outcome"] = addon_module("operators").last_outcome  # what a click after this ack is told by
     write(f"ack_{n}.json", data)
     return 0.2
 
@@ -194,7 +195,11 @@ def serve():
 def wait_bake(n):
     operators = addon_module("operators")
     running = operators.is_running()
-    state["seen_running"] |= running
+    # A bake quicker than these 0.3 s steps (or than the second between the click and this command) is
+    # never seen running: its outcome, set when a bake ends, is then new since the last answer.
+    outcome = operators.last_outcome
+    ended = outcome is not state["outcome"] and outcome is not None and outcome[0] != "ERROR"
+    state["seen_running"] |= running or ended
     if running and time.monotonic() < state["wait_until"]:
         data = report_state()
         write(f"during_{n}.json", data)  # what the editors show while it fills in
@@ -203,6 +208,7 @@ def wait_bake(n):
         area.tag_redraw()
     data = report_state()
     data["seen_running"] = state["seen_running"]
+    state["outcome"] = operators.last_outcome
     write(f"ack_{n}.json", data)
     bpy.app.timers.register(serve, first_interval=0.2)
     return None
